@@ -1,0 +1,291 @@
+"""Experiment configuration: frozen dataclasses loaded from TOML.
+
+Unknown keys and wrong types are errors that name the file and the field.
+Defaults are the paper's numbers (coevolutionary-gp-rotorcraft, sections 2.2 and 3.2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gpquad.errors import GpquadError
+from gpquad.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+FRAMES = ("NED/FRD", "ENU/FLU")
+METRICS = ("mae", "mse")
+
+#: The dominant terms of the paper's median model (Table 1), used by the reference simulator.
+MEDIAN_MODEL = {
+    "a_x": "10.0*theta - 0.6*u",
+    "a_y": "-9.2*phi - 0.6*v",
+    "a_z": "28.2*u_T(t-5) - w - 9.81",
+    "p_dot": "10.3*u_R(t-1) - 4.15*p",
+    "q_dot": "-9.8*u_P - 3.3*q",
+    "r_dot": "-7.8*u_Y(t-2) - 1.9*r",
+}
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Where the flight data comes from and how it is read."""
+
+    files: tuple[str, ...] = ()  # empty: fly the reference simulator
+    format: str = "generic"
+    frame: str = "NED/FRD"
+    inputs: tuple[str, ...] = DEFAULT_INPUTS
+    columns: dict[str, str] = field(default_factory=dict)  # canonical name -> file column
+    trim: str = "none"  # none | mean | given
+    trim_values: dict[str, float] = field(default_factory=dict)
+    validation_fraction: float = 2000 / 13800  # paper: 11,800 train + 2,000 validation
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Reference simulator: a known model flown by a pilot-like closed loop."""
+
+    seed: int = 0
+    rate_hz: float = 25.0
+    duration_s: float = 552.0  # 13,800 samples at 25 Hz, as in the paper
+    equations: dict[str, str] = field(default_factory=lambda: dict(MEDIAN_MODEL))
+    trim: dict[str, float] = field(default_factory=lambda: {"u_T": 9.81 / 28.2})
+    stick_sd: dict[str, float] = field(
+        default_factory=lambda: {"u_P": 0.08, "u_R": 0.08, "u_Y": 0.08, "u_T": 0.03})
+    stick_time_constant_s: float = 0.6
+    # Pilot feedback: input -> {state: gain}; keeps attitude and speed bounded.
+    pilot_gains: dict[str, dict[str, float]] = field(default_factory=lambda: {
+        "u_R": {"phi": -0.6, "v": 0.05},
+        "u_P": {"theta": 0.6, "u": 0.05},
+        "u_Y": {"psi": 0.15},
+    })
+    input_limit: float = 1.0
+
+
+@dataclass(frozen=True)
+class EvolutionConfig:
+    """Coevolution settings; defaults are the paper's."""
+
+    targets: tuple[str, ...] = TARGET_NAMES
+    iterations: int = 30
+    model_generations: int = 600
+    test_generations: int = 80
+    n_models: int = 14
+    n_tests: int = 5
+    suite_size: int = 6
+    window_steps: int = 750
+    max_depth: int = 5
+    p_leaf: float = 0.7
+    p_constant_leaf: float = 0.25
+    const_low: float = -5.0
+    const_high: float = 5.0
+    const_variance: float = 0.1
+    p_const_perturb: float = 0.5
+    p_delay: float = 0.1
+    max_delay: int = 5
+    metric: str = "mae"
+    simplify_generations: int = 50
+    test_offset_max: int = 375
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    dir: str = "results"
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole experiment."""
+
+    seed: int = 0
+    name: str = "experiment"
+    data: DataConfig = field(default_factory=DataConfig)
+    simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
+    evolution: EvolutionConfig = field(default_factory=EvolutionConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    base_dir: str = "."  # folder that relative data paths are read from (not a TOML key)
+
+    def to_dict(self) -> dict:
+        out = dataclasses.asdict(self)
+        out.pop("base_dir")
+        return out
+
+    def data_paths(self) -> list[Path]:
+        return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
+
+
+_SECTIONS = {"data": DataConfig, "simulator": SimulatorConfig, "evolution": EvolutionConfig,
+             "output": OutputConfig}
+
+
+def _type_name(tp) -> str:
+    return getattr(tp, "__name__", str(tp)).replace("typing.", "")
+
+
+def _coerce(value, tp, source: str, where: str):
+    """Check `value` against the annotation `tp`; return it in the dataclass's form."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+
+    def bad():
+        return GpquadError(f"expected {_type_name(tp)}, got {type(value).__name__} {value!r}",
+                           source=source, field=where)
+
+    if origin in (typing.Union, types.UnionType):
+        for arg in args:
+            try:
+                return _coerce(value, arg, source, where)
+            except GpquadError:
+                continue
+        raise bad()
+    if tp is type(None):
+        if value is None:
+            return None
+        raise bad()
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise bad()
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise bad()
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise bad()
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise bad()
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise bad()
+        return tuple(_coerce(v, args[0], source, f"{where}[{i}]") for i, v in enumerate(value))
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise bad()
+        return {str(k): _coerce(v, args[1], source, f"{where}.{k}") for k, v in value.items()}
+    raise bad()  # pragma: no cover
+
+
+def _build(cls, table: dict, source: str, prefix: str):
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls) if f.name != "base_dir"]
+    kwargs = {}
+    for key, value in table.items():
+        where = f"{prefix}{key}"
+        if key not in names:
+            raise GpquadError(f"unknown key; allowed keys here are {names}", source=source,
+                              field=where)
+        if key in _SECTIONS and cls is Config:
+            if not isinstance(value, dict):
+                raise GpquadError("expected a [section] table", source=source, field=where)
+            kwargs[key] = _build(_SECTIONS[key], value, source, f"{where}.")
+        else:
+            kwargs[key] = _coerce(value, hints[key], source, where)
+    return cls(**kwargs)
+
+
+def _check_probability(value: float, source: str, where: str):
+    if not 0.0 <= value <= 1.0:
+        raise GpquadError(f"must be a probability in [0, 1], got {value}", source=source,
+                          field=where)
+
+
+def validate(cfg: Config, source: str = "config") -> Config:
+    """Semantic checks that types alone cannot express."""
+    ev = cfg.evolution
+    for i, t in enumerate(ev.targets):
+        if t not in TARGET_NAMES:
+            raise GpquadError(f"unknown target '{t}'; choose from {list(TARGET_NAMES)}",
+                              source=source, field=f"evolution.targets[{i}]")
+    if not ev.targets:
+        raise GpquadError("at least one target is needed", source=source, field="evolution.targets")
+    for name in ("p_leaf", "p_constant_leaf", "p_const_perturb", "p_delay"):
+        _check_probability(getattr(ev, name), source, f"evolution.{name}")
+    positive = ("iterations", "n_models", "n_tests", "suite_size", "window_steps")
+    for name in positive:
+        if getattr(ev, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"evolution.{name}")
+    for name in ("model_generations", "test_generations", "simplify_generations", "max_delay",
+                 "test_offset_max"):
+        if getattr(ev, name) < 0:
+            raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
+    if not 1 <= ev.max_depth <= 8:
+        raise GpquadError("must be between 1 and 8", source=source, field="evolution.max_depth")
+    if ev.n_models < 2:
+        raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
+                          source=source, field="evolution.n_models")
+    if ev.metric not in METRICS:
+        raise GpquadError(f"choose one of {list(METRICS)}", source=source, field="evolution.metric")
+    if ev.const_low >= ev.const_high or ev.const_variance < 0:
+        raise GpquadError("need const_low < const_high and const_variance >= 0", source=source,
+                          field="evolution.const_low")
+    d = cfg.data
+    if d.frame not in FRAMES:
+        raise GpquadError(f"choose one of {list(FRAMES)}", source=source, field="data.frame")
+    if d.trim not in ("none", "mean", "given"):
+        raise GpquadError("choose none, mean or given", source=source, field="data.trim")
+    if not 0.0 <= d.validation_fraction < 1.0:
+        raise GpquadError("must be in [0, 1)", source=source, field="data.validation_fraction")
+    if not d.inputs or len(set(d.inputs)) != len(d.inputs):
+        raise GpquadError("need distinct input names", source=source, field="data.inputs")
+    clash = set(d.inputs) & set(STATE_NAMES)
+    if clash:
+        raise GpquadError(f"input names {sorted(clash)} clash with state names", source=source,
+                          field="data.inputs")
+    s = cfg.simulator
+    unknown_eq = set(s.equations) - set(TARGET_NAMES)
+    if unknown_eq:
+        raise GpquadError(f"unknown targets {sorted(unknown_eq)}", source=source,
+                          field="simulator.equations")
+    if s.rate_hz <= 0 or s.duration_s <= 0:
+        raise GpquadError("rate_hz and duration_s must be > 0", source=source,
+                          field="simulator.rate_hz")
+    return cfg
+
+
+def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:
+    cfg = _build(Config, table, source, "")
+    cfg = dataclasses.replace(cfg, base_dir=str(base_dir))
+    return validate(cfg, source)
+
+
+def load_config(path) -> Config:
+    """Read and validate a TOML experiment file."""
+    path = Path(path)
+    if not path.is_file():
+        raise GpquadError("config file not found", source=str(path))
+    try:
+        table = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
+    return config_from_dict(table, str(path), str(path.parent.resolve()))
+
+
+def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=None,
+             out=None) -> Config:
+    """Apply command-line overrides; file paths are taken relative to the current folder."""
+    data, ev, output = cfg.data, cfg.evolution, cfg.output
+    base_dir = cfg.base_dir
+    if files:
+        data = dataclasses.replace(data, files=tuple(str(Path(f).resolve()) for f in files))
+    if targets:
+        ev = dataclasses.replace(ev, targets=tuple(targets))
+    if iterations is not None:
+        ev = dataclasses.replace(ev, iterations=int(iterations))
+    if out is not None:
+        output = dataclasses.replace(output, dir=str(Path(out).resolve()))
+    new = dataclasses.replace(cfg, data=data, evolution=ev, output=output, base_dir=base_dir,
+                              seed=cfg.seed if seed is None else int(seed))
+    return validate(new, "command line")

@@ -1,0 +1,116 @@
+"""The dataset the engine identifies from: flights concatenated into FlightArrays.
+
+Accelerations are the integrator's discrete inverse (gpquad.kernels.integrator),
+computed per flight so that no difference spans two flights. Each flight is
+split by time: the first part trains, the last `validation_fraction` validates.
+Test windows never span two flights or the train/validation boundary.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpquad.data.flight import Flight
+from gpquad.errors import GpquadError
+from gpquad.kernels.flight_arrays import FlightArrays
+from gpquad.kernels.integrator import body_accelerations
+from gpquad.kernels.quaternion import body_rotations, euler_array
+
+#: Relative tolerance on the sample period shared by all flights.
+DT_MATCH = 1e-3
+
+
+@dataclass
+class Dataset:
+    """Concatenated flights and their index ranges (start inclusive, stop exclusive)."""
+
+    arrays: FlightArrays
+    input_names: tuple[str, ...]
+    segments: list[tuple[int, int]]
+    train: list[tuple[int, int]]
+    validation: list[tuple[int, int]]
+    names: list[str]
+    trim: dict[str, float]
+
+    @property
+    def dt(self) -> float:
+        return self.arrays.dt
+
+    @property
+    def n_samples(self) -> int:
+        return self.arrays.states.shape[0]
+
+    def summary(self) -> dict:
+        return {
+            "flights": self.names,
+            "samples": self.n_samples,
+            "dt_s": self.dt,
+            "train_samples": int(sum(b - a for a, b in self.train)),
+            "validation_samples": int(sum(b - a for a, b in self.validation)),
+            "trim": self.trim,
+        }
+
+
+def flight_arrays(flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(states (N, 9), acc (N, 6), rot (N, 9)) of one flight; last acc row is 0."""
+    dt = flight.dt
+    quat = np.ascontiguousarray(flight.quat, dtype=float)
+    vel = np.ascontiguousarray(flight.vel, dtype=float)
+    rates = np.ascontiguousarray(flight.rates, dtype=float)
+    states = np.hstack([euler_array(quat), vel, rates])
+    acc = np.zeros((len(flight), 6))
+    acc[:-1] = body_accelerations(vel, rates, dt)
+    return states, acc, body_rotations(rates, dt)
+
+
+def _trim(flights: list[Flight], mode: str, given: dict, input_names) -> dict[str, float]:
+    if mode == "none":
+        return {name: 0.0 for name in input_names}
+    if mode == "mean":
+        stacked = np.vstack([f.inputs for f in flights])
+        return {name: float(stacked[:, i].mean()) for i, name in enumerate(input_names)}
+    missing = [n for n in input_names if n not in given]
+    if missing:
+        raise GpquadError(f"data.trim = 'given' but no value for {missing}",
+                          field="data.trim_values")
+    return {name: float(given[name]) for name in input_names}
+
+
+def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: str = "none",
+                  trim_values: dict | None = None) -> Dataset:
+    """Concatenate flights, compute accelerations and rotations, split train/validation."""
+    if not flights:
+        raise GpquadError("no flight data", field="data.files")
+    input_names = flights[0].input_names
+    dt = flights[0].dt
+    for f in flights[1:]:
+        if f.input_names != input_names:
+            raise GpquadError(f"inputs {f.input_names} differ from {input_names}", source=f.name)
+        if abs(f.dt - dt) > DT_MATCH * dt:
+            raise GpquadError(f"sample period {f.dt:.5g} s differs from {dt:.5g} s; resample to "
+                              "one rate", source=f.name, field="t")
+    trim_map = _trim(flights, trim, trim_values or {}, input_names)
+    offsets = np.array([trim_map[n] for n in input_names])
+    parts = [flight_arrays(f) for f in flights]
+    arrays = FlightArrays(
+        quat=np.ascontiguousarray(np.vstack([f.quat for f in flights])),
+        states=np.ascontiguousarray(np.vstack([p[0] for p in parts])),
+        acc=np.ascontiguousarray(np.vstack([p[1] for p in parts])),
+        inputs=np.ascontiguousarray(np.vstack([f.inputs for f in flights]) - offsets),
+        rot=np.ascontiguousarray(np.vstack([p[2] for p in parts])),
+        dt=float(dt),
+    )
+    segments, train, validation = [], [], []
+    start = 0
+    for f in flights:
+        stop = start + len(f)
+        segments.append((start, stop))
+        cut = stop - int(round(validation_fraction * len(f)))
+        train.append((start, cut))
+        if cut < stop:
+            validation.append((cut, stop))
+        start = stop
+    return Dataset(arrays=arrays, input_names=tuple(input_names), segments=segments, train=train,
+                   validation=validation, names=[f.name for f in flights], trim=trim_map)

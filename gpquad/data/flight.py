@@ -1,0 +1,207 @@
+"""The Flight record and the generic flight file (CSV or Parquet).
+
+Generic columns: `t` (s); `qw, qx, qy, qz` (body-to-world quaternion);
+`u, v, w` (body velocity, m/s) or `vx, vy, vz` (world velocity, m/s);
+`p, q, r` (body rates, rad/s); the input columns; optional `x, y, z` (m).
+Frames: NED/FRD or ENU/FLU, converted to NED/FRD, which the engine uses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gpquad.errors import GpquadError
+from gpquad.kernels.integrator import world_to_body
+from gpquad.variables import (
+    BODY_VEL_COLUMNS,
+    POSITION_COLUMNS,
+    QUAT_COLUMNS,
+    RATE_COLUMNS,
+    WORLD_VEL_COLUMNS,
+)
+
+#: Body rates above this (rad/s) are taken as a sign that the file is in deg/s.
+MAX_PLAUSIBLE_RATE = 40.0
+#: Allowed relative jitter of the sample period.
+DT_TOLERANCE = 0.01
+
+
+@dataclass
+class Flight:
+    """One uniformly sampled, in-flight segment in NED/FRD.
+
+    t (N,) s; quat (N, 4) body-to-world (w, x, y, z); vel (N, 3) body m/s;
+    rates (N, 3) body rad/s; inputs (N, n_inputs); pos (N, 3) world m or None.
+    """
+
+    name: str
+    t: np.ndarray
+    quat: np.ndarray
+    vel: np.ndarray
+    rates: np.ndarray
+    inputs: np.ndarray
+    input_names: tuple[str, ...]
+    pos: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def dt(self) -> float:
+        return float(np.median(np.diff(self.t)))
+
+    def to_frame(self) -> pd.DataFrame:
+        """The flight as a generic-format table (NED/FRD)."""
+        cols = {"t": self.t}
+        cols.update({c: self.quat[:, i] for i, c in enumerate(QUAT_COLUMNS)})
+        cols.update({c: self.vel[:, i] for i, c in enumerate(BODY_VEL_COLUMNS)})
+        cols.update({c: self.rates[:, i] for i, c in enumerate(RATE_COLUMNS)})
+        if self.pos is not None:
+            cols.update({c: self.pos[:, i] for i, c in enumerate(POSITION_COLUMNS)})
+        cols.update({c: self.inputs[:, i] for i, c in enumerate(self.input_names)})
+        return pd.DataFrame(cols)
+
+
+# Frame conversion ENU/FLU -> NED/FRD: q_ned_frd = Q_WORLD * q_enu_flu * Q_BODY.
+_Q_WORLD = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])  # pi about (1, 1, 0)/sqrt(2)
+_Q_BODY = np.array([0.0, 1.0, 0.0, 0.0])  # pi about x
+
+
+def _quat_mul_rows(a, b):
+    a0, a1, a2, a3 = np.moveaxis(np.broadcast_to(a, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
+    b0, b1, b2, b3 = np.moveaxis(np.broadcast_to(b, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
+    return np.stack([
+        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+    ], axis=-1)
+
+
+def enu_flu_quat(quat):
+    """Body-to-world quaternions (N, 4) from ENU/FLU to NED/FRD (its own inverse)."""
+    q = _quat_mul_rows(_quat_mul_rows(_Q_WORLD, quat), _Q_BODY)
+    return np.where(q[:, :1] < 0, -q, q)  # same rotation, w >= 0
+
+
+def flip_body(vectors):
+    """Body vectors (N, 3) FLU <-> FRD."""
+    return vectors * np.array([1.0, -1.0, -1.0])
+
+
+def flip_world(vectors):
+    """World vectors (N, 3) ENU <-> NED."""
+    return vectors[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0])
+
+
+def _read_table(path: Path) -> pd.DataFrame:
+    if not path.is_file():
+        raise GpquadError("file not found", source=str(path))
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".csv":
+            return pd.read_csv(path)
+        if suffix in (".parquet", ".pq"):
+            return pd.read_parquet(path)
+    except Exception as exc:  # truncated or corrupt files
+        raise GpquadError(f"cannot read the file ({type(exc).__name__}: {exc})",
+                          source=str(path)) from None
+    raise GpquadError(f"unknown file type '{suffix}'; the generic format is .csv or .parquet "
+                      "(set data.format for PX4 or Betaflight logs)", source=str(path))
+
+
+def _column(df: pd.DataFrame, name: str, columns: dict, source: str) -> np.ndarray:
+    col = columns.get(name, name)
+    if col not in df.columns:
+        raise GpquadError(f"missing column '{col}'; map it with [data.columns] {name} = \"...\"",
+                          source=source, field=col)
+    values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        first = int(np.argmax(bad))
+        raise GpquadError(f"{int(bad.sum())} NaN or non-numeric values (first at row {first}); "
+                          "clean or cut the log", source=source, field=col)
+    return values
+
+
+def check_time(t: np.ndarray, source: str, column: str = "t") -> float:
+    """Validate a time column (s): strictly increasing and uniformly sampled. Returns dt."""
+    if len(t) < 3:
+        raise GpquadError(f"only {len(t)} samples", source=source, field=column)
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0))
+        raise GpquadError(f"time is not increasing at row {i + 1} ({t[i]} then {t[i + 1]}); "
+                          "sort the log or drop duplicate rows", source=source, field=column)
+    dt = float(np.median(steps))
+    if np.abs(steps - dt).max() > DT_TOLERANCE * dt:
+        raise GpquadError(f"sampling is not uniform (dt from {steps.min():.4g} to "
+                          f"{steps.max():.4g} s); resample the log first "
+                          "(gpquad's PX4/Betaflight readers do this)", source=source, field=column)
+    return dt
+
+
+def check_units(quat, rates, source: str):
+    """Catch quaternions that are not unit and rates that look like deg/s."""
+    norm = np.linalg.norm(quat, axis=1)
+    if np.abs(norm - 1.0).max() > 1e-2:
+        raise GpquadError(f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
+                          "give a unit quaternion (w, x, y, z)", source=source, field="qw")
+    peak = np.abs(rates).max()
+    if peak > MAX_PLAUSIBLE_RATE:
+        raise GpquadError(f"body rates reach {peak:.1f}, implausible in rad/s; "
+                          "convert deg/s to rad/s", source=source, field="p")
+
+
+def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | None = None
+                     ) -> Flight:
+    """Read and validate one generic flight file (CSV or Parquet)."""
+    path = Path(path)
+    source = str(path)
+    columns = columns or {}
+    df = _read_table(path)
+    t = _column(df, "t", columns, source)
+    dt = check_time(t, source, columns.get("t", "t"))
+    quat = np.column_stack([_column(df, c, columns, source) for c in QUAT_COLUMNS])
+    rates = np.column_stack([_column(df, c, columns, source) for c in RATE_COLUMNS])
+    check_units(quat, rates, source)
+    quat = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    has_body = all(columns.get(c, c) in df.columns for c in BODY_VEL_COLUMNS)
+    has_world = all(columns.get(c, c) in df.columns for c in WORLD_VEL_COLUMNS)
+    if not (has_body or has_world):
+        raise GpquadError("needs body velocity columns u, v, w or world velocity vx, vy, vz",
+                          source=source, field="u")
+    vel_cols = BODY_VEL_COLUMNS if has_body else WORLD_VEL_COLUMNS
+    vel = np.column_stack([_column(df, c, columns, source) for c in vel_cols])
+    pos = None
+    if all(columns.get(c, c) in df.columns for c in POSITION_COLUMNS):
+        pos = np.column_stack([_column(df, c, columns, source) for c in POSITION_COLUMNS])
+    inputs = np.column_stack([_column(df, c, columns, source) for c in input_names])
+    if frame == "ENU/FLU":
+        quat = enu_flu_quat(quat)
+        rates = flip_body(rates)
+        vel = flip_body(vel) if has_body else flip_world(vel)
+        pos = None if pos is None else flip_world(pos)
+    elif frame != "NED/FRD":
+        raise GpquadError(f"unknown frame '{frame}'", source=source, field="frame")
+    if not has_body:
+        vel = world_to_body(np.ascontiguousarray(quat), np.ascontiguousarray(vel))
+    return Flight(name=path.name, t=t - t[0], quat=quat, vel=vel, rates=rates, inputs=inputs,
+                  input_names=tuple(input_names), pos=pos, meta={"source": source, "dt": dt})
+
+
+def write_flight_file(flight: Flight, path) -> Path:
+    """Write a flight in the generic format (by suffix: .csv or .parquet)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frame = flight.to_frame()
+    if path.suffix.lower() == ".csv":
+        frame.to_csv(path, index=False, float_format="%.17g")
+    else:
+        frame.to_parquet(path, index=False)
+    return path

@@ -1,0 +1,194 @@
+"""The coevolution loop of the paper (section 2.2), with explicit, checkpointable state.
+
+One iteration = `model_generations` generations of the model hill climbers on
+the test suite, `test_generations` generations of the test hill climbers
+(fitness: variance of the models' errors), insertion of the best test into the
+suite, and one bloat simplification of every model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gpquad.config import EvolutionConfig
+from gpquad.data.dataset import Dataset
+from gpquad.evolve.evaluator import Evaluator
+from gpquad.evolve.windows import WindowSpace, tile
+from gpquad.kernels.tree_eval import eval_on_samples
+from gpquad.tree.encoding import Tree
+from gpquad.tree.variation import (
+    VariationParams,
+    constant_mutation,
+    fold_constants,
+    mutate,
+    random_tree,
+    replace_with_constant,
+)
+from gpquad.variables import N_STATE
+
+
+@dataclass
+class RunState:
+    """Everything needed to continue a run: climbers, tests, suite and the RNG state."""
+
+    target: str
+    iteration: int
+    models: list[Tree]
+    model_errors: np.ndarray
+    tests: np.ndarray  # virtual positions of the test hill climbers
+    suite: np.ndarray  # data start indices
+    suite_age: np.ndarray  # insertion order; the smallest is the oldest
+    inserted: int
+    rng_state: dict
+    history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
+
+
+def variation_params(cfg: EvolutionConfig, n_inputs: int) -> VariationParams:
+    return VariationParams(
+        n_variables=N_STATE + n_inputs, n_inputs=n_inputs, max_depth=cfg.max_depth,
+        p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
+        const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
+        p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
+
+
+def test_variance(errors: np.ndarray) -> np.ndarray:
+    """Fitness of each test (column): variance of the models' errors (rows).
+
+    A diverged model (inf) counts as twice the worst finite error in the matrix, so
+    that a window on which some models blow up is a strongly discriminating test.
+    """
+    finite = np.isfinite(errors)
+    cap = 2.0 * errors[finite].max() if finite.any() else 1.0
+    return np.where(finite, errors, cap).var(axis=0)
+
+
+class Coevolution:
+    """Coevolutionary identification of one target's equation."""
+
+    def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
+        self.dataset = dataset
+        self.target = target
+        self.cfg = cfg
+        self.params = variation_params(cfg, len(dataset.input_names))
+        self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
+        self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
+
+    # ----------------------------------------------------------------- state
+    def init_state(self, seed) -> RunState:
+        rng = np.random.default_rng(seed)
+        cfg = self.cfg
+        models = [random_tree(rng, self.params) for _ in range(cfg.n_models)]
+        tests = self.space.random(rng, cfg.n_tests)
+        suite = self.space.starts(self.space.random(rng, cfg.suite_size))
+        errors = self.evaluator.mean_errors(models, suite)
+        return RunState(target=self.target, iteration=0, models=models, model_errors=errors,
+                        tests=tests, suite=suite, suite_age=np.arange(cfg.suite_size),
+                        inserted=cfg.suite_size, rng_state=rng.bit_generator.state)
+
+    # ---------------------------------------------------------------- phases
+    def model_phase(self, state: RunState, rng: np.random.Generator) -> None:
+        """Hill climbers: each parent makes one mutant, kept if strictly better."""
+        ev = self.evaluator
+        state.model_errors = ev.mean_errors(state.models, state.suite)
+        for gen in range(self.cfg.model_generations):
+            mutants = [mutate(rng, m, self.params) for m in state.models]
+            errors = ev.mean_errors(mutants, state.suite, bounds=state.model_errors)
+            for i in np.flatnonzero(errors < state.model_errors):
+                state.models[i] = mutants[i]
+                state.model_errors[i] = errors[i]
+            best = int(np.argmin(state.model_errors))
+            state.history.append({
+                "target": self.target, "iteration": state.iteration, "generation": gen,
+                "best_error": float(state.model_errors[best]),
+                "median_error": float(np.median(state.model_errors)),
+                "best_size": state.models[best].size,
+            })
+
+    def test_phase(self, state: RunState, rng: np.random.Generator) -> None:
+        """Test hill climbers maximise disagreement; the best joins the suite."""
+        ev = self.evaluator
+        fitness = test_variance(ev.window_errors(state.models, self.space.starts(state.tests)))
+        for _ in range(self.cfg.test_generations):
+            mutants = self.space.mutate(rng, state.tests, self.cfg.test_offset_max)
+            f = test_variance(ev.window_errors(state.models, self.space.starts(mutants)))
+            better = f > fitness
+            state.tests[better] = mutants[better]
+            fitness[better] = f[better]
+        best_start = int(self.space.starts(state.tests[int(np.argmax(fitness))]))
+        self.insert_test(state, best_start)
+
+    def insert_test(self, state: RunState, start: int) -> None:
+        """Replace the suite test the new one overlaps, else the oldest."""
+        overlap = np.abs(state.suite - start) < self.cfg.window_steps
+        slot = int(np.argmax(overlap)) if overlap.any() else int(np.argmin(state.suite_age))
+        state.suite[slot] = start
+        state.suite_age[slot] = state.inserted
+        state.inserted += 1
+
+    def simplify_phase(self, state: RunState, rng: np.random.Generator) -> None:
+        """Replace a random subtree of each model by a constant, re-converge constants only,
+        and keep the result when it is no worse."""
+        ev = self.evaluator
+        arrays = self.dataset.arrays
+        state.model_errors = ev.mean_errors(state.models, state.suite)
+        samples = (state.suite[:, None] + np.arange(self.cfg.window_steps)[None, :]).ravel()
+
+        def constant_for(tree: Tree):
+            def value(start, end):
+                sub = tree.codes[start:end].copy()
+                vals = tree.values[start:end].copy()
+                out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states,
+                                      arrays.inputs, samples)
+                out = out[np.isfinite(out)]
+                return float(out.mean()) if out.size else 0.0
+            return value
+
+        candidates = [replace_with_constant(rng, m, constant_for(m)) for m in state.models]
+        errors = ev.mean_errors(candidates, state.suite)
+        for _ in range(self.cfg.simplify_generations):
+            mutants = [constant_mutation(rng, c, self.params) for c in candidates]
+            mutant_errors = ev.mean_errors(mutants, state.suite, bounds=errors)
+            for i in np.flatnonzero(mutant_errors < errors):
+                candidates[i] = mutants[i]
+                errors[i] = mutant_errors[i]
+        for i in np.flatnonzero(errors <= state.model_errors):
+            state.models[i] = fold_constants(candidates[i])
+            state.model_errors[i] = errors[i]
+
+    def iterate(self, state: RunState) -> RunState:
+        """One full iteration; returns the same state object, advanced."""
+        rng = np.random.default_rng()
+        rng.bit_generator.state = state.rng_state
+        self.model_phase(state, rng)
+        self.test_phase(state, rng)
+        self.simplify_phase(state, rng)
+        state.iteration += 1
+        state.rng_state = rng.bit_generator.state
+        return state
+
+    # ------------------------------------------------------------- selection
+    def tiled_errors(self, trees: list[Tree], ranges) -> np.ndarray:
+        """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none)."""
+        starts, steps = tile(ranges, self.cfg.window_steps, self.cfg.max_delay)
+        if len(starts) == 0:
+            return np.full(len(trees), np.nan)
+        return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
+
+    def best(self, state: RunState) -> tuple[Tree, float, float]:
+        """The climber with the lowest error over the whole training data,
+        with its training and validation errors."""
+        train = self.tiled_errors(state.models, self.dataset.train)
+        i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
+        validation = self.tiled_errors([state.models[i]], self.dataset.validation)[0]
+        return state.models[i], float(train[i]), float(validation)
+
+
+def clone_state(state: RunState) -> RunState:
+    """A deep copy (trees are immutable)."""
+    return dataclasses.replace(
+        state, models=list(state.models), model_errors=state.model_errors.copy(),
+        tests=state.tests.copy(), suite=state.suite.copy(), suite_age=state.suite_age.copy(),
+        rng_state=dict(state.rng_state), history=list(state.history))
