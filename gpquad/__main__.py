@@ -1,0 +1,5 @@
+import sys
+
+from gpquad.cli import main
+
+sys.exit(main())

@@ -1,0 +1,133 @@
+"""Command line: gpquad run | simulate | export | bench."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from gpquad.errors import GpquadError
+
+
+def _cmd_run(args) -> int:
+    from gpquad.config import load_config, override
+    from gpquad.experiments import default_run_dir, run_experiment
+
+    cfg = override(load_config(args.config), files=args.data, targets=args.target,
+                   iterations=args.iterations, seed=args.seed,
+                   out=None)
+    run_dir = Path(args.out) if args.out else default_run_dir(cfg)
+    try:
+        model = run_experiment(cfg, run_dir, progress=not args.quiet)
+    except KeyboardInterrupt:
+        return 130
+    print("\nDiscovered equations:")
+    print(model)
+    print(f"\nRun folder: {run_dir}")
+    return 0
+
+
+def _cmd_simulate(args) -> int:
+    from gpquad.config import load_config
+    from gpquad.data.flight import write_flight_file
+    from gpquad.simulator import simulate
+
+    cfg = load_config(args.config) if args.config else None
+    if cfg is None:
+        from gpquad.config import Config
+
+        cfg = Config()
+    flight = simulate(cfg.simulator, cfg.data.inputs)
+    path = write_flight_file(flight, args.out)
+    print(f"wrote {len(flight)} samples at {1 / flight.dt:.4g} Hz to {path}")
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from gpquad.model import DiscoveredModel
+
+    model = DiscoveredModel.load(args.run)
+    if args.format == "latex":
+        print(model.latex(raw=args.raw_inputs), end="")
+    elif args.format == "markdown":
+        print(model.markdown(), end="")
+    elif args.format == "sympy":
+        for target, eq in model.equations.items():
+            expr = eq.sympy_raw() if args.raw_inputs else eq.sympy()
+            print(f"{target} = {expr}    delays {eq.used_delays()}")
+    else:
+        print(json.dumps(model.to_dict(), indent=2))
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from gpquad.bench import format_report, run_benchmark
+
+    result = run_benchmark(full=args.full)
+    print(json.dumps(result) if args.json else format_report(result))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="gpquad", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="identify equations from a config")
+    run.add_argument("config", help="experiment TOML file")
+    run.add_argument("--data", action="append", help="flight file (repeatable); overrides data.files")
+    run.add_argument("--target", action="append", help="target equation (repeatable; default all six)")
+    run.add_argument("--iterations", type=int, help="coevolution iterations per target")
+    run.add_argument("--seed", type=int, help="master seed")
+    run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
+    run.add_argument("--quiet", action="store_true", help="no progress lines")
+    run.set_defaults(func=_cmd_run)
+
+    sim = sub.add_parser("simulate", help="write the reference simulator's flight to a file")
+    sim.add_argument("config", nargs="?", help="experiment TOML ([simulator] section)")
+    sim.add_argument("--out", required=True, help="output .csv or .parquet")
+    sim.set_defaults(func=_cmd_simulate)
+
+    exp = sub.add_parser("export", help="print a run's equations")
+    exp.add_argument("run", help="run folder or model.json")
+    exp.add_argument("--format", choices=["latex", "markdown", "sympy", "json"], default="sympy")
+    exp.add_argument("--raw-inputs", action="store_true", help="write equations in untrimmed inputs")
+    exp.set_defaults(func=_cmd_export)
+
+    bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")
+    bench.add_argument("--json", action="store_true", help="one JSON object")
+    bench.add_argument("--full", action="store_true", help="measure a whole 30-iteration run")
+    bench.set_defaults(func=_cmd_bench)
+
+    for register in _extensions():
+        register(sub)
+    return parser
+
+
+def _extensions():
+    """Sub-command groups contributed by other packages of gpquad (data, baselines, sweeps)."""
+    registers = []
+    for module, name in (("gpquad.data.cli", "register"), ("gpquad.baselines.cli", "register"),
+                         ("gpquad.sweep_cli", "register")):
+        try:
+            mod = __import__(module, fromlist=[name])
+        except ModuleNotFoundError as exc:
+            if exc.name and module.startswith(exc.name):
+                continue
+            raise
+        registers.append(getattr(mod, name))
+    return registers
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except GpquadError as exc:
+        print(f"gpquad: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

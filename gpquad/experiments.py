@@ -1,0 +1,139 @@
+"""Run one experiment config: load data, identify each target, write the run folder."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.config import Config
+from gpquad.data.dataset import Dataset
+from gpquad.data.io import load_dataset
+from gpquad.evolve.coevolution import Coevolution, RunState
+from gpquad.model import DiscoveredModel, Equation
+from gpquad.results import HistoryWriter, atomic_write_text, provenance, write_json
+from gpquad.variables import target_index
+
+
+def target_seed(master_seed: int, target: str) -> np.random.SeedSequence:
+    """Seed of one target's run: independent of which other targets are run."""
+    return np.random.SeedSequence([int(master_seed), target_index(target)])
+
+
+def default_run_dir(cfg: Config) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path(cfg.output.dir) / f"{cfg.name}-seed{cfg.seed}-{stamp}"
+
+
+class Progress:
+    """One line per iteration: target, iteration, best training error and time left."""
+
+    def __init__(self, enabled: bool, total_iterations: int, stream=sys.stdout):
+        self.enabled = enabled
+        self.total = total_iterations
+        self.done = 0
+        self.start = time.perf_counter()
+        self.stream = stream
+
+    def iteration(self, target: str, state: RunState, iterations: int) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        left = elapsed / self.done * (self.total - self.done)
+        best = float(np.min(state.model_errors))
+        print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best train error "
+              f"{best:.5g}  elapsed {elapsed:6.1f} s  left ~{left:6.1f} s",
+              file=self.stream, flush=True)
+
+    def say(self, text: str) -> None:
+        if self.enabled:
+            print(text, file=self.stream, flush=True)
+
+
+def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter | None = None,
+             progress: Progress | None = None, state: RunState | None = None
+             ) -> tuple[Equation, RunState]:
+    """Run the coevolution for one target; returns its best equation and final state.
+
+    On KeyboardInterrupt the exception is re-raised with the partial result attached
+    as `exc.partial = (equation, state)`.
+    """
+    ev = cfg.evolution
+    co = Coevolution(dataset, target, ev)
+    if state is None:
+        state = co.init_state(target_seed(cfg.seed, target))
+    try:
+        while state.iteration < ev.iterations:
+            co.iterate(state)
+            if history is not None:
+                history.write(state.history)
+            state.history.clear()
+            if progress is not None:
+                progress.iteration(target, state, ev.iterations)
+    except KeyboardInterrupt as exc:
+        tree, train, val = co.best(state)
+        exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
+        raise
+    tree, train, val = co.best(state)
+    return Equation(target, tree, dataset.input_names, train, val, dataset.trim), state
+
+
+def write_model(run_dir: Path, model: DiscoveredModel) -> None:
+    write_json(run_dir / "model.json", model.to_dict())
+    atomic_write_text(run_dir / "equations.tex", model.latex())
+    atomic_write_text(run_dir / "equations.md", model.markdown())
+    if any(model.trim.values()):
+        atomic_write_text(run_dir / "equations_raw_inputs.tex", model.latex(raw=True))
+
+
+def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> DiscoveredModel:
+    """Identify every configured target and write the run folder.
+
+    Bad data or config fails here, before any long work. Ctrl-C writes the equations
+    found so far (model.json has "interrupted": true) and re-raises.
+    """
+    run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg)
+    show = cfg.output.progress if progress is None else progress
+    started = time.time()
+    dataset = load_dataset(cfg)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    info = {"seed": cfg.seed, "config": cfg.to_dict(), "dataset": dataset.summary(),
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}
+    write_json(run_dir / "config.json", cfg.to_dict())
+    write_json(run_dir / "run.json", info)
+    ev = cfg.evolution
+    report = Progress(show, ev.iterations * len(ev.targets))
+    report.say(f"gpquad: {dataset.summary()['train_samples']} training samples at "
+               f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}")
+    history = HistoryWriter(run_dir / "history.csv")
+    equations: dict[str, Equation] = {}
+    model = DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
+                            cfg.to_dict())
+    timings = {}
+    try:
+        for target in ev.targets:
+            t0 = time.perf_counter()
+            equations[target], _ = identify(dataset, target, cfg, history, report)
+            timings[target] = time.perf_counter() - t0
+            report.say(f"  -> {equations[target].text()}  (validation error "
+                       f"{equations[target].validation_error:.4g})")
+    except KeyboardInterrupt as exc:
+        partial = getattr(exc, "partial", None)
+        if partial is not None:
+            equations[partial[0].target] = partial[0]
+        model = dataclasses.replace(model, interrupted=True)
+        write_model(run_dir, model)
+        print(f"\ngpquad: interrupted; the equations found so far are in {run_dir}",
+              file=sys.stderr)
+        raise
+    finally:
+        history.close()
+    write_model(run_dir, model)
+    info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=time.time() - started,
+                target_time_s=timings)
+    write_json(run_dir / "run.json", info)
+    return model

@@ -1,0 +1,174 @@
+"""A discovered model: one equation per target, exportable and flyable.
+
+model.json contract:
+{"targets": {"p_dot": {"expr": "<sympy string>", "delays": {"u_R": 1, ...}, "error": ...,
+             "validation_error": ..., "latex": ..., "prefix": {...}}, ...},
+ "seed": ..., "config": {...}, "input_names": [...], "trim": {...}, "dt": ...}
+`expr` is in the model's own variables (trim-subtracted inputs); `expr_raw` writes
+the same equation in the log's raw inputs (u = u' + trim).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import sympy as sp
+
+from gpquad.tree.encoding import Tree
+from gpquad.tree.operators import CONST
+from gpquad.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
+from gpquad.variables import TARGET_LATEX, TARGET_NAMES, target_index
+
+
+@dataclass
+class Equation:
+    """One discovered equation: its tree and errors (integrated-state MAE or MSE)."""
+
+    target: str
+    tree: Tree
+    input_names: tuple[str, ...]
+    error: float
+    validation_error: float
+    trim: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def delays(self) -> dict[str, int]:
+        return {n: int(d) for n, d in zip(self.input_names, self.tree.delays)}
+
+    def used_delays(self) -> dict[str, int]:
+        """Delays of the inputs that appear in the equation."""
+        used = self.tree.used_inputs()
+        return {n: d for i, (n, d) in enumerate(self.delays.items()) if i in used}
+
+    def sympy(self) -> sp.Expr:
+        """Simplified sympy expression in the model's variables."""
+        return simplify(to_sympy(self.tree, self.input_names))
+
+    def sympy_raw(self) -> sp.Expr:
+        """The same equation in the raw (not trim-subtracted) inputs."""
+        expr = self.sympy()
+        reps = {sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(n, 0.0)
+                for n in self.input_names if self.trim.get(n, 0.0)}
+        return simplify(expr.xreplace(reps)) if reps else expr
+
+    def latex(self, digits: int = 3, raw: bool = False) -> str:
+        lhs = TARGET_LATEX[target_index(self.target)]
+        expr = self.sympy_raw() if raw else self.sympy()
+        return f"{lhs} = {to_latex(expr, self.delays, self.input_names, digits)}"
+
+    def text(self, digits: int = 3) -> str:
+        expr = round_constants(self.sympy(), digits)
+        delays = ", ".join(f"{n}: t-{d}" for n, d in self.used_delays().items() if d)
+        return f"{self.target} = {expr}" + (f"    [delays {delays}]" if delays else "")
+
+    def to_dict(self) -> dict:
+        out = {
+            "expr": expr_string(self.sympy()),
+            "delays": self.delays,
+            "error": self.error,
+            "validation_error": self.validation_error,
+            "latex": self.latex(),
+            "size": self.tree.size,
+            "prefix": {"codes": self.tree.codes.tolist(), "values": self.tree.values.tolist()},
+        }
+        if any(self.trim.values()):
+            out["expr_raw"] = expr_string(self.sympy_raw())
+        return out
+
+    @classmethod
+    def from_dict(cls, target: str, d: dict, input_names, trim) -> "Equation":
+        delays = [int(d["delays"].get(n, 0)) for n in input_names]
+        tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
+        return cls(target, tree, tuple(input_names), float(d["error"]),
+                   float(d.get("validation_error", np.nan)), dict(trim))
+
+
+@dataclass
+class DiscoveredModel:
+    """The equations of a run, with what is needed to reproduce and fly them."""
+
+    equations: dict[str, Equation]
+    input_names: tuple[str, ...]
+    trim: dict[str, float]
+    dt: float
+    seed: int
+    config: dict
+    interrupted: bool = False
+
+    def to_dict(self) -> dict:
+        out = {
+            "targets": {t: self.equations[t].to_dict() for t in TARGET_NAMES
+                        if t in self.equations},
+            "seed": self.seed,
+            "config": self.config,
+            "input_names": list(self.input_names),
+            "trim": self.trim,
+            "dt": self.dt,
+        }
+        if self.interrupted:
+            out["interrupted"] = True
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "DiscoveredModel":
+        names = tuple(d["input_names"])
+        eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
+               for t, e in d["targets"].items()}
+        return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
+                   d.get("config", {}), bool(d.get("interrupted", False)))
+
+    @classmethod
+    def load(cls, path) -> "DiscoveredModel":
+        path = Path(path)
+        if path.is_dir():
+            path = path / "model.json"
+        return cls.from_dict(json.loads(path.read_text()))
+
+    def to_sympy(self) -> dict[str, sp.Expr]:
+        return {t: e.sympy() for t, e in self.equations.items()}
+
+    def latex(self, raw: bool = False) -> str:
+        rows = [self.equations[t].latex(raw=raw) for t in TARGET_NAMES if t in self.equations]
+        return "\\begin{align}\n" + " \\\\\n".join(r.replace(" = ", " &= ", 1) for r in rows) + \
+            "\n\\end{align}\n"
+
+    def markdown(self) -> str:
+        lines = ["| target | equation | train error | validation error |", "|---|---|---|---|"]
+        for t in TARGET_NAMES:
+            if t in self.equations:
+                e = self.equations[t]
+                lines.append(f"| {t} | ${e.latex()}$ | {e.error:.4g} | {e.validation_error:.4g} |")
+        return "\n".join(lines) + "\n"
+
+    def __str__(self) -> str:
+        return "\n".join(self.equations[t].text() for t in TARGET_NAMES if t in self.equations)
+
+    def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
+        """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
+
+        Targets without an equation use the data's accelerations. input_noise, if given,
+        has shape (n_windows, n_steps, n_inputs) and is added to the recorded inputs.
+        """
+        from gpquad.kernels.fitness import rollout
+
+        capacity = max(e.tree.size for e in self.equations.values())
+        n_in = len(self.input_names)
+        codes = np.zeros((6, capacity), dtype=np.int64)
+        values = np.zeros((6, capacity))
+        sizes = np.ones(6, dtype=np.int64)
+        delays = np.zeros((6, n_in), dtype=np.int64)
+        modelled = np.zeros(6, dtype=np.bool_)
+        codes[:, 0] = CONST  # a constant-0 placeholder where there is no equation
+        for t, eq in self.equations.items():
+            k = target_index(t)
+            codes[k, : eq.tree.size] = eq.tree.codes
+            values[k, : eq.tree.size] = eq.tree.values
+            sizes[k] = eq.tree.size
+            delays[k] = eq.tree.delays
+            modelled[k] = True
+        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
+        return rollout(codes, values, sizes, delays, modelled, dataset.arrays,
+                       np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
