@@ -26,12 +26,12 @@ from gpquad.variables import terminal_names
 
 
 def benchmark_tree(input_names) -> Tree:
-    """15 nodes: (c*u_R - c*p) + (theta*q - v/c); reads Euler angles and velocity."""
+    """15 nodes: (10.3 u_R - 4.15 p) + (theta q - v / 20); reads an Euler angle and a velocity."""
     idx = {n: VAR_BASE + i for i, n in enumerate(terminal_names(input_names))}
     codes = [ADD, SUB, MUL, CONST, idx[input_names[1]], MUL, CONST, idx["p"],
              SUB, MUL, idx["theta"], idx["q"], DIV, idx["v"], CONST]
     values = [0.0] * 15
-    values[3], values[6], values[14] = 10.3, -4.15, 7.0
+    values[3], values[6], values[14] = 10.3, 4.15, 20.0
     return Tree.from_lists(codes, values, [0, 1, 0, 0][: len(input_names)])
 
 

@@ -47,6 +47,22 @@ class DataConfig:
     trim: str = "none"  # none | mean | given
     trim_values: dict[str, float] = field(default_factory=dict)
     validation_fraction: float = 2000 / 13800  # paper: 11,800 train + 2,000 validation
+    # Log pipeline (formats px4-csv, ulog, betaflight, table; see gpquad.data.pipeline).
+    log_index: int = 0  # Betaflight: which log of a multi-log file (1-based); 0 = every log
+    resample_hz: float = 100.0  # common clock before filtering (paper: 100 Hz)
+    max_gap_s: float = 0.2  # a longer gap in any stream splits the flight there
+    segment: str = "auto"  # auto (armed and thrust) | armed | thrust | range | none
+    thrust_threshold: float = 0.2  # normalised collective thrust above which the craft flies
+    time_range: tuple[float, ...] = ()  # segment = "range": (start_s, stop_s) from log start
+    min_segment_s: float = 10.0  # shorter in-flight segments are dropped
+    filter_taps: int = 200  # zero-phase FIR low-pass length (paper: 200)
+    cutoff_hz: float = 5.0  # FIR cutoff (paper: 5 Hz); 0 = no filter
+    filter_inputs: bool = True  # filter the inputs too (anti-aliasing before downsampling)
+    downsample: int = 4  # paper: 100 Hz -> 25 Hz
+    rates_from: str = "quaternion"  # quaternion (exact discrete inverse) | log
+    check_steps: int = 750  # integration-check window (paper: 750 steps)
+    check_max_rse: float = 0.05  # integration check passes below this RSE (paper: 5 %)
+    check_before_run: bool = True  # refuse to start a run on a dataset that fails the check
 
 
 @dataclass(frozen=True)
@@ -93,7 +109,28 @@ class EvolutionConfig:
     max_delay: int = 5
     metric: str = "mae"
     simplify_generations: int = 50
+    simplify_tolerance: float = 0.0  # keep a simplified model if error <= (1 + tol) * before
     test_offset_max: int = 375
+    # Not in the paper: Nelder-Mead on each model's constants after the model phase
+    # ("none" keeps the paper's method; "nelder-mead" tunes with this many evaluations).
+    constant_tuning: str = "none"
+    constant_tuning_evals: int = 60
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Repeated runs and full-model assembly (`gpquad sweep`); defaults are the paper's
+    (section 3.2: 30 repetitions per equation, 30 full models, input noise SD = 10 %)."""
+
+    runs: int = 30  # repetitions of each equation's identification
+    full_models: int = 30  # full six-equation models assembled from the runs
+    selection: str = "validation"  # error that picks the best run: validation | train
+    assembly: str = "bootstrap"  # full model k: best of a resample of the runs | repetition k
+    input_noise: float = 0.1  # Gaussian input noise SD as a fraction of max |input|; 0 = off
+    window_s: float = 7.0  # prediction window of the figure (paper Figure 2), s
+    horizons_s: tuple[float, ...] = (1.0, 7.0, 30.0)  # RSE horizons of the metrics table, s
+    shared_fraction: float = 0.5  # a term is "shared" when more than this fraction of runs has it
+    divergence_factor: float = 10.0  # diverged: non-finite or |state| > factor * max |data|
 
 
 @dataclass(frozen=True)
@@ -112,6 +149,7 @@ class Config:
     simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
     evolution: EvolutionConfig = field(default_factory=EvolutionConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    sweep: SweepConfig = field(default_factory=SweepConfig)
     base_dir: str = "."  # folder that relative data paths are read from (not a TOML key)
 
     def to_dict(self) -> dict:
@@ -124,7 +162,7 @@ class Config:
 
 
 _SECTIONS = {"data": DataConfig, "simulator": SimulatorConfig, "evolution": EvolutionConfig,
-             "output": OutputConfig}
+             "output": OutputConfig, "sweep": SweepConfig}
 
 
 def _type_name(tp) -> str:
@@ -226,6 +264,11 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if ev.n_models < 2:
         raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
                           source=source, field="evolution.n_models")
+    if ev.constant_tuning not in ("none", "nelder-mead"):
+        raise GpquadError("choose none or nelder-mead", source=source,
+                          field="evolution.constant_tuning")
+    if ev.simplify_tolerance < 0 or ev.constant_tuning_evals < 0:
+        raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
     if ev.metric not in METRICS:
         raise GpquadError(f"choose one of {list(METRICS)}", source=source, field="evolution.metric")
     if ev.const_low >= ev.const_high or ev.const_variance < 0:
@@ -238,6 +281,7 @@ def validate(cfg: Config, source: str = "config") -> Config:
         raise GpquadError("choose none, mean or given", source=source, field="data.trim")
     if not 0.0 <= d.validation_fraction < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="data.validation_fraction")
+    validate_pipeline(d, source)
     if not d.inputs or len(set(d.inputs)) != len(d.inputs):
         raise GpquadError("need distinct input names", source=source, field="data.inputs")
     clash = set(d.inputs) & set(STATE_NAMES)
@@ -252,7 +296,55 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if s.rate_hz <= 0 or s.duration_s <= 0:
         raise GpquadError("rate_hz and duration_s must be > 0", source=source,
                           field="simulator.rate_hz")
+    validate_sweep(cfg.sweep, source)
     return cfg
+
+
+def validate_sweep(sw: SweepConfig, source: str = "config") -> None:
+    """Checks of the [sweep] section."""
+    for name in ("runs", "full_models"):
+        if getattr(sw, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"sweep.{name}")
+    if sw.selection not in ("validation", "train"):
+        raise GpquadError("choose validation or train", source=source, field="sweep.selection")
+    if sw.assembly not in ("bootstrap", "repetition"):
+        raise GpquadError("choose bootstrap or repetition", source=source, field="sweep.assembly")
+    if sw.assembly == "repetition" and sw.full_models > sw.runs:
+        raise GpquadError(f"assembly = 'repetition' needs full_models <= runs ({sw.runs}); "
+                          "lower full_models or use assembly = 'bootstrap'", source=source,
+                          field="sweep.full_models")
+    if sw.input_noise < 0 or sw.window_s <= 0 or sw.divergence_factor <= 0:
+        raise GpquadError("input_noise must be >= 0, window_s and divergence_factor > 0",
+                          source=source, field="sweep.input_noise")
+    if not sw.horizons_s or min(sw.horizons_s) <= 0:
+        raise GpquadError("need positive horizons in s", source=source, field="sweep.horizons_s")
+    _check_probability(sw.shared_fraction, source, "sweep.shared_fraction")
+
+
+SEGMENT_MODES = ("auto", "armed", "thrust", "range", "none")
+
+
+def validate_pipeline(d: DataConfig, source: str = "config") -> None:
+    """Checks of the log-pipeline fields of [data]."""
+    if d.segment not in SEGMENT_MODES:
+        raise GpquadError(f"choose one of {list(SEGMENT_MODES)}", source=source,
+                          field="data.segment")
+    if d.segment == "range" and (len(d.time_range) != 2 or d.time_range[0] >= d.time_range[1]):
+        raise GpquadError("segment = 'range' needs time_range = [start_s, stop_s], start < stop",
+                          source=source, field="data.time_range")
+    for name in ("resample_hz", "max_gap_s", "check_max_rse"):
+        if getattr(d, name) <= 0:
+            raise GpquadError("must be > 0", source=source, field=f"data.{name}")
+    if d.cutoff_hz < 0 or d.cutoff_hz >= d.resample_hz / 2:
+        raise GpquadError(f"must be in [0, resample_hz / 2 = {d.resample_hz / 2}) (0 = no filter)",
+                          source=source, field="data.cutoff_hz")
+    for name in ("filter_taps", "downsample", "check_steps"):
+        if getattr(d, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"data.{name}")
+    if d.min_segment_s < 0 or d.log_index < 0:
+        raise GpquadError("must be >= 0", source=source, field="data.min_segment_s")
+    if d.rates_from not in ("quaternion", "log"):
+        raise GpquadError("choose quaternion or log", source=source, field="data.rates_from")
 
 
 def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:

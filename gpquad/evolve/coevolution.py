@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import minimize
 
 from gpquad.config import EvolutionConfig
 from gpquad.data.dataset import Dataset
@@ -19,6 +20,7 @@ from gpquad.evolve.evaluator import Evaluator
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.kernels.tree_eval import eval_on_samples
 from gpquad.tree.encoding import Tree
+from gpquad.tree.operators import CONST
 from gpquad.tree.variation import (
     VariationParams,
     constant_mutation,
@@ -154,15 +156,42 @@ class Coevolution:
             for i in np.flatnonzero(mutant_errors < errors):
                 candidates[i] = mutants[i]
                 errors[i] = mutant_errors[i]
-        for i in np.flatnonzero(errors <= state.model_errors):
+        allowed = state.model_errors * (1.0 + self.cfg.simplify_tolerance)
+        for i in np.flatnonzero(errors <= allowed):
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
+
+    def tuning_phase(self, state: RunState) -> None:
+        """Nelder-Mead on each model's constants (deterministic; off in the paper's method)."""
+        if self.cfg.constant_tuning == "none" or self.cfg.constant_tuning_evals == 0:
+            return
+        ev = self.evaluator
+        for i, model in enumerate(state.models):
+            slots = np.flatnonzero(model.codes == CONST)
+            if slots.size == 0:
+                continue
+
+            def objective(x, model=model, slots=slots):
+                values = model.values.copy()
+                values[slots] = x
+                err = ev.mean_errors([Tree(model.codes, values, model.delays)], state.suite)[0]
+                return err if np.isfinite(err) else 1e300
+
+            res = minimize(objective, model.values[slots], method="Nelder-Mead",
+                           options={"maxfev": self.cfg.constant_tuning_evals, "xatol": 1e-8,
+                                    "fatol": 1e-12})
+            if res.fun < state.model_errors[i]:
+                values = model.values.copy()
+                values[slots] = res.x
+                state.models[i] = Tree(model.codes, values, model.delays)
+                state.model_errors[i] = res.fun
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""
         rng = np.random.default_rng()
         rng.bit_generator.state = state.rng_state
         self.model_phase(state, rng)
+        self.tuning_phase(state)
         self.test_phase(state, rng)
         self.simplify_phase(state, rng)
         state.iteration += 1

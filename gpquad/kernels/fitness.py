@@ -15,11 +15,18 @@ not an approximation:
 `rollout` integrates everything and is the reference these paths are tested on.
 """
 
-import math
-
 import numpy as np
 
-from gpquad.kernels.quaternion import euler_from_quat, quat_mul, rate_increment, rotation_matrix
+from gpquad.kernels.quaternion import (
+    euler_from_quat,
+    euler_phi,
+    euler_psi,
+    euler_theta,
+    quat_mul,
+    rate_increment,
+    renormalize,
+    rotate_back,
+)
 from gpquad.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.numba_config import njit
 from gpquad.tree.operators import VAR_BASE
@@ -39,19 +46,24 @@ def _uses(codes, size, first, last):
 
 
 @njit
-def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared, bound, out):
+def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
+                       bound, out):
     """Mean per-step error of one tree on each window; fills out (n_windows,).
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
     and every entry is set to inf. Pass np.inf to evaluate fully.
-    Returns True when abandoned.
+    A window whose state diverges (NaN or beyond STATE_LIMIT) scores inf and stops.
+    Returns True when the evaluation stopped early.
     """
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
     linear = target < 3
-    uses_euler = _uses(codes, size, 0, 2)
+    uses_phi = _uses(codes, size, 0, 0)
+    uses_theta = _uses(codes, size, 1, 1)
+    uses_psi = _uses(codes, size, 2, 2)
+    uses_euler = uses_phi or uses_theta or uses_psi
     uses_vel = _uses(codes, size, 3, 5)
     need_vel = linear or uses_vel
     need_att = (not linear) and uses_euler
@@ -64,7 +76,8 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     vel = np.empty((3, n))
     rates = np.empty((3, n))
     err = np.zeros(n)
-    mat = np.empty((3, 3))
+    alive = np.ones(n, dtype=np.bool_)
+    n_alive = n
     for lane in range(n):
         s = starts[lane]
         for i in range(4):
@@ -76,6 +89,8 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     for k in range(n_steps):
         # Leaves: states then delayed inputs.
         for lane in range(n):
+            if not alive[lane]:
+                continue
             idx = starts[lane] + k
             if linear:
                 for i in range(3):
@@ -83,8 +98,13 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                     features[6 + i, lane] = states[idx, 6 + i]
             else:
                 if need_att:
-                    features[0, lane], features[1, lane], features[2, lane] = euler_from_quat(
-                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
+                    q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+                    if uses_phi:
+                        features[0, lane] = euler_phi(q0, q1, q2, q3)
+                    if uses_theta:
+                        features[1, lane] = euler_theta(q0, q1, q2, q3)
+                    if uses_psi:
+                        features[2, lane] = euler_psi(q0, q1, q2, q3)
                 for i in range(3):
                     features[6 + i, lane] = rates[i, lane]
             for i in range(3):
@@ -95,6 +115,9 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
 
         total = 0.0
         for lane in range(n):
+            if not alive[lane]:
+                total += err[lane]
+                continue
             idx = starts[lane] + k
             if linear:
                 b0 = vel[0, lane] + acc[idx, 0] * dt
@@ -112,26 +135,22 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 x = vel[target, lane]
             else:
                 if need_vel or need_att:
-                    d0, d1, d2, d3 = rate_increment(rates[0, lane], rates[1, lane], rates[2, lane], dt)
+                    d0, d1, d2, d3 = rate_increment(rates[0, lane], rates[1, lane],
+                                                    rates[2, lane], dt)
                     if need_vel:
-                        rotation_matrix(d0, d1, d2, d3, mat)
-                        b0 = vel[0, lane] + acc[idx, 0] * dt
-                        b1 = vel[1, lane] + acc[idx, 1] * dt
-                        b2 = vel[2, lane] + acc[idx, 2] * dt
-                        vel[0, lane] = mat[0, 0] * b0 + mat[1, 0] * b1 + mat[2, 0] * b2
-                        vel[1, lane] = mat[0, 1] * b0 + mat[1, 1] * b1 + mat[2, 1] * b2
-                        vel[2, lane] = mat[0, 2] * b0 + mat[1, 2] * b1 + mat[2, 2] * b2
+                        vel[0, lane], vel[1, lane], vel[2, lane] = rotate_back(
+                            d0, d1, d2, d3, vel[0, lane] + acc[idx, 0] * dt,
+                            vel[1, lane] + acc[idx, 1] * dt, vel[2, lane] + acc[idx, 2] * dt)
                     if need_att:
                         n0, n1, n2, n3 = quat_mul(quat[0, lane], quat[1, lane], quat[2, lane],
                                                   quat[3, lane], d0, d1, d2, d3)
-                        norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-                        quat[0, lane] = n0 / norm
-                        quat[1, lane] = n1 / norm
-                        quat[2, lane] = n2 / norm
-                        quat[3, lane] = n3 / norm
+                        n0, n1, n2, n3 = renormalize(n0, n1, n2, n3)
+                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane] = n0, n1, n2, n3
                 for i in range(3):
-                    rates[i, lane] += acc[idx, 3 + i] * dt
-                rates[target - 3, lane] += (pred[lane] - acc[idx, target]) * dt
+                    if i == target - 3:
+                        rates[i, lane] += pred[lane] * dt
+                    else:
+                        rates[i, lane] += acc[idx, 3 + i] * dt
                 x = rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
@@ -140,9 +159,11 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 e = abs(e)
             if not abs(x) < STATE_LIMIT:  # also catches NaN
                 e = DIVERGED
+                alive[lane] = False
+                n_alive -= 1
             err[lane] += e
             total += err[lane]
-        if total > budget:
+        if total > budget or n_alive == 0:
             for lane in range(n):
                 out[lane] = DIVERGED
             return True
@@ -177,7 +198,6 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
     features = np.empty((9 + n_in, 1))
     stack = np.empty((STACK_ROWS, 1))
     pred = np.empty(1)
-    mat = np.empty((3, 3))
     a = np.empty(6)
     for lane in range(n):
         s = starts[lane]
@@ -206,16 +226,10 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
                     eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
                     a[t] = pred[0]
             d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
-            rotation_matrix(d0, d1, d2, d3, mat)
-            b0 = vel[0] + a[0] * dt
-            b1 = vel[1] + a[1] * dt
-            b2 = vel[2] + a[2] * dt
-            vel[0] = mat[0, 0] * b0 + mat[1, 0] * b1 + mat[2, 0] * b2
-            vel[1] = mat[0, 1] * b0 + mat[1, 1] * b1 + mat[2, 1] * b2
-            vel[2] = mat[0, 2] * b0 + mat[1, 2] * b1 + mat[2, 2] * b2
+            vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + a[0] * dt,
+                                                 vel[1] + a[1] * dt, vel[2] + a[2] * dt)
             n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
-            norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-            q0, q1, q2, q3 = n0 / norm, n1 / norm, n2 / norm, n3 / norm
+            q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
             for i in range(3):
                 rates[i] += a[3 + i] * dt
     return out

@@ -13,11 +13,16 @@ angular accelerations alpha (rad/s^2):
 data's first state reproduces the data's V and omega to round-off.
 """
 
-import math
-
 import numpy as np
 
-from gpquad.kernels.quaternion import quat_mul, rate_from_increment, rate_increment, rotation_matrix
+from gpquad.kernels.quaternion import (
+    quat_mul,
+    rate_from_increment,
+    rate_increment,
+    renormalize,
+    rotate_back,
+    rotation_matrix,
+)
 from gpquad.numba_config import njit
 
 
@@ -32,16 +37,10 @@ def integrate_step(quat, vel, rates, pos, acc, dt, mat):
     for i in range(3):
         pos[i] += (mat[i, 0] * vel[0] + mat[i, 1] * vel[1] + mat[i, 2] * vel[2]) * dt
     d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
-    rotation_matrix(d0, d1, d2, d3, mat)
-    b0 = vel[0] + acc[0] * dt
-    b1 = vel[1] + acc[1] * dt
-    b2 = vel[2] + acc[2] * dt
-    vel[0] = mat[0, 0] * b0 + mat[1, 0] * b1 + mat[2, 0] * b2
-    vel[1] = mat[0, 1] * b0 + mat[1, 1] * b1 + mat[2, 1] * b2
-    vel[2] = mat[0, 2] * b0 + mat[1, 2] * b1 + mat[2, 2] * b2
+    vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + acc[0] * dt,
+                                         vel[1] + acc[1] * dt, vel[2] + acc[2] * dt)
     n0, n1, n2, n3 = quat_mul(quat[0], quat[1], quat[2], quat[3], d0, d1, d2, d3)
-    norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-    quat[0], quat[1], quat[2], quat[3] = n0 / norm, n1 / norm, n2 / norm, n3 / norm
+    quat[0], quat[1], quat[2], quat[3] = renormalize(n0, n1, n2, n3)
     for i in range(3):
         rates[i] += acc[3 + i] * dt
 

@@ -25,22 +25,47 @@ def quat_mul(a0, a1, a2, a3, b0, b1, b2, b3):
     )
 
 
+# Taylor coefficients of sin(h)/h and cos(h) in powers of h^2, exact to double precision
+# for h < SERIES_LIMIT (the last term kept is below 1e-19 there).
+SERIES_LIMIT = 0.5
+
+
 @njit
 def rate_increment(p, q, r, dt):
-    """dq = exp(omega dt / 2) for body rates (p, q, r) rad/s held over dt s."""
-    angle = math.sqrt(p * p + q * q + r * r) * dt
-    half = 0.5 * angle
-    if angle < 1e-12:
-        # Second-order series; exact to round-off at these angles.
-        s = 0.5 * dt
-        return 1.0, p * s, q * s, r * s
-    s = math.sin(half) * dt / angle
-    return math.cos(half), p * s, q * s, r * s
+    """dq = exp(omega dt / 2) for body rates (p, q, r) rad/s held over dt s.
+
+    With h = |omega| dt / 2, dq = (cos h, sin(h)/h * omega dt / 2). Below SERIES_LIMIT
+    both are evaluated as series in h^2 (no sqrt, sin or cos: this is the hot path).
+    """
+    h2 = 0.25 * (p * p + q * q + r * r) * dt * dt
+    if h2 < SERIES_LIMIT * SERIES_LIMIT:
+        sinc = 1.0 + h2 * (-1.0 / 6.0 + h2 * (1.0 / 120.0 + h2 * (-1.0 / 5040.0 + h2 * (
+            1.0 / 362880.0 + h2 * (-1.0 / 39916800.0 + h2 * (1.0 / 6227020800.0 + h2 * (
+                -1.0 / 1307674368000.0)))))))
+        cosh = 1.0 + h2 * (-0.5 + h2 * (1.0 / 24.0 + h2 * (-1.0 / 720.0 + h2 * (
+            1.0 / 40320.0 + h2 * (-1.0 / 3628800.0 + h2 * (1.0 / 479001600.0 + h2 * (
+                -1.0 / 87178291200.0)))))))
+    else:
+        h = math.sqrt(h2)
+        sinc = math.sin(h) / h
+        cosh = math.cos(h)
+    s = 0.5 * dt * sinc
+    return cosh, p * s, q * s, r * s
+
+
+@njit
+def renormalize(q0, q1, q2, q3):
+    """First-order renormalisation of a nearly unit quaternion (no sqrt or division)."""
+    k = 1.5 - 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    return q0 * k, q1 * k, q2 * k, q3 * k
 
 
 @njit
 def rate_from_increment(d0, d1, d2, d3, dt):
-    """Inverse of rate_increment: body rates (rad/s) from a unit increment quaternion."""
+    """Inverse of rate_increment: body rates (rad/s) from a unit increment quaternion.
+
+    Unique for rotations below half a turn per step (|omega| dt < pi).
+    """
     if d0 < 0.0:  # same rotation, shorter way round
         d0, d1, d2, d3 = -d0, -d1, -d2, -d3
     vnorm = math.sqrt(d1 * d1 + d2 * d2 + d3 * d3)
@@ -49,6 +74,18 @@ def rate_from_increment(d0, d1, d2, d3, dt):
     angle = 2.0 * math.atan2(vnorm, d0)
     scale = angle / (vnorm * dt)
     return d1 * scale, d2 * scale, d3 * scale
+
+
+@njit
+def rotate_back(d0, d1, d2, d3, b0, b1, b2):
+    """R(d)^T b: express body_t vector b in body_{t+1} for the increment d (rotation by conj(d))."""
+    # v' = b + w t + u' x t with u' = -u and t = 2 (u' x b)
+    t0 = 2.0 * (d3 * b1 - d2 * b2)
+    t1 = 2.0 * (d1 * b2 - d3 * b0)
+    t2 = 2.0 * (d2 * b0 - d1 * b1)
+    return (b0 + d0 * t0 + (d3 * t1 - d2 * t2),
+            b1 + d0 * t1 + (d1 * t2 - d3 * t0),
+            b2 + d0 * t2 + (d2 * t0 - d1 * t1))
 
 
 @njit
@@ -66,14 +103,28 @@ def rotation_matrix(q0, q1, q2, q3, out):
 
 
 @njit
+def euler_phi(q0, q1, q2, q3):
+    """Roll (rad) of a body-to-world quaternion, ZYX convention."""
+    return math.atan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
+
+
+@njit
+def euler_theta(q0, q1, q2, q3):
+    """Pitch (rad), ZYX convention; clamped at +-pi/2."""
+    s = 2.0 * (q0 * q2 - q3 * q1)
+    return math.asin(min(1.0, max(-1.0, s)))
+
+
+@njit
+def euler_psi(q0, q1, q2, q3):
+    """Yaw (rad), ZYX convention."""
+    return math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+
+
+@njit
 def euler_from_quat(q0, q1, q2, q3):
     """ZYX Euler angles (phi, theta, psi) in rad of a body-to-world quaternion."""
-    phi = math.atan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
-    s = 2.0 * (q0 * q2 - q3 * q1)
-    s = min(1.0, max(-1.0, s))
-    theta = math.asin(s)
-    psi = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
-    return phi, theta, psi
+    return euler_phi(q0, q1, q2, q3), euler_theta(q0, q1, q2, q3), euler_psi(q0, q1, q2, q3)
 
 
 @njit

@@ -1,0 +1,401 @@
+"""From raw log streams to engine-ready flights: the paper's data pipeline (section 2.1).
+
+Steps, each set in `[data]` and recorded in `Flight.meta["pipeline"]`:
+
+1. **One clock.** Every stream (a topic or a group of fields with its own timestamps) is put
+   on a uniform clock of `resample_hz`: states are interpolated linearly (quaternions
+   component-wise with sign continuity, then normalised), inputs and flags are held (zero-order
+   hold). A grid point inside a gap longer than `max_gap_s` (or 2.5 sample periods of a slow
+   stream) of any required stream is invalid: flights are split there, never interpolated across.
+2. **Segmentation.** Keep the in-flight samples (armed and thrust above a threshold, or a time
+   range; see the readers), in runs of at least `min_segment_s`.
+3. **Zero-phase FIR low-pass** (`filter_taps`, `cutoff_hz`; paper 200 taps, 5 Hz). The symmetric
+   filter's delay of (taps - 1) / 2 samples is compensated exactly by time-stamping each output
+   at the centre of its window; edge samples without full support are dropped, so there are no
+   start-up transients.
+4. **Downsampling** by `downsample` (paper 4: 100 Hz to 25 Hz).
+5. **Rates and velocities from pose.** By default the body rates are those that carry each
+   quaternion exactly to the next one under the engine's integrator
+   (`rates_from_quaternions`), so attitude, rates and accelerations are mutually consistent;
+   world velocity is rotated into the body frame with the (filtered) attitude.
+6. The accelerations themselves are computed by `build_dataset` with the engine's exact discrete
+   inverse (`body_accelerations`); trim subtraction and the time split happen there too.
+
+A reference of the unfiltered measurements on the final clock is kept in
+`Flight.meta["reference"]` for the integration check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy.signal import firwin
+
+from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
+from gpquad.errors import GpquadError
+from gpquad.kernels.integrator import rates_from_quaternions, world_to_body
+from gpquad.kernels.quaternion import euler_array
+
+#: Stream kinds: interpolated states, interpolated quaternion, held inputs/flags.
+KINDS = ("state", "quat", "hold")
+#: A slow stream's gap threshold is at least this many of its median sample periods.
+GAP_PERIODS = 2.5
+QUAT_COLS = ("qw", "qx", "qy", "qz")
+RATE_COLS = ("p", "q", "r")
+WORLD_VEL_COLS = ("vx", "vy", "vz")
+BODY_VEL_COLS = ("u", "v", "w")
+
+
+@dataclass
+class Stream:
+    """One group of signals sampled on its own clock.
+
+    t (M,) s; values (M, k) in SI units and NED/FRD; columns names the k output columns.
+    kind: "state" (linear interpolation), "quat" (normalised interpolation) or "hold".
+    Gaps in a `required` stream split the flight; `source`/`field` name it in errors.
+    """
+
+    name: str
+    t: np.ndarray
+    values: np.ndarray
+    columns: tuple[str, ...]
+    kind: str
+    source: str
+    field: str = "timestamp"
+    required: bool = True
+
+
+@dataclass
+class LogTable:
+    """A whole log on one uniform clock, before segmentation and filtering.
+
+    table: columns t (s, log clock), qw..qz, p, q, r (rad/s, may be absent), vx, vy, vz
+    (world NED m/s) or u, v, w (body m/s), the inputs, and extra signals. valid (N,) bool:
+    no gap; in_flight (N,) bool. measured maps each state variable to a short description
+    that starts with "measured" or "not measured".
+    """
+
+    name: str
+    source: str
+    table: pd.DataFrame
+    valid: np.ndarray
+    in_flight: np.ndarray
+    rate_hz: float
+    input_names: tuple[str, ...]
+    measured: dict[str, str]
+    streams: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def velocity_frame(self) -> str:
+        return "body" if "u" in self.table.columns else "world"
+
+
+def is_measured(description: str) -> bool:
+    """Whether a `LogTable.measured` description says the signal is real."""
+    return description.startswith("measured")
+
+
+def check_stream_time(t: np.ndarray, source: str, field: str) -> None:
+    """Timestamps must be finite and strictly increasing (no duplicates, no steps back)."""
+    if len(t) < 2:
+        raise GpquadError(f"only {len(t)} samples", source=source, field=field)
+    if not np.isfinite(t).all():
+        raise GpquadError("non-numeric or NaN timestamps", source=source, field=field)
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        i = int(bad[0])
+        kind = "duplicate" if steps[i] == 0 else "backwards"
+        raise GpquadError(f"{bad.size} {kind} timestamps (first at row {i + 1}: {t[i]:.6f} then "
+                          f"{t[i + 1]:.6f} s); the log is damaged or unsorted", source=source,
+                          field=field)
+
+
+def _continuous_quat(q: np.ndarray) -> np.ndarray:
+    """Flip signs so that consecutive quaternions are in the same hemisphere."""
+    q = np.array(q, dtype=float)
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
+    return q * flips[:, None]
+
+
+def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
+             ) -> tuple[pd.DataFrame, np.ndarray, list[dict]]:
+    """Put streams on one uniform clock over their common time span.
+
+    Returns (table with t and every stream column, valid (N,) bool, per-stream info rows).
+    Rows of a stream with NaN are dropped first, so a NaN run becomes a gap.
+    """
+    clean = []
+    info = []
+    for s in streams:
+        if s.kind not in KINDS:
+            raise ValueError(f"unknown stream kind {s.kind}")
+        t = np.asarray(s.t, dtype=float)
+        values = np.asarray(s.values, dtype=float).reshape(len(t), -1)
+        check_stream_time(t, s.source, s.field)
+        finite = np.isfinite(values).all(axis=1)
+        if not finite.any():
+            raise GpquadError(f"every row of '{s.name}' is NaN or empty", source=s.source,
+                              field=",".join(s.columns))
+        dropped = int((~finite).sum())
+        t, values = t[finite], values[finite]
+        if len(t) < 2:
+            raise GpquadError(f"only {len(t)} usable rows in '{s.name}'", source=s.source,
+                              field=s.field)
+        if s.kind == "quat":
+            norm = np.linalg.norm(values, axis=1)
+            if np.abs(norm - 1).max() > 0.05:
+                raise GpquadError(f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, "
+                                  "not 1", source=s.source, field=s.columns[0])
+            values = _continuous_quat(values / norm[:, None])
+        period = float(np.median(np.diff(t)))
+        clean.append((s, t, values, max(max_gap_s, GAP_PERIODS * period)))
+        info.append({"stream": s.name, "rows": len(t), "rate_hz": 1.0 / period,
+                     "start_s": float(t[0]), "stop_s": float(t[-1]), "nan_rows": dropped,
+                     "required": s.required})
+    start = max(c[1][0] for c in clean)
+    stop = min(c[1][-1] for c in clean)
+    if stop - start < 2.0 / rate_hz:
+        raise GpquadError(f"the streams do not overlap in time ({start:.3f}..{stop:.3f} s)",
+                          source=streams[0].source, field="timestamp")
+    n = int(np.floor((stop - start) * rate_hz + 1e-9)) + 1
+    grid = start + np.arange(n) / rate_hz
+    cols = {"t": grid}
+    valid = np.ones(n, dtype=bool)
+    for s, t, values, gap in clean:
+        idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 2)
+        if s.required:
+            span = t[idx + 1] - t[idx]
+            valid &= ~((span > gap) & (grid > t[idx]))
+        if s.kind == "hold":
+            held = np.searchsorted(t, grid, side="right") - 1
+            out = values[np.clip(held, 0, None)]
+        else:
+            out = np.column_stack([np.interp(grid, t, values[:, j])
+                                   for j in range(values.shape[1])])
+            if s.kind == "quat":
+                out /= np.linalg.norm(out, axis=1, keepdims=True)
+        for j, c in enumerate(s.columns):
+            cols[c] = out[:, j]
+    for row, (_, t, _, gap) in zip(info, clean):
+        row["gaps"] = int((np.diff(t) > gap).sum())
+    return pd.DataFrame(cols), valid, info
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges of the True runs of a boolean array."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def lowpass_taps(taps: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
+    """Symmetric (linear-phase) FIR low-pass taps, unit DC gain."""
+    h = firwin(taps, cutoff_hz, fs=rate_hz)
+    return h / h.sum()
+
+
+def zero_phase_fir(t: np.ndarray, x: np.ndarray, h: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Filter x (N, k) with symmetric taps h; return (t_out, y) with the delay compensated.
+
+    Output j is sum_i h[i] x[j + i], stamped at the centre of its window, t[j] + (L-1)/2 dt,
+    so a sine comes out without phase lag. Returns N - L + 1 samples (no edge transients).
+    """
+    x = np.asarray(x, dtype=float)
+    two_d = x.ndim == 2
+    x2 = x if two_d else x[:, None]
+    L = len(h)
+    if len(t) < L:
+        raise ValueError("segment shorter than the filter")
+    y = np.column_stack([np.convolve(x2[:, j], h[::-1], mode="valid") for j in range(x2.shape[1])])
+    dt = (t[-1] - t[0]) / (len(t) - 1)
+    t_out = t[: len(t) - L + 1] + 0.5 * (L - 1) * dt
+    return t_out, (y if two_d else y[:, 0])
+
+
+def min_samples(data) -> int:
+    """Samples (at resample_hz) that a segment needs to give a few filtered, downsampled rows."""
+    taps = data.filter_taps if data.cutoff_hz > 0 else 1
+    return taps + 8 * data.downsample
+
+
+def segments_of(log: LogTable, data) -> tuple[list[tuple[int, int]], list[str]]:
+    """Usable [start, stop) ranges of log.table and notes on what was dropped."""
+    keep = []
+    notes = []
+    need = max(int(round(data.min_segment_s * log.rate_hz)), min_samples(data))
+    t = log.table["t"].to_numpy()
+    for a, b in runs(log.valid & log.in_flight):
+        if b - a < need:
+            notes.append(f"dropped in-flight piece {t[a]:.2f}..{t[b - 1]:.2f} s "
+                         f"({(b - a) / log.rate_hz:.2f} s < {need / log.rate_hz:.2f} s)")
+        else:
+            keep.append((a, b))
+    return keep, notes
+
+
+def no_flight_error(log: LogTable, data, notes: list[str]) -> GpquadError:
+    t = log.table["t"].to_numpy()
+    flying = float(log.in_flight.sum()) / log.rate_hz
+    gaps = len(runs(~log.valid))
+    detail = f"{flying:.1f} s in flight by segment = '{data.segment}' over {t[0]:.1f}..{t[-1]:.1f} s"
+    if notes:
+        detail += f", {len(notes)} piece(s) too short or cut by {gaps} gap(s)"
+    return GpquadError(f"no usable flight in the log ({detail}); check arming/thrust, or set "
+                       "data.segment = 'range' with data.time_range", source=log.source,
+                       field="data.segment")
+
+
+def _reference(table: pd.DataFrame, t_out: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Unfiltered measurements (N, 9) at times t_out: Euler angles, body velocity, rates.
+
+    Log rates are averaged over each step [t, t + dt], as the discrete rates are.
+    """
+    t = table["t"].to_numpy()
+    q = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in QUAT_COLS])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.ascontiguousarray(q)
+    if "u" in table.columns:
+        vel = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in BODY_VEL_COLS])
+    else:
+        world = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in WORLD_VEL_COLS])
+        vel = world_to_body(q, np.ascontiguousarray(world))
+    if all(c in table.columns for c in RATE_COLS) and len(t_out) > 1:
+        dt = t_out[1] - t_out[0]
+        sub = np.linspace(0.0, dt, 9)
+        w = np.full(9, 1.0 / 8)
+        w[0] = w[-1] = 0.5 / 8
+        times = np.minimum(t_out[:, None] + sub[None, :], t[-1])
+        rates = np.column_stack([np.interp(times, t, table[c].to_numpy()) @ w
+                                 for c in RATE_COLS])
+    return np.hstack([euler_array(q), vel, rates])
+
+
+def _step_means(x: np.ndarray, d: int) -> np.ndarray:
+    """Trapezoidal means of x (M, k) over [i d, (i + 1) d] for every i (last: point value)."""
+    m = len(x)
+    out = x[::d].copy()
+    n_full = (m - 1) // d
+    if n_full > 0:
+        w = np.full(d + 1, 1.0 / d)
+        w[0] = w[-1] = 0.5 / d
+        for i in range(n_full):
+            out[i] = w @ x[i * d: i * d + d + 1]
+    return out
+
+
+def _filtered_reference(x: np.ndarray, frame: str, rates: np.ndarray) -> np.ndarray:
+    """Filtered (not downsampled-then-derived) measurements (N, 9) on the final clock."""
+    q = np.ascontiguousarray(x[:, :4] / np.linalg.norm(x[:, :4], axis=1, keepdims=True))
+    vel = x[:, 4:7]
+    if frame == "world":
+        vel = world_to_body(q, np.ascontiguousarray(vel))
+    log_rates = x[:, 7:10] if x.shape[1] >= 10 else rates
+    return np.hstack([euler_array(q), vel, log_rates])
+
+
+def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
+    """Filter, downsample and derive rates/velocities for table rows [a, b)."""
+    seg = log.table.iloc[a:b]
+    t = seg["t"].to_numpy()
+    vel_cols = BODY_VEL_COLS if log.velocity_frame == "body" else WORLD_VEL_COLS
+    has_rates = all(c in seg.columns for c in RATE_COLS)
+    state_cols = list(QUAT_COLS) + list(vel_cols) + (list(RATE_COLS) if has_rates else [])
+    inputs = list(log.input_names)
+    x_state = seg[state_cols].to_numpy(dtype=float, copy=True)
+    x_state[:, :4] = _continuous_quat(x_state[:, :4])
+    x_in = seg[inputs].to_numpy(dtype=float, copy=True)
+    steps = [f"resampled to {log.rate_hz:g} Hz (states interpolated, inputs held)"]
+    if data.cutoff_hz > 0:
+        h = lowpass_taps(data.filter_taps, data.cutoff_hz, log.rate_hz)
+        t_f, x_state = zero_phase_fir(t, x_state, h)
+        if data.filter_inputs:
+            _, x_in = zero_phase_fir(t, x_in, h)
+        else:
+            x_in = x_in[(len(h) - 1) // 2: (len(h) - 1) // 2 + len(t_f)]
+        t = t_f
+        steps.append(f"zero-phase FIR low-pass: {data.filter_taps} taps, {data.cutoff_hz:g} Hz "
+                     f"(delay {(data.filter_taps - 1) / 2:g} samples compensated; inputs "
+                     f"{'filtered' if data.filter_inputs else 'not filtered'})")
+    d = data.downsample
+    filtered_ref = x_state[::d].copy()
+    if has_rates:  # the discrete rate is the mean over [t, t + dt]: average the gyro likewise
+        filtered_ref[:, 7:10] = _step_means(x_state[:, 7:10], d)
+    t, x_state, x_in = t[::d], x_state[::d], x_in[::d]
+    rate = log.rate_hz / d
+    dt = 1.0 / rate
+    steps.append(f"downsampled by {d} to {rate:g} Hz")
+    quat = x_state[:, :4] / np.linalg.norm(x_state[:, :4], axis=1, keepdims=True)
+    quat = np.ascontiguousarray(quat)
+    if data.rates_from == "quaternion" or not has_rates:
+        rates = rates_from_quaternions(quat, dt)
+        steps.append("body rates from the quaternion (exact inverse of the integrator)")
+        n = len(t) - 1
+    else:
+        rates = x_state[:, 7:10]
+        steps.append("body rates from the log (filtered)")
+        n = len(t)
+    t, quat, x_state, x_in, rates = t[:n], quat[:n], x_state[:n], x_in[:n], rates[:n]
+    if log.velocity_frame == "world":
+        vel = world_to_body(quat, np.ascontiguousarray(x_state[:, 4:7]))
+        steps.append("body velocity = world velocity rotated by the filtered attitude")
+    else:
+        vel = np.ascontiguousarray(x_state[:, 4:7])
+    if np.abs(rates).max() > MAX_PLAUSIBLE_RATE:
+        raise GpquadError(f"body rates reach {np.abs(rates).max():.1f} rad/s, implausible; "
+                          "degrees where radians are expected?", source=log.source, field="p")
+    meta = {
+        "source": log.source, "log": log.name, "segment": index,
+        "t_start_s": float(t[0]), "t_stop_s": float(t[-1]), "dt": dt,
+        "measured": dict(log.measured), "pipeline": steps,
+        "reference_raw": _reference(log.table.iloc[a:b], t, rates),
+        "reference": _filtered_reference(filtered_ref[:n], log.velocity_frame, rates),
+    }
+    return Flight(name=f"{log.name}#{index}", t=t, quat=quat, vel=np.ascontiguousarray(vel),
+                  rates=np.ascontiguousarray(rates), inputs=np.ascontiguousarray(x_in),
+                  input_names=tuple(inputs), pos=None, meta=meta)
+
+
+def flights_from_log(log: LogTable, data) -> list[Flight]:
+    """The in-flight segments of a log, filtered and downsampled per the config.
+
+    Raises GpquadError when no segment is long enough.
+    """
+    keep, notes = segments_of(log, data)
+    log.notes.extend(notes)
+    if not keep:
+        raise no_flight_error(log, data, notes)
+    return [process_segment(log, a, b, data, i) for i, (a, b) in enumerate(keep)]
+
+
+def in_flight_mask(t: np.ndarray, armed: np.ndarray | None, thrust: np.ndarray | None,
+                   data, source: str) -> np.ndarray:
+    """In-flight samples by `data.segment`: armed, thrust above threshold, both, a range or all.
+
+    armed (N,) bool or None when the log has no arming state; thrust (N,) normalised or None.
+    """
+    mode = data.segment
+    if mode == "none":
+        return np.ones(len(t), dtype=bool)
+    if mode == "range":
+        lo, hi = data.time_range
+        return (t >= lo) & (t <= hi)
+    mask = np.ones(len(t), dtype=bool)
+    if mode in ("armed", "auto"):
+        if armed is None:
+            if mode == "armed":
+                raise GpquadError("the log has no arming state; use segment = 'thrust' or "
+                                  "'range'", source=source, field="data.segment")
+        else:
+            mask &= armed
+    if mode in ("thrust", "auto"):
+        if thrust is None:
+            raise GpquadError("the log has no thrust signal; use segment = 'armed' or 'range'",
+                              source=source, field="data.segment")
+        mask &= thrust > data.thrust_threshold
+    return mask

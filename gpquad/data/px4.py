@@ -1,0 +1,266 @@
+"""PX4 logs as topic tables: a folder of `ulog2csv` CSVs (format "px4-csv").
+
+`px4_log_table` turns topic tables (from CSVs or from a .ulg, see gpquad.data.ulog) into one
+`LogTable` on one clock. Signals used (PX4 conventions, NED/FRD, SI units):
+
+- vehicle_attitude: q[0..3] (w, x, y, z), body-to-world; rollspeed/pitchspeed/yawspeed
+  (rad/s), or vehicle_angular_velocity xyz[0..2] in newer logs.
+- vehicle_local_position: vx, vy, vz (NED m/s), with the v_xy_valid / v_z_valid flags. A
+  velocity whose flag is never set was not measured: it is kept (the log's value, usually 0)
+  but reported as "not measured"; when the flag is set only part of the time, the invalid rows
+  are gaps.
+- actuator_controls_0: control[0..3] = roll, pitch, yaw torque in [-1, 1] and thrust in [0, 1];
+  the default inputs u_R, u_P, u_Y, u_T.
+- vehicle_status: arming_state (2 = armed), nav_state; vehicle_rates_setpoint (rad/s);
+  input_rc (PWM us -> (pwm - 1500) / 500); actuator_outputs (PWM us -> (pwm - PWM_MIN) /
+  (PWM_MAX - PWM_MIN) from the parameters). These are extra columns that `[data.columns]` can
+  map to inputs, e.g. `u_T = "motor_0"`.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
+from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.errors import GpquadError
+
+#: PX4's ARMING_STATE_ARMED (2016 and later).
+ARMED = 2
+#: Default input name -> table column.
+DEFAULT_INPUT_COLUMNS = {"u_R": "roll_cmd", "u_P": "pitch_cmd", "u_Y": "yaw_cmd",
+                         "u_T": "thrust_cmd"}
+REQUIRED_TOPICS = ("vehicle_attitude", "vehicle_local_position", "actuator_controls_0")
+
+
+class Topics:
+    """Topic tables of one log: name -> DataFrame (timestamp in us), with their sources."""
+
+    def __init__(self, tables: dict[str, pd.DataFrame], sources: dict[str, str], params: dict,
+                 where: str):
+        self.tables = tables
+        self.sources = sources
+        self.params = params
+        self.where = where
+
+    def has(self, topic: str) -> bool:
+        return topic in self.tables and len(self.tables[topic]) > 0
+
+    def get(self, topic: str) -> pd.DataFrame:
+        if topic not in self.tables:
+            raise GpquadError(f"missing topic '{topic}' (for a ulog2csv folder: a file "
+                              f"*_{topic}_0.csv)", source=self.where, field=topic)
+        return self.tables[topic]
+
+    def column(self, topic: str, name: str) -> np.ndarray:
+        df = self.get(topic)
+        if name not in df.columns:
+            raise GpquadError(f"missing column '{name}' in topic '{topic}'",
+                              source=self.sources.get(topic, self.where), field=name)
+        return pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
+
+    def time(self, topic: str) -> np.ndarray:
+        """Topic timestamps in s (from microseconds)."""
+        return self.column(topic, "timestamp") * 1e-6
+
+    def stream(self, topic: str, fields, columns, kind: str, required: bool = True,
+               scale: float = 1.0, offset: float = 0.0) -> Stream:
+        values = np.column_stack([(self.column(topic, f) - offset) * scale for f in fields])
+        return Stream(topic, self.time(topic), values, tuple(columns), kind,
+                      self.sources.get(topic, self.where), "timestamp", required)
+
+
+_TOPIC_FILE = re.compile(r"^(?P<topic>.+)_(?P<inst>\d+)\.csv$")
+
+
+def read_octave_params(path: Path) -> dict[str, float]:
+    """Parameters from ulog2csv's `parameters.octave` (name -> value)."""
+    params = {}
+    name = None
+    for line in path.read_text(errors="replace").splitlines():
+        if line.startswith("# name "):
+            name = line[7:].strip()
+        elif line and not line.startswith("#") and name:
+            try:
+                params[name] = float(line.strip())
+            except ValueError:
+                pass
+            name = None
+    return params
+
+
+def read_px4_folder(path) -> Topics:
+    """Topic tables from a folder of `<log>_<topic>_<instance>.csv` files (ulog2csv)."""
+    path = Path(path)
+    if not path.is_dir():
+        raise GpquadError("not a folder of ulog2csv topic CSVs (format px4-csv)", source=str(path))
+    files = sorted(path.glob("*.csv"))
+    if not files:
+        raise GpquadError("no topic CSVs in the folder", source=str(path))
+    stems = [f.name for f in files]
+    prefix = _common_prefix(stems)
+    tables, sources = {}, {}
+    for f in files:
+        m = _TOPIC_FILE.match(f.name[len(prefix):])
+        if not m:
+            continue
+        topic, inst = m.group("topic"), int(m.group("inst"))
+        key = topic if inst == 0 else f"{topic}#{inst}"
+        if topic not in _WANTED:
+            continue
+        try:
+            tables[key] = pd.read_csv(f)
+        except Exception as exc:  # truncated or corrupt CSV
+            raise GpquadError(f"cannot read the topic CSV ({type(exc).__name__}: {exc})",
+                              source=str(f)) from None
+        sources[key] = str(f)
+    octave = path / "parameters.octave"
+    params = read_octave_params(octave) if octave.is_file() else {}
+    return Topics(tables, sources, params, str(path))
+
+
+_WANTED = {"vehicle_attitude", "vehicle_angular_velocity", "vehicle_local_position",
+           "actuator_controls_0", "vehicle_status", "vehicle_rates_setpoint", "input_rc",
+           "actuator_outputs"}
+
+
+def _common_prefix(names: list[str]) -> str:
+    """The log-name prefix `<log>_` shared by ulog2csv files (empty if there is none)."""
+    for topic in ("vehicle_attitude_0.csv", "actuator_controls_0_0.csv"):
+        for n in names:
+            if n.endswith("_" + topic):
+                return n[: -len(topic)]
+    return ""
+
+
+def _check_rad(values: np.ndarray, source: str, field: str) -> None:
+    peak = float(np.nanmax(np.abs(values))) if values.size else 0.0
+    if peak > MAX_PLAUSIBLE_RATE:
+        raise GpquadError(f"body rates reach {peak:.1f}, implausible in rad/s: degrees where "
+                          "radians are expected? convert deg/s to rad/s", source=source,
+                          field=field)
+
+
+def _velocity_stream(tp: Topics, measured: dict) -> Stream:
+    topic = "vehicle_local_position"
+    t = tp.time(topic)
+    vel = np.column_stack([tp.column(topic, c) for c in ("vx", "vy", "vz")])
+    df = tp.get(topic)
+    for flag, axes in (("v_xy_valid", ("u", "v")), ("v_z_valid", ("w",))):
+        cols = [0, 1] if flag == "v_xy_valid" else [2]
+        if flag not in df.columns:
+            for a in axes:
+                measured[a] = "measured (estimator velocity; no validity flag in the log)"
+            continue
+        ok = tp.column(topic, flag) > 0.5
+        if not ok.any():
+            for a in axes:
+                measured[a] = (f"not measured ({flag} = 0 throughout; the log's value "
+                               f"{np.nanmean(np.abs(vel[:, cols])):.3g} m/s is kept)")
+        else:
+            for a in axes:
+                measured[a] = (f"measured (estimator, {flag} = 1 for {ok.mean():.0%} of rows; "
+                               "invalid rows are gaps)")
+            vel[~ok] = np.nan  # a gap: never interpolated across
+    return Stream(topic, t, vel, ("vx", "vy", "vz"), "state", tp.sources.get(topic, tp.where))
+
+
+def px4_log_table(tp: Topics, data, name: str) -> LogTable:
+    """One PX4 log on one clock (see the module docstring for the signals)."""
+    for topic in REQUIRED_TOPICS:
+        tp.get(topic)
+    measured = {}
+    streams = [tp.stream("vehicle_attitude", [f"q[{i}]" for i in range(4)],
+                         ("qw", "qx", "qy", "qz"), "quat")]
+    measured.update({a: "measured (estimator attitude quaternion)" for a in ("phi", "theta", "psi")})
+    att = tp.get("vehicle_attitude")
+    if "rollspeed" in att.columns:
+        s = tp.stream("vehicle_attitude", ["rollspeed", "pitchspeed", "yawspeed"],
+                      ("p", "q", "r"), "state")
+    elif tp.has("vehicle_angular_velocity"):
+        s = tp.stream("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)],
+                      ("p", "q", "r"), "state")
+    else:
+        s = None
+    if s is not None:
+        _check_rad(s.values, s.source, "rollspeed")
+        streams.append(s)
+        measured.update({a: "measured (gyro, estimator output)" for a in ("p", "q", "r")})
+    else:
+        measured.update({a: "measured (derived from the quaternion only)" for a in "pqr"})
+    streams.append(_velocity_stream(tp, measured))
+    streams.append(tp.stream("actuator_controls_0", [f"control[{i}]" for i in range(4)],
+                             ("roll_cmd", "pitch_cmd", "yaw_cmd", "thrust_cmd"), "hold"))
+    notes = []
+    armed_ok = False
+    optional = []
+    if tp.has("vehicle_status"):
+        optional.append(lambda: tp.stream("vehicle_status", ["arming_state", "nav_state"],
+                                          ("arming_state", "nav_state"), "hold", required=False))
+    if tp.has("vehicle_rates_setpoint"):
+        optional.append(lambda: tp.stream("vehicle_rates_setpoint",
+                                          ["roll", "pitch", "yaw", "thrust"],
+                                          ("p_sp", "q_sp", "r_sp", "thrust_sp"), "hold",
+                                          required=False))
+    if tp.has("input_rc"):
+        optional.append(lambda: tp.stream("input_rc", [f"values[{i}]" for i in range(8)],
+                                          tuple(f"rc_{i}" for i in range(8)), "hold",
+                                          required=False, scale=1 / 500, offset=1500.0))
+    if tp.has("actuator_outputs"):
+        lo, hi = tp.params.get("PWM_MIN", 1000.0), tp.params.get("PWM_MAX", 2000.0)
+        optional.append(lambda: tp.stream("actuator_outputs", [f"output[{i}]" for i in range(4)],
+                                          tuple(f"motor_{i}" for i in range(4)), "hold",
+                                          required=False, scale=1 / (hi - lo), offset=lo))
+    for make in optional:
+        try:
+            s = make()
+            if len(s.t) >= 2 and np.all(np.diff(s.t) > 0):
+                streams.append(s)
+                armed_ok |= s.name == "vehicle_status"
+            else:
+                notes.append(f"skipped topic {s.name}: timestamps not increasing")
+        except GpquadError as exc:
+            notes.append(f"skipped optional topic: {exc}")
+    table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
+    inputs = _map_inputs(table, data, tp.where)
+    for n_in, col in inputs.items():
+        table[n_in] = table[col]
+    t = table["t"].to_numpy()
+    armed = (table["arming_state"].to_numpy() == ARMED) if armed_ok else None
+    thrust = table["thrust_cmd"].to_numpy()
+    mask = in_flight_mask(t, armed, thrust, data, tp.where)
+    return LogTable(name=name, source=tp.where, table=table, valid=valid, in_flight=mask,
+                    rate_hz=data.resample_hz, input_names=tuple(data.inputs), measured=measured,
+                    streams=info, notes=notes)
+
+
+def _map_inputs(table: pd.DataFrame, data, source: str) -> dict[str, str]:
+    """Input name -> table column, from [data.columns] or the PX4 defaults."""
+    out = {}
+    for name in data.inputs:
+        col = data.columns.get(name, DEFAULT_INPUT_COLUMNS.get(name))
+        if col is None:
+            raise GpquadError(f"no signal for input '{name}'; map it with [data.columns] "
+                              f"{name} = \"<column>\" (available: {sorted(table.columns)})",
+                              source=source, field=f"data.columns.{name}")
+        if col not in table.columns:
+            raise GpquadError(f"input '{name}' maps to unknown signal '{col}' (available: "
+                              f"{sorted(c for c in table.columns if c != 't')})", source=source,
+                              field=f"data.columns.{name}")
+        out[name] = col
+    return out
+
+
+def read_px4_folder_log(path, data) -> LogTable:
+    """A ulog2csv folder as one LogTable."""
+    path = Path(path)
+    return px4_log_table(read_px4_folder(path), data, path.name)
+
+
+def read_px4_csv(path, data) -> list[Flight]:
+    """Reader for format "px4-csv": in-flight segments of a ulog2csv folder."""
+    return flights_from_log(read_px4_folder_log(path, data), data)

@@ -1,0 +1,342 @@
+"""Resumable sweeps: every configured equation identified `runs` times, in parallel.
+
+Layout of a sweep folder::
+
+    DIR/sweep.json                      seed, config fingerprint, grid, provenance
+    DIR/config.json                     the config
+    DIR/runs/<target>/rep<k>/           one run: checkpoint.bin, history.csv,
+                                        status.json (live), result.json (when finished)
+    DIR/model.json, DIR/models/ ...     full models (gpquad.assemble)
+
+Seeds: run (target, k) uses ``SeedSequence(seed).spawn(7)[target_index].spawn(k + 1)[k]``,
+so its result depends on neither the number of jobs, the finishing order, nor the other
+runs of the grid. Child 6 of the root seeds the full-model assembly.
+
+Kill safety: after each iteration the run appends its history rows to history.csv,
+fsyncs it, then atomically replaces checkpoint.bin, which records history.csv's length.
+On resume the history is truncated to that length, so rows of an iteration that was
+interrupted are never duplicated. A finished run writes result.json (atomically) and is
+skipped from then on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gpquad import checkpoint
+from gpquad.config import Config
+from gpquad.data.dataset import Dataset
+from gpquad.errors import GpquadError
+from gpquad.evolve.coevolution import Coevolution
+from gpquad.model import Equation
+from gpquad.results import HistoryWriter, provenance, write_json
+from gpquad.variables import TARGET_NAMES, target_index
+
+#: Index of the root seed's child that seeds full-model assembly (after the six targets).
+ASSEMBLY_CHILD = len(TARGET_NAMES)
+BACKENDS = ("loky", "dask")
+
+
+@dataclass(frozen=True)
+class RunKey:
+    """One cell of the grid."""
+
+    target: str
+    repetition: int
+
+    @property
+    def name(self) -> str:
+        return f"{self.target}/rep{self.repetition:03d}"
+
+
+def run_seed(master_seed: int, target: str, repetition: int) -> np.random.SeedSequence:
+    """Seed of run (target, repetition), spawned from the master seed."""
+    per_target = np.random.SeedSequence(int(master_seed)).spawn(len(TARGET_NAMES) + 1)
+    return per_target[target_index(target)].spawn(repetition + 1)[repetition]
+
+
+def assembly_seed(master_seed: int, index: int) -> np.random.SeedSequence:
+    """Seed of full model `index` (bootstrap draw and input noise)."""
+    child = np.random.SeedSequence(int(master_seed)).spawn(ASSEMBLY_CHILD + 1)[ASSEMBLY_CHILD]
+    return child.spawn(index + 1)[index]
+
+
+def grid(cfg: Config, runs: int | None = None) -> list[RunKey]:
+    """Every (target, repetition), target-major."""
+    n = cfg.sweep.runs if runs is None else runs
+    return [RunKey(t, k) for t in cfg.evolution.targets for k in range(n)]
+
+
+def run_dir(out: Path, key: RunKey) -> Path:
+    return Path(out) / "runs" / key.target / f"rep{key.repetition:03d}"
+
+
+def fingerprint(cfg: Config) -> str:
+    """Hash of everything a run's result depends on (seed, data, simulator, evolution)."""
+    d = cfg.to_dict()
+    relevant = {k: d[k] for k in ("seed", "data", "simulator", "evolution")}
+    relevant["data_paths"] = [str(p) for p in cfg.data_paths()]
+    relevant["evolution"].pop("targets")  # adding targets to a sweep keeps earlier runs valid
+    blob = json.dumps(relevant, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+# --------------------------------------------------------------------------- one run
+def _status(path: Path, **fields) -> None:
+    write_json(path, {**fields, "time": time.time()})
+
+
+def _restart_files(folder: Path) -> None:
+    for name in ("checkpoint.bin", "history.csv", "status.json", "result.json"):
+        p = folder / name
+        if p.exists():
+            p.unlink()
+
+
+def _resume(folder: Path, fp: str):
+    """(state, history_bytes, warning) from the run's checkpoint; state None to start anew."""
+    ckpt = folder / "checkpoint.bin"
+    hist = folder / "history.csv"
+    if not ckpt.exists():
+        return None, 0, None
+    try:
+        state, meta = checkpoint.load(ckpt)
+        if meta.get("fingerprint") != fp:
+            raise checkpoint.CorruptCheckpoint("written by a different config")
+        size = hist.stat().st_size if hist.exists() else -1
+        if size < meta["history_bytes"]:
+            raise checkpoint.CorruptCheckpoint(
+                f"history.csv has {size} bytes, fewer than the {meta['history_bytes']} recorded")
+        return state, int(meta["history_bytes"]), None
+    except (checkpoint.CorruptCheckpoint, KeyError) as exc:
+        return None, 0, f"{ckpt}: corrupt checkpoint ({exc}); restarting this run from scratch"
+
+
+def execute_run(cfg: Config, dataset: Dataset, key: RunKey, out) -> dict:
+    """Run (or resume, or skip) one cell of the grid; returns its summary.
+
+    Summary keys: target, repetition, train_error, validation_error, skipped (bool),
+    warnings (list of str).
+    """
+    folder = run_dir(Path(out), key)
+    folder.mkdir(parents=True, exist_ok=True)
+    result_path = folder / "result.json"
+    warnings: list[str] = []
+    if result_path.exists():
+        try:
+            done = json.loads(result_path.read_text())
+            return {**_summary(done), "skipped": True, "warnings": []}
+        except (ValueError, KeyError) as exc:
+            warnings.append(f"{result_path}: unreadable ({exc}); running it again")
+            result_path.unlink()
+    fp = fingerprint(cfg)
+    ev = cfg.evolution
+    co = Coevolution(dataset, key.target, ev)
+    hist = folder / "history.csv"
+    ckpt = folder / "checkpoint.bin"
+    status = folder / "status.json"
+    state, history_bytes, warning = _resume(folder, fp)
+    if warning:
+        warnings.append(warning)
+    if state is None:
+        _restart_files(folder)
+        state = co.init_state(run_seed(cfg.seed, key.target, key.repetition))
+    else:
+        with open(hist, "r+b") as fh:  # drop rows written after the checkpoint
+            fh.truncate(history_bytes)
+    started = time.time()
+    _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
+            iterations=ev.iterations, best_error=float(np.min(state.model_errors)),
+            started=started, state="running")
+    writer = HistoryWriter(hist)
+    try:
+        while state.iteration < ev.iterations:
+            co.iterate(state)
+            writer.write(state.history)
+            state.history.clear()
+            checkpoint.fsync_file(hist)
+            meta = {"fingerprint": fp, "target": key.target, "repetition": key.repetition,
+                    "history_bytes": hist.stat().st_size}
+            checkpoint.save(ckpt, state, meta)
+            _status(status, target=key.target, repetition=key.repetition,
+                    iteration=state.iteration, iterations=ev.iterations,
+                    best_error=float(np.min(state.model_errors)), started=started,
+                    state="running")
+    finally:
+        writer.close()
+    tree, train, val = co.best(state)
+    eq = Equation(key.target, tree, dataset.input_names, train, val, dataset.trim)
+    result = {"target": key.target, "repetition": key.repetition,
+              "seed": {"master": cfg.seed, "spawn_key": list(
+                  run_seed(cfg.seed, key.target, key.repetition).spawn_key)},
+              "iterations": state.iteration, "train_error": train, "validation_error": val,
+              "equation": eq.to_dict()}
+    write_json(result_path, result)
+    _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
+            iterations=ev.iterations, best_error=float(np.min(state.model_errors)),
+            started=started, state="done", wall_s=time.time() - started)
+    return {**_summary(result), "skipped": False, "warnings": warnings}
+
+
+def _summary(result: dict) -> dict:
+    return {"target": result["target"], "repetition": int(result["repetition"]),
+            "train_error": float(result["train_error"]),
+            "validation_error": float(result["validation_error"])}
+
+
+# ------------------------------------------------------------------------ the sweep
+def prepare(cfg: Config, out: Path, runs: int) -> dict:
+    """Create or check the sweep folder; refuses a folder written by another config."""
+    out = Path(out)
+    fp = fingerprint(cfg)
+    info_path = out / "sweep.json"
+    if info_path.exists():
+        try:
+            old = json.loads(info_path.read_text())
+        except ValueError:
+            old = {}
+        if old.get("fingerprint") not in (None, fp):
+            raise GpquadError("this folder holds a sweep of a different config (seed, data, "
+                              "simulator or evolution settings differ); give another --out",
+                              source=str(out), field="--out")
+    elif out.exists() and any(out.iterdir()):
+        raise GpquadError("folder exists and is not a sweep folder; give another --out",
+                          source=str(out), field="--out")
+    out.mkdir(parents=True, exist_ok=True)
+    info = {"fingerprint": fp, "seed": cfg.seed, "name": cfg.name, "runs": runs,
+            "targets": list(cfg.evolution.targets), "iterations": cfg.evolution.iterations,
+            "base_dir": cfg.base_dir,
+            "seeding": "run (target, k): SeedSequence(seed).spawn(7)[target_index]"
+                       ".spawn(k + 1)[k]; full model k: child 6, spawn(k + 1)[k]",
+            **provenance()}
+    write_json(info_path, info)
+    write_json(out / "config.json", {**cfg.to_dict(), "base_dir": cfg.base_dir})
+    return info
+
+
+def precheck(out: Path, keys: list[RunKey], fp: str) -> list[str]:
+    """Warnings for checkpoints that cannot be resumed (found before any work starts)."""
+    found = []
+    for key in keys:
+        folder = run_dir(out, key)
+        if (folder / "result.json").exists():
+            continue
+        _, _, warning = _resume(folder, fp)
+        if warning:
+            found.append(warning)
+    return found
+
+
+def _parallel(jobs: int, backend: str, address: str | None):
+    """A context manager yielding a configured joblib.Parallel."""
+    import contextlib
+
+    from joblib import Parallel, parallel_config
+
+    @contextlib.contextmanager
+    def ctx():
+        if backend == "loky":
+            yield Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
+            return
+        from dask.distributed import Client, LocalCluster
+
+        cluster = None
+        if address:
+            client = Client(address)
+        else:
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None,
+                                   silence_logs=40)
+            client = Client(cluster)
+        try:
+            with parallel_config(backend="dask"):
+                yield Parallel(n_jobs=-1 if address else jobs, return_as="generator_unordered")
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+    return ctx()
+
+
+def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
+              backend: str = "loky", address: str | None = None, progress=None,
+              assemble: bool = True) -> dict:
+    """Run every missing cell of the grid, then assemble the full models.
+
+    Returns {"runs": [summaries], "warnings": [...], "model": path or None}.
+    """
+    from gpquad.data.io import load_dataset
+
+    if backend not in BACKENDS:
+        raise GpquadError(f"choose one of {list(BACKENDS)}", field="--backend")
+    if jobs < 1:
+        raise GpquadError("must be >= 1", field="--jobs")
+    out = Path(out)
+    n_runs = cfg.sweep.runs if runs is None else int(runs)
+    if n_runs < 1:
+        raise GpquadError("must be >= 1", field="--runs")
+    dataset = load_dataset(cfg)  # bad data fails here, before any long work
+    for t in cfg.evolution.targets:  # window too long for the data fails here too
+        Coevolution(dataset, t, cfg.evolution)
+    prepare(cfg, out, n_runs)
+    keys = grid(cfg, n_runs)
+    warnings = precheck(out, keys, fingerprint(cfg))
+    if progress is not None:
+        progress.start(out, keys, cfg.evolution.iterations)
+        for w in warnings:
+            progress.warn(w)
+    summaries = []
+    t0 = time.time()
+    try:
+        from joblib import delayed
+
+        with _parallel(jobs, backend, address) as parallel:
+            for summary in parallel(delayed(execute_run)(cfg, dataset, k, str(out)) for k in keys):
+                summaries.append(summary)
+                for w in summary["warnings"]:
+                    if w not in warnings:
+                        warnings.append(w)
+                        if progress is not None:
+                            progress.warn(w)
+                if progress is not None:
+                    progress.run_done(summary)
+    finally:
+        if progress is not None:
+            progress.stop()
+    summaries.sort(key=lambda s: (target_index(s["target"]), s["repetition"]))
+    model_path = None
+    if assemble:
+        from gpquad.assemble import assemble_sweep
+
+        model_path = assemble_sweep(out, cfg, dataset, n_runs)
+    info_path = out / "sweep.json"
+    info = json.loads(info_path.read_text())
+    info.update(last_wall_time_s=time.time() - t0, jobs=jobs, backend=backend,
+                finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    write_json(info_path, info)
+    if progress is not None:
+        progress.finished(summaries, model_path)
+    return {"runs": summaries, "warnings": warnings, "model": model_path}
+
+
+def clear_runs(out) -> None:
+    """Delete every run folder of a sweep (not used by the sweep itself)."""
+    shutil.rmtree(Path(out) / "runs", ignore_errors=True)
+
+
+def default_out(cfg: Config) -> Path:
+    """A stable folder name, so that the same command resumes the same sweep."""
+    return Path(cfg.output.dir) / f"{cfg.name}-sweep-seed{cfg.seed}"
+
+
+def cpu_count() -> int:
+    return os.cpu_count() or 1

@@ -1,0 +1,105 @@
+"""Slow, obviously correct references for every kernel (STUMPY's tests/naive.py habit).
+
+Written independently of gpquad.kernels: rotations come from scipy, trees are
+evaluated recursively, and every window integrates the whole state.
+"""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gpquad.tree.operators import CONST, DIV_EPS, VAR_BASE
+
+
+def rotation(quat_wxyz) -> Rotation:
+    w, x, y, z = quat_wxyz
+    return Rotation.from_quat([x, y, z, w])
+
+
+def quat_wxyz(rot: Rotation) -> np.ndarray:
+    x, y, z, w = rot.as_quat()
+    q = np.array([w, x, y, z])
+    return q if w >= 0 else -q
+
+
+def euler(quat) -> np.ndarray:
+    """(phi, theta, psi) ZYX of a body-to-world quaternion."""
+    yaw, pitch, roll = rotation(quat).as_euler("ZYX")
+    return np.array([roll, pitch, yaw])
+
+
+def step(quat, vel, rates, pos, acc, dt):
+    """One step of the paper's eq. (2) with scipy rotations."""
+    att = rotation(quat)
+    increment = Rotation.from_rotvec(np.asarray(rates) * dt)
+    new_pos = pos + att.apply(vel) * dt
+    new_vel = increment.inv().apply(vel + acc[:3] * dt)
+    new_rates = rates + acc[3:] * dt
+    return quat_wxyz(att * increment), new_vel, new_rates, new_pos
+
+
+def integrate(quat0, vel0, rates0, pos0, acc, dt):
+    quat, vel, rates, pos = [np.array(quat0)], [np.array(vel0)], [np.array(rates0)], [np.array(pos0)]
+    for a in acc:
+        q, v, w, x = step(quat[-1], vel[-1], rates[-1], pos[-1], a, dt)
+        quat.append(q)
+        vel.append(v)
+        rates.append(w)
+        pos.append(x)
+    return np.array(quat), np.array(vel), np.array(rates), np.array(pos)
+
+
+def body_accelerations(vel, rates, dt):
+    out = []
+    for t in range(len(vel) - 1):
+        increment = Rotation.from_rotvec(rates[t] * dt)
+        a = (increment.apply(vel[t + 1]) - vel[t]) / dt
+        alpha = (rates[t + 1] - rates[t]) / dt
+        out.append(np.concatenate([a, alpha]))
+    return np.array(out)
+
+
+def eval_tree(codes, values, leaves):
+    """Recursive evaluation; leaves[k] is the value of variable k."""
+    pos = 0
+
+    def rec():
+        nonlocal pos
+        c, v = int(codes[pos]), float(values[pos])
+        pos += 1
+        if c == CONST:
+            return v
+        if c >= VAR_BASE:
+            return float(leaves[c - VAR_BASE])
+        a = rec()
+        b = rec()
+        if c == 0:
+            return a + b
+        if c == 1:
+            return a - b
+        if c == 2:
+            return a * b
+        return 1.0 if abs(b) < DIV_EPS else a / b
+
+    return rec()
+
+
+def window_error(tree, target, arrays, start, n_steps, squared=False):
+    """Integrate every state from `start` with the tree's acceleration for `target`."""
+    quat = arrays.quat[start].copy()
+    vel = arrays.states[start, 3:6].copy()
+    rates = arrays.states[start, 6:9].copy()
+    pos = np.zeros(3)
+    total = 0.0
+    for k in range(n_steps):
+        idx = start + k
+        leaves = list(euler(quat)) + list(vel) + list(rates)
+        leaves += [arrays.inputs[idx - d, j] for j, d in enumerate(tree.delays)]
+        acc = arrays.acc[idx].copy()
+        acc[target] = eval_tree(tree.codes, tree.values, leaves)
+        quat, vel, rates, pos = step(quat, vel, rates, pos, acc, arrays.dt)
+        x = np.concatenate([vel, rates])[target]
+        if not abs(x) < 1e6:
+            return np.inf
+        e = x - arrays.states[idx + 1, 3 + target]
+        total += e * e if squared else abs(e)
+    return total / n_steps
