@@ -152,10 +152,11 @@ def check_units(quat, rates, source: str):
     if np.abs(norm - 1.0).max() > 1e-2:
         raise GpquadError(f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
                           "give a unit quaternion (w, x, y, z)", source=source, field="qw")
-    peak = np.abs(rates).max()
-    if peak > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"body rates reach {peak:.1f}, implausible in rad/s; "
-                          "convert deg/s to rad/s", source=source, field="p")
+    peaks = np.abs(rates).max(axis=0)
+    if peaks.max() > MAX_PLAUSIBLE_RATE:
+        column = RATE_COLUMNS[int(np.argmax(peaks))]
+        raise GpquadError(f"body rate reaches {peaks.max():.1f}, implausible in rad/s; "
+                          "convert deg/s to rad/s", source=source, field=column)
 
 
 def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | None = None

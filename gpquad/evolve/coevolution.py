@@ -12,15 +12,14 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize
 
 from gpquad.config import EvolutionConfig
 from gpquad.data.dataset import Dataset
 from gpquad.evolve.evaluator import Evaluator
+from gpquad.evolve.local_search import improve_constants, improve_delays
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.kernels.tree_eval import eval_on_samples
 from gpquad.tree.encoding import Tree
-from gpquad.tree.operators import CONST
 from gpquad.tree.variation import (
     VariationParams,
     constant_mutation,
@@ -56,7 +55,7 @@ def variation_params(cfg: EvolutionConfig, n_inputs: int) -> VariationParams:
         p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
 
 
-def test_variance(errors: np.ndarray) -> np.ndarray:
+def disagreement(errors: np.ndarray) -> np.ndarray:
     """Fitness of each test (column): variance of the models' errors (rows).
 
     A diverged model (inf) counts as twice the worst finite error in the matrix, so
@@ -112,10 +111,10 @@ class Coevolution:
     def test_phase(self, state: RunState, rng: np.random.Generator) -> None:
         """Test hill climbers maximise disagreement; the best joins the suite."""
         ev = self.evaluator
-        fitness = test_variance(ev.window_errors(state.models, self.space.starts(state.tests)))
+        fitness = disagreement(ev.window_errors(state.models, self.space.starts(state.tests)))
         for _ in range(self.cfg.test_generations):
             mutants = self.space.mutate(rng, state.tests, self.cfg.test_offset_max)
-            f = test_variance(ev.window_errors(state.models, self.space.starts(mutants)))
+            f = disagreement(ev.window_errors(state.models, self.space.starts(mutants)))
             better = f > fitness
             state.tests[better] = mutants[better]
             fitness[better] = f[better]
@@ -161,37 +160,25 @@ class Coevolution:
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
 
-    def tuning_phase(self, state: RunState) -> None:
-        """Nelder-Mead on each model's constants (deterministic; off in the paper's method)."""
-        if self.cfg.constant_tuning == "none" or self.cfg.constant_tuning_evals == 0:
+    def local_search_phase(self, state: RunState) -> None:
+        """Optional local search of delays and constants (not in the paper; see config)."""
+        mode = self.cfg.local_search
+        if mode == "none":
             return
-        ev = self.evaluator
         for i, model in enumerate(state.models):
-            slots = np.flatnonzero(model.codes == CONST)
-            if slots.size == 0:
-                continue
-
-            def objective(x, model=model, slots=slots):
-                values = model.values.copy()
-                values[slots] = x
-                err = ev.mean_errors([Tree(model.codes, values, model.delays)], state.suite)[0]
-                return err if np.isfinite(err) else 1e300
-
-            res = minimize(objective, model.values[slots], method="Nelder-Mead",
-                           options={"maxfev": self.cfg.constant_tuning_evals, "xatol": 1e-8,
-                                    "fatol": 1e-12})
-            if res.fun < state.model_errors[i]:
-                values = model.values.copy()
-                values[slots] = res.x
-                state.models[i] = Tree(model.codes, values, model.delays)
-                state.model_errors[i] = res.fun
+            model, err = improve_delays(self.evaluator, model, state.model_errors[i],
+                                        state.suite, self.cfg.max_delay)
+            if mode == "delays+constants":
+                model, err = improve_constants(self.evaluator, model, err, state.suite,
+                                               self.cfg.local_search_evals)
+            state.models[i], state.model_errors[i] = model, err
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""
         rng = np.random.default_rng()
         rng.bit_generator.state = state.rng_state
         self.model_phase(state, rng)
-        self.tuning_phase(state)
+        self.local_search_phase(state)
         self.test_phase(state, rng)
         self.simplify_phase(state, rng)
         state.iteration += 1

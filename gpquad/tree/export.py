@@ -8,8 +8,11 @@ the expression) and are written u_{T-5} in LaTeX.
 
 import re
 
+from tokenize import TokenError
+
 import numpy as np
 import sympy as sp
+from sympy.parsing.sympy_parser import parse_expr
 
 from gpquad.errors import GpquadError
 from gpquad.tree.encoding import Tree
@@ -98,9 +101,12 @@ def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple
 
     plain = _DELAY_RE.sub(strip, text)
     syms = symbols_for(input_names)
+    # Only numbers and our symbols: any other name (even a sympy function) is an unknown symbol.
+    namespace = {"Integer": sp.Integer, "Float": sp.Float, "Rational": sp.Rational,
+                 "Symbol": sp.Symbol}
     try:
-        expr = sp.sympify(plain, locals=syms)
-    except (sp.SympifyError, SyntaxError, TypeError) as exc:
+        expr = parse_expr(plain, local_dict=dict(syms), global_dict=namespace)
+    except (sp.SympifyError, SyntaxError, TypeError, TokenError) as exc:
         raise GpquadError(f"cannot parse '{text}' ({exc})", source=source) from None
     unknown = {str(s) for s in expr.free_symbols} - set(syms)
     if unknown:

@@ -1,0 +1,174 @@
+"""The coevolution engine: windows, suite, determinism, run folders and the CLI."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from gpquad.cli import main
+from gpquad.config import Config, DataConfig, EvolutionConfig, SimulatorConfig
+from gpquad.data.dataset import build_dataset
+from gpquad.evolve.coevolution import Coevolution, disagreement
+from gpquad.evolve.windows import WindowSpace, tile
+from gpquad.experiments import run_experiment
+from gpquad.model import DiscoveredModel
+
+TINY = EvolutionConfig(targets=("p_dot",), iterations=2, model_generations=15,
+                       test_generations=5, window_steps=60, test_offset_max=30,
+                       simplify_generations=5)
+
+
+def tiny_config(**evolution) -> Config:
+    sim = dataclasses.replace(SimulatorConfig(), duration_s=40.0)
+    return Config(seed=3, simulator=sim, data=DataConfig(trim="mean"),
+                  evolution=dataclasses.replace(TINY, **evolution))
+
+
+def test_windows_never_span_flights_or_the_split():
+    ranges = [(0, 100), (100, 180), (180, 400)]
+    space = WindowSpace(ranges, n_steps=70, max_delay=5)
+    starts = space.starts(np.arange(space.size))
+    for s in starts:
+        inside = [a + 5 <= s and s + 70 <= b - 1 for a, b in ranges]
+        assert sum(inside) == 1
+    # every valid start is reachable exactly once
+    # starts 5..29, 105..109 and 185..329
+    assert len(set(starts.tolist())) == space.size == 25 + 5 + 145
+    rng = np.random.default_rng(0)
+    mutated = space.mutate(rng, space.random(rng, 50), 1000)
+    assert ((mutated >= 0) & (mutated < space.size)).all()
+    tiles, steps = tile(ranges, 70, 5)
+    assert steps == 70 and all(any(a + 5 <= s and s + 70 <= b - 1 for a, b in ranges)
+                               for s in tiles)
+
+
+def test_window_space_refuses_short_data():
+    from gpquad.errors import GpquadError
+
+    with pytest.raises(GpquadError, match="window_steps"):
+        WindowSpace([(0, 50)], n_steps=750, max_delay=5)
+
+
+def test_suite_insertion_replaces_overlapping_then_oldest(short_dataset):
+    co = Coevolution(short_dataset, "p_dot", dataclasses.replace(TINY, suite_size=3))
+    state = co.init_state(0)
+    state.suite[:] = [100, 400, 700]
+    state.suite_age[:] = [0, 1, 2]
+    state.inserted = 3
+    co.insert_test(state, 430)  # overlaps 400
+    assert state.suite.tolist() == [100, 430, 700]
+    co.insert_test(state, 1000)  # overlaps none: replaces the oldest (100)
+    assert state.suite.tolist() == [1000, 430, 700]
+
+
+def test_test_fitness_is_variance_with_diverged_models_capped():
+    errors = np.array([[1.0, 1.0], [3.0, np.inf]])
+    f = disagreement(errors)
+    assert f[0] == pytest.approx(1.0)
+    assert f[1] == pytest.approx(np.var([1.0, 6.0]))
+
+
+def test_hill_climbers_never_get_worse(short_dataset):
+    co = Coevolution(short_dataset, "p_dot", TINY)
+    state = co.init_state(1)
+    rng = np.random.default_rng(2)
+    before = co.evaluator.mean_errors(state.models, state.suite)
+    co.model_phase(state, rng)
+    after = co.evaluator.mean_errors(state.models, state.suite)
+    assert (after <= before + 1e-15).all()
+    best = [row["best_error"] for row in state.history]
+    assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))
+
+
+def test_same_seed_same_model_json(tmp_path):
+    cfg = tiny_config(targets=("p_dot", "a_x"))
+    run_experiment(cfg, tmp_path / "a", progress=False)
+    run_experiment(cfg, tmp_path / "b", progress=False)
+    a = (tmp_path / "a" / "model.json").read_bytes()
+    assert a == (tmp_path / "b" / "model.json").read_bytes()
+    other = run_experiment(dataclasses.replace(cfg, seed=4), tmp_path / "c", progress=False)
+    assert json.loads(a)["targets"] != other.to_dict()["targets"]
+
+
+def test_run_folder_contents(tmp_path):
+    model = run_experiment(tiny_config(), tmp_path / "run", progress=False)
+    run = tmp_path / "run"
+    for name in ("model.json", "equations.tex", "equations.md", "history.csv", "run.json",
+                 "config.json"):
+        assert (run / name).is_file(), name
+    info = json.loads((run / "run.json").read_text())
+    assert info["seed"] == 3 and "numba" in info["versions"] and info["git_revision"]
+    data = json.loads((run / "model.json").read_text())
+    p_dot = data["targets"]["p_dot"]
+    assert set(p_dot) >= {"expr", "delays", "error", "validation_error"}
+    assert np.isfinite(p_dot["validation_error"])
+    import sympy as sp
+
+    sp.sympify(p_dot["expr"])  # parsable
+    history = (run / "history.csv").read_text().splitlines()
+    assert len(history) == 1 + TINY.iterations * TINY.model_generations
+    loaded = DiscoveredModel.load(run)
+    assert loaded.equations["p_dot"].tree.codes.tolist() == \
+        model.equations["p_dot"].tree.codes.tolist()
+
+
+def test_model_simulate_reproduces_the_data_with_the_true_equations(short_dataset):
+    """A DiscoveredModel holding the simulator's equations flies the data back exactly."""
+    from gpquad.config import MEDIAN_MODEL
+    from gpquad.model import Equation
+    from gpquad.tree.export import from_sympy, parse_equation
+
+    trim = short_dataset.trim
+    eqs = {}
+    for target, text in MEDIAN_MODEL.items():
+        expr, delays = parse_equation(text, short_dataset.input_names)
+        expr = expr.subs({s: s + trim[str(s)] for s in expr.free_symbols if str(s) in trim})
+        eqs[target] = Equation(target, from_sympy(expr, delays, short_dataset.input_names),
+                               short_dataset.input_names, 0.0, 0.0, trim)
+    model = DiscoveredModel(eqs, short_dataset.input_names, trim, short_dataset.dt, 0, {})
+    starts = np.array([20, 500], dtype=np.int64)
+    states = model.simulate(short_dataset, starts, 300)
+    truth = np.stack([short_dataset.arrays.states[s:s + 301] for s in starts])
+    assert np.abs(states - truth).max() < 1e-8
+
+
+def test_cli_run_and_errors(tmp_path, capsys):
+    cfg = tmp_path / "exp.toml"
+    cfg.write_text('seed = 2\n[simulator]\nduration_s = 40.0\n[evolution]\n'
+                   'targets = ["r_dot"]\niterations = 1\nmodel_generations = 5\n'
+                   'test_generations = 2\nwindow_steps = 60\ntest_offset_max = 30\n'
+                   'simplify_generations = 2\n')
+    out = tmp_path / "run"
+    assert main(["run", str(cfg), "--out", str(out), "--quiet"]) == 0
+    assert "r_dot =" in capsys.readouterr().out
+    assert (out / "model.json").is_file()
+    assert main(["export", str(out), "--format", "latex"]) == 0
+    assert "\\dot{r}" in capsys.readouterr().out
+    # bad input: one line on stderr, exit code 2, no traceback
+    assert main(["run", str(cfg), "--data", str(tmp_path / "none.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gpquad: error:") and "none.csv" in err and "\n" not in err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[evolution]\nwindow_step = 3\n")
+    assert main(["run", str(bad)]) == 2
+    assert "evolution.window_step" in capsys.readouterr().err
+
+
+def test_interrupt_writes_partial_results(tmp_path, monkeypatch):
+    from gpquad.evolve import coevolution
+
+    calls = {"n": 0}
+    original = coevolution.Coevolution.iterate
+
+    def iterate_then_interrupt(self, state):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return original(self, state)
+
+    monkeypatch.setattr(coevolution.Coevolution, "iterate", iterate_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(tiny_config(), tmp_path / "run", progress=False)
+    data = json.loads((tmp_path / "run" / "model.json").read_text())
+    assert data["interrupted"] is True and "p_dot" in data["targets"]
