@@ -113,8 +113,9 @@ class EvolutionConfig:
     simplify_tolerance: float = 0.0  # keep a simplified model if error <= (1 + tol) * before
     test_offset_max: int = 375
     # Not in the paper: a local search on every model after the model phase. "none" keeps
-    # the paper's method; "delays+constants" tries every single-input delay change, then
-    # runs Nelder-Mead on the constants with at most local_search_evals evaluations.
+    # the paper's method; "delays" tries every single-input delay change; "delays+constants"
+    # first runs Nelder-Mead on the constants (at most local_search_evals evaluations),
+    # then tries the delay changes, each with its constants re-fitted (evals / 5).
     local_search: str = "none"
     local_search_evals: int = 150
 

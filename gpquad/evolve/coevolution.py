@@ -165,12 +165,14 @@ class Coevolution:
         mode = self.cfg.local_search
         if mode == "none":
             return
+        refit = self.cfg.local_search_evals // 5 if mode == "delays+constants" else 0
         for i, model in enumerate(state.models):
-            model, err = improve_delays(self.evaluator, model, state.model_errors[i],
-                                        state.suite, self.cfg.max_delay)
+            err = state.model_errors[i]
             if mode == "delays+constants":
                 model, err = improve_constants(self.evaluator, model, err, state.suite,
                                                self.cfg.local_search_evals)
+            model, err = improve_delays(self.evaluator, model, err, state.suite,
+                                        self.cfg.max_delay, refit)
             state.models[i], state.model_errors[i] = model, err
 
     def iterate(self, state: RunState) -> RunState:

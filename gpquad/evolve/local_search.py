@@ -17,24 +17,29 @@ from gpquad.tree.operators import CONST
 
 
 def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: int,
-                   rounds: int = 2) -> tuple[Tree, float]:
-    """Greedy coordinate search: try every other delay of every used input, keep the best."""
-    used = sorted(model.used_inputs())
-    for _ in range(rounds):
-        candidates = []
-        for j in used:
-            for d in range(max_delay + 1):
-                if d != model.delays[j]:
-                    delays = model.delays.copy()
-                    delays[j] = d
-                    candidates.append(Tree(model.codes, model.values, delays))
-        if not candidates:
-            break
-        errors = ev.mean_errors(candidates, suite)
-        best = int(np.argmin(errors))
-        if not errors[best] < error:
-            break
-        model, error = candidates[best], float(errors[best])
+                   refit_evals: int = 0) -> tuple[Tree, float]:
+    """Try every other delay of every used input, one at a time; keep the best if better.
+
+    A wrong delay is usually compensated by wrong constants, so with refit_evals > 0
+    each candidate's constants are re-fitted (Nelder-Mead) before it is compared.
+    """
+    candidates = []
+    for j in sorted(model.used_inputs()):
+        for d in range(max_delay + 1):
+            if d != model.delays[j]:
+                delays = model.delays.copy()
+                delays[j] = d
+                candidates.append(Tree(model.codes, model.values, delays))
+    if not candidates:
+        return model, error
+    errors = ev.mean_errors(candidates, suite)
+    if refit_evals > 0:
+        for k, candidate in enumerate(candidates):
+            candidates[k], errors[k] = improve_constants(ev, candidate, errors[k], suite,
+                                                         refit_evals)
+    best = int(np.argmin(errors))
+    if errors[best] < error:
+        return candidates[best], float(errors[best])
     return model, error
 
 
