@@ -118,6 +118,10 @@ class EvolutionConfig:
     # then tries the delay changes, each with its constants re-fitted (evals / 5).
     local_search: str = "none"
     local_search_evals: int = 150
+    # Not in the paper: prune the final equation (subtrees -> constants, constants re-fitted)
+    # while its training error grows by less than prune_tolerance x the error of the best
+    # constant model (a parsimony threshold on the error scale); 0 = off.
+    prune_tolerance: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -270,7 +274,7 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if ev.local_search not in LOCAL_SEARCHES:
         raise GpquadError(f"choose one of {list(LOCAL_SEARCHES)}", source=source,
                           field="evolution.local_search")
-    if ev.simplify_tolerance < 0 or ev.local_search_evals < 0:
+    if ev.simplify_tolerance < 0 or ev.local_search_evals < 0 or ev.prune_tolerance < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
     if ev.metric not in METRICS:
         raise GpquadError(f"choose one of {list(METRICS)}", source=source, field="evolution.metric")

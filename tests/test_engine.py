@@ -13,6 +13,7 @@ from gpquad.evolve.coevolution import Coevolution, disagreement
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.experiments import run_experiment
 from gpquad.model import DiscoveredModel
+from gpquad.tree.random_stream import RandomStream
 
 TINY = EvolutionConfig(targets=("p_dot",), iterations=2, model_generations=15,
                        test_generations=5, window_steps=60, test_offset_max=30,
@@ -72,7 +73,7 @@ def test_test_fitness_is_variance_with_diverged_models_capped():
 def test_hill_climbers_never_get_worse(short_dataset):
     co = Coevolution(short_dataset, "p_dot", TINY)
     state = co.init_state(1)
-    rng = np.random.default_rng(2)
+    rng = RandomStream(np.random.default_rng(2))
     before = co.evaluator.mean_errors(state.models, state.suite)
     co.model_phase(state, rng)
     after = co.evaluator.mean_errors(state.models, state.suite)

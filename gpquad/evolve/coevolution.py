@@ -16,10 +16,12 @@ import numpy as np
 from gpquad.config import EvolutionConfig
 from gpquad.data.dataset import Dataset
 from gpquad.evolve.evaluator import Evaluator
-from gpquad.evolve.local_search import improve_constants, improve_delays
+from gpquad.evolve.local_search import improve_constants, improve_delays, prune
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.kernels.tree_eval import eval_on_samples
 from gpquad.tree.encoding import Tree
+from gpquad.tree.operators import CONST
+from gpquad.tree.random_stream import RandomStream
 from gpquad.tree.variation import (
     VariationParams,
     constant_mutation,
@@ -90,7 +92,7 @@ class Coevolution:
                         inserted=cfg.suite_size, rng_state=rng.bit_generator.state)
 
     # ---------------------------------------------------------------- phases
-    def model_phase(self, state: RunState, rng: np.random.Generator) -> None:
+    def model_phase(self, state: RunState, rng: RandomStream) -> None:
         """Hill climbers: each parent makes one mutant, kept if strictly better."""
         ev = self.evaluator
         state.model_errors = ev.mean_errors(state.models, state.suite)
@@ -129,23 +131,25 @@ class Coevolution:
         state.suite_age[slot] = state.inserted
         state.inserted += 1
 
-    def simplify_phase(self, state: RunState, rng: np.random.Generator) -> None:
+    def subtree_mean(self, tree: Tree, start: int, end: int, samples) -> float:
+        """Mean one-step value of tree.codes[start:end] on data samples (finite values only)."""
+        arrays = self.dataset.arrays
+        sub = np.ascontiguousarray(tree.codes[start:end])
+        vals = np.ascontiguousarray(tree.values[start:end])
+        out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs,
+                              samples)
+        out = out[np.isfinite(out)]
+        return float(out.mean()) if out.size else 0.0
+
+    def simplify_phase(self, state: RunState, rng: RandomStream) -> None:
         """Replace a random subtree of each model by a constant, re-converge constants only,
         and keep the result when it is no worse."""
         ev = self.evaluator
-        arrays = self.dataset.arrays
         state.model_errors = ev.mean_errors(state.models, state.suite)
         samples = (state.suite[:, None] + np.arange(self.cfg.window_steps)[None, :]).ravel()
 
         def constant_for(tree: Tree):
-            def value(start, end):
-                sub = tree.codes[start:end].copy()
-                vals = tree.values[start:end].copy()
-                out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states,
-                                      arrays.inputs, samples)
-                out = out[np.isfinite(out)]
-                return float(out.mean()) if out.size else 0.0
-            return value
+            return lambda start, end: self.subtree_mean(tree, start, end, samples)
 
         candidates = [replace_with_constant(rng, m, constant_for(m)) for m in state.models]
         errors = ev.mean_errors(candidates, state.suite)
@@ -179,10 +183,11 @@ class Coevolution:
         """One full iteration; returns the same state object, advanced."""
         rng = np.random.default_rng()
         rng.bit_generator.state = state.rng_state
-        self.model_phase(state, rng)
+        stream = RandomStream(rng)  # scalar draws for the variation operators
+        self.model_phase(state, stream)
         self.local_search_phase(state)
         self.test_phase(state, rng)
-        self.simplify_phase(state, rng)
+        self.simplify_phase(state, stream)
         state.iteration += 1
         state.rng_state = rng.bit_generator.state
         return state
@@ -196,12 +201,25 @@ class Coevolution:
         return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
 
     def best(self, state: RunState) -> tuple[Tree, float, float]:
-        """The climber with the lowest error over the whole training data,
-        with its training and validation errors."""
+        """The climber with the lowest error over the whole training data, with its training
+        and validation errors. With prune_tolerance > 0 it is pruned first: subtrees become
+        constants while the error grows by less than prune_tolerance times the error of the
+        best constant model."""
         train = self.tiled_errors(state.models, self.dataset.train)
         i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
-        validation = self.tiled_errors([state.models[i]], self.dataset.validation)[0]
-        return state.models[i], float(train[i]), float(validation)
+        model, error = state.models[i], float(train[i])
+        if self.cfg.prune_tolerance > 0:
+            starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
+            samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
+            # The allowance is a fraction of the error of the best constant model.
+            mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
+            trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
+            scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
+            model, error = prune(self.evaluator, model, starts, steps,
+                                 self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
+                                 lambda t, a, b: self.subtree_mean(t, a, b, samples))
+        validation = self.tiled_errors([model], self.dataset.validation)[0]
+        return model, error, float(validation)
 
 
 def clone_state(state: RunState) -> RunState:

@@ -64,3 +64,60 @@ def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals
     if res.fun < error:
         return with_values(res.x), float(res.fun)
     return model, error
+
+
+def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, evals: int,
+          constant_of) -> tuple[Tree, float]:
+    """Remove bloat from a final model: replace subtrees by constants while the error stays
+    below the starting error plus `allowance` (same units as the error).
+
+    Subtrees are tried largest first; each candidate's constants are re-fitted by
+    Nelder-Mead (`evals` evaluations). constant_of(tree, start, end) gives the constant
+    that replaces tree.codes[start:end]. Errors are measured on `starts` windows.
+    """
+    from gpquad.tree.encoding import subtree_end
+    from gpquad.tree.variation import fold_constants
+
+    def error_of(tree: Tree) -> float:
+        return float(ev.window_errors([tree], starts, n_steps=n_steps).mean())
+
+    def refit(tree: Tree, err: float) -> tuple[Tree, float]:
+        slots = np.flatnonzero(tree.codes == CONST)
+        if slots.size == 0 or evals == 0:
+            return tree, err
+
+        def objective(x):
+            values = tree.values.copy()
+            values[slots] = x
+            e = error_of(Tree(tree.codes, values, tree.delays))
+            return e if np.isfinite(e) else 1e300
+
+        res = minimize(objective, tree.values[slots], method="Nelder-Mead",
+                       options={"maxfev": evals, "xatol": 1e-10, "fatol": 1e-14})
+        if res.fun < err:
+            values = tree.values.copy()
+            values[slots] = res.x
+            return Tree(tree.codes, values, tree.delays), float(res.fun)
+        return tree, err
+
+    model = fold_constants(model)
+    limit = error_of(model) + allowance
+    model, err = refit(model, error_of(model))
+    changed = True
+    while changed and model.size > 1:
+        changed = False
+        codes = model.codes.tolist()
+        spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
+                        if codes[i] != CONST), reverse=True)
+        for _, i in spans:
+            end = subtree_end(codes, i)
+            value = constant_of(model, i, end)
+            candidate = fold_constants(Tree.from_lists(
+                codes[:i] + [CONST] + codes[end:],
+                model.values.tolist()[:i] + [value] + model.values.tolist()[end:], model.delays))
+            cand_err = error_of(candidate)
+            candidate, cand_err = refit(candidate, cand_err)
+            if cand_err <= limit:
+                model, err, changed = candidate, cand_err, True
+                break
+    return model, err

@@ -7,7 +7,6 @@ the expression) and are written u_{T-5} in LaTeX.
 """
 
 import re
-
 from tokenize import TokenError
 
 import numpy as np

@@ -7,8 +7,8 @@ gpquad.variables.terminal_names). The kernels read the integer constants
 below; export reads OPERATORS. Division is protected: |b| < DIV_EPS gives 1.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 ADD, SUB, MUL, DIV = 0, 1, 2, 3
 CONST = 4
@@ -33,7 +33,8 @@ def _protected_div(a, b):
 
     b = np.asarray(b, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(np.abs(b) < DIV_EPS, 1.0, np.asarray(a, dtype=float) / np.where(b == 0, 1, b))
+        safe = np.where(b == 0, 1, b)
+        return np.where(np.abs(b) < DIV_EPS, 1.0, np.asarray(a, dtype=float) / safe)
 
 
 OPERATORS: tuple[Operator, ...] = (

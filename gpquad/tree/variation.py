@@ -1,6 +1,7 @@
 """Variation operators of the paper (section 2.2), with explicit randomness.
 
-Every function takes a numpy Generator; nothing here draws from global state.
+Every function takes a numpy Generator or a RandomStream built on one; nothing
+here draws from global state.
 Trees are handled as Python lists while they change and as Tree records otherwise.
 """
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from gpquad.tree.encoding import Tree, node_depths, subtree_end
 from gpquad.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
+from gpquad.tree.random_stream import RandomStream, as_stream
 
 
 @dataclass(frozen=True)
@@ -29,15 +31,16 @@ class VariationParams:
     max_delay: int = 5
 
 
-def random_leaf(rng: np.random.Generator, params: VariationParams):
+def random_leaf(rng: RandomStream, params: VariationParams):
     """(code, value) of a new leaf: a U(low, high) constant or a uniform variable."""
     if rng.random() < params.p_constant_leaf:
-        return CONST, float(rng.uniform(params.const_low, params.const_high))
-    return VAR_BASE + int(rng.integers(params.n_variables)), 0.0
+        return CONST, rng.uniform(params.const_low, params.const_high)
+    return VAR_BASE + rng.below(params.n_variables), 0.0
 
 
-def random_subtree(rng: np.random.Generator, params: VariationParams, max_depth: int):
+def random_subtree(rng, params: VariationParams, max_depth: int):
     """Grow a random subtree of depth <= max_depth; each node is a leaf with p = p_leaf."""
+    rng = as_stream(rng)
     codes: list[int] = []
     values: list[float] = []
 
@@ -47,7 +50,7 @@ def random_subtree(rng: np.random.Generator, params: VariationParams, max_depth:
             codes.append(c)
             values.append(v)
             return
-        codes.append(int(rng.integers(N_OPERATORS)))
+        codes.append(rng.below(N_OPERATORS))
         values.append(0.0)
         grow(depth_left - 1)
         grow(depth_left - 1)
@@ -56,8 +59,9 @@ def random_subtree(rng: np.random.Generator, params: VariationParams, max_depth:
     return codes, values
 
 
-def random_tree(rng: np.random.Generator, params: VariationParams) -> Tree:
+def random_tree(rng, params: VariationParams) -> Tree:
     """A new model: a random tree whose root is an operator when depth allows, delays all 0."""
+    rng = as_stream(rng)
     while True:
         codes, values = random_subtree(rng, params, params.max_depth)
         if len(codes) > 1 or params.max_depth == 0:
@@ -66,12 +70,13 @@ def random_tree(rng: np.random.Generator, params: VariationParams) -> Tree:
 
 def macro_mutation(rng, codes, values, params: VariationParams):
     """Replace one node by a new one, dropping or growing children as needed."""
-    i = int(rng.integers(len(codes)))
+    rng = as_stream(rng)
+    i = rng.below(len(codes))
     depth = node_depths(codes)[i]
     end = subtree_end(codes, i)
     was_op = codes[i] < N_OPERATORS
     if depth < params.max_depth and rng.random() >= params.p_leaf:
-        new_op = int(rng.integers(N_OPERATORS))
+        new_op = rng.below(N_OPERATORS)
         if was_op:
             return codes[:i] + [new_op] + codes[i + 1:], values[:i] + [0.0] + values[i + 1:]
         left_c, left_v = random_subtree(rng, params, params.max_depth - depth - 1)
@@ -84,7 +89,8 @@ def macro_mutation(rng, codes, values, params: VariationParams):
 
 def micro_mutation(rng, codes, values, params: VariationParams):
     """Replace the subtree at one node by a newly grown subtree."""
-    i = int(rng.integers(len(codes)))
+    rng = as_stream(rng)
+    i = rng.below(len(codes))
     depth = node_depths(codes)[i]
     end = subtree_end(codes, i)
     new_c, new_v = random_subtree(rng, params, params.max_depth - depth)
@@ -96,13 +102,15 @@ def perturb_constant(rng, codes, values, sigma: float) -> list[float]:
     slots = [i for i, c in enumerate(codes) if c == CONST]
     if not slots:
         return values
+    rng = as_stream(rng)
     values = list(values)
-    values[slots[int(rng.integers(len(slots)))]] += float(rng.normal(0.0, sigma))
+    values[slots[rng.below(len(slots))]] += rng.normal(sigma)
     return values
 
 
-def mutate(rng: np.random.Generator, tree: Tree, params: VariationParams) -> Tree:
+def mutate(rng, tree: Tree, params: VariationParams) -> Tree:
     """The paper's mutation: macro or micro (p = 0.5 each), then constant and delay mutation."""
+    rng = as_stream(rng)
     codes = tree.codes.tolist()
     values = tree.values.tolist()
     if rng.random() < 0.5:
@@ -111,20 +119,20 @@ def mutate(rng: np.random.Generator, tree: Tree, params: VariationParams) -> Tre
         codes, values = micro_mutation(rng, codes, values, params)
     if rng.random() < params.p_const_perturb:
         values = perturb_constant(rng, codes, values, params.const_sigma)
-    delays = tree.delays.copy()
-    redraw = rng.random(params.n_inputs) < params.p_delay
-    fresh = rng.integers(0, params.max_delay + 1, size=params.n_inputs)
-    delays[redraw] = fresh[redraw]
+    delays = tree.delays.tolist()
+    for j in range(params.n_inputs):
+        if rng.random() < params.p_delay:
+            delays[j] = rng.below(params.max_delay + 1)
     return Tree.from_lists(codes, values, delays)
 
 
-def constant_mutation(rng: np.random.Generator, tree: Tree, params: VariationParams) -> Tree:
+def constant_mutation(rng, tree: Tree, params: VariationParams) -> Tree:
     """Gaussian perturbation of one constant only (re-convergence after simplification)."""
     values = perturb_constant(rng, tree.codes.tolist(), tree.values.tolist(), params.const_sigma)
     return Tree.from_lists(tree.codes, values, tree.delays)
 
 
-def replace_with_constant(rng: np.random.Generator, tree: Tree, constant_of) -> Tree:
+def replace_with_constant(rng, tree: Tree, constant_of) -> Tree:
     """Bloat simplification: replace a random subtree by one constant.
 
     constant_of(start, end) gives the constant for the subtree codes[start:end]
@@ -132,7 +140,7 @@ def replace_with_constant(rng: np.random.Generator, tree: Tree, constant_of) -> 
     """
     codes = tree.codes.tolist()
     values = tree.values.tolist()
-    i = int(rng.integers(len(codes)))
+    i = as_stream(rng).below(len(codes))
     end = subtree_end(codes, i)
     value = float(constant_of(i, end))
     return Tree.from_lists(codes[:i] + [CONST] + codes[end:], values[:i] + [value] + values[end:],
