@@ -75,8 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="identify equations from a config")
     run.add_argument("config", help="experiment TOML file")
-    run.add_argument("--data", action="append", help="flight file (repeatable); overrides data.files")
-    run.add_argument("--target", action="append", help="target equation (repeatable; default all six)")
+    run.add_argument("--data", action="append",
+                     help="flight file (repeatable); replaces data.files")
+    run.add_argument("--target", action="append",
+                     help="target equation (repeatable; default all six)")
     run.add_argument("--iterations", type=int, help="coevolution iterations per target")
     run.add_argument("--seed", type=int, help="master seed")
     run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
@@ -91,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     exp = sub.add_parser("export", help="print a run's equations")
     exp.add_argument("run", help="run folder or model.json")
     exp.add_argument("--format", choices=["latex", "markdown", "sympy", "json"], default="sympy")
-    exp.add_argument("--raw-inputs", action="store_true", help="write equations in untrimmed inputs")
+    exp.add_argument("--raw-inputs", action="store_true",
+                     help="write equations in untrimmed inputs")
     exp.set_defaults(func=_cmd_export)
 
     bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")

@@ -18,8 +18,8 @@ import numpy as np
 import sympy as sp
 
 from gpquad.tree.encoding import Tree
-from gpquad.tree.operators import CONST
 from gpquad.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
+from gpquad.tree.operators import CONST
 from gpquad.variables import TARGET_LATEX, TARGET_NAMES, target_index
 
 
@@ -36,7 +36,7 @@ class Equation:
 
     @property
     def delays(self) -> dict[str, int]:
-        return {n: int(d) for n, d in zip(self.input_names, self.tree.delays)}
+        return {n: int(d) for n, d in zip(self.input_names, self.tree.delays, strict=True)}
 
     def used_delays(self) -> dict[str, int]:
         """Delays of the inputs that appear in the equation."""
@@ -79,7 +79,7 @@ class Equation:
         return out
 
     @classmethod
-    def from_dict(cls, target: str, d: dict, input_names, trim) -> "Equation":
+    def from_dict(cls, target: str, d: dict, input_names, trim) -> Equation:
         delays = [int(d["delays"].get(n, 0)) for n in input_names]
         tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
         return cls(target, tree, tuple(input_names), float(d["error"]),
@@ -113,7 +113,7 @@ class DiscoveredModel:
         return out
 
     @classmethod
-    def from_dict(cls, d: dict) -> "DiscoveredModel":
+    def from_dict(cls, d: dict) -> DiscoveredModel:
         names = tuple(d["input_names"])
         eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
                for t, e in d["targets"].items()}
@@ -121,7 +121,7 @@ class DiscoveredModel:
                    d.get("config", {}), bool(d.get("interrupted", False)))
 
     @classmethod
-    def load(cls, path) -> "DiscoveredModel":
+    def load(cls, path) -> DiscoveredModel:
         path = Path(path)
         if path.is_dir():
             path = path / "model.json"

@@ -67,7 +67,7 @@ def pilot_sticks(cfg: SimulatorConfig, input_names, n: int, dt: float,
 
 
 def simulate(cfg: SimulatorConfig, input_names) -> Flight:
-    """Fly the configured truth model; returns the flight and keeps the true accelerations in meta."""
+    """Fly the configured truth model; the true accelerations are kept in meta["true_acc"]."""
     model = TruthModel(cfg.equations, input_names)
     dt = 1.0 / cfg.rate_hz
     n = int(round(cfg.duration_s * cfg.rate_hz))

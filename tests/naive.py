@@ -38,7 +38,8 @@ def step(quat, vel, rates, pos, acc, dt):
 
 
 def integrate(quat0, vel0, rates0, pos0, acc, dt):
-    quat, vel, rates, pos = [np.array(quat0)], [np.array(vel0)], [np.array(rates0)], [np.array(pos0)]
+    quat, vel = [np.array(quat0)], [np.array(vel0)]
+    rates, pos = [np.array(rates0)], [np.array(pos0)]
     for a in acc:
         q, v, w, x = step(quat[-1], vel[-1], rates[-1], pos[-1], a, dt)
         quat.append(q)

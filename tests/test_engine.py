@@ -8,7 +8,6 @@ import pytest
 
 from gpquad.cli import main
 from gpquad.config import Config, DataConfig, EvolutionConfig, SimulatorConfig
-from gpquad.data.dataset import build_dataset
 from gpquad.evolve.coevolution import Coevolution, disagreement
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.experiments import run_experiment

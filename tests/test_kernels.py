@@ -137,7 +137,8 @@ def test_tree_evaluation_matches_recursive_reference(nodes, lanes):
     np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(prefix_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
        st.booleans())
 def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared):

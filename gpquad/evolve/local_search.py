@@ -43,9 +43,8 @@ def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: i
     return model, error
 
 
-def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals: int
-                      ) -> tuple[Tree, float]:
-    """Nelder-Mead on all constants of the tree, at most max_evals evaluations."""
+def fit_constants(model: Tree, error: float, error_of, max_evals: int) -> tuple[Tree, float]:
+    """Nelder-Mead on all constants of the tree against error_of(tree); keeps improvements."""
     slots = np.flatnonzero(model.codes == CONST)
     if slots.size == 0 or max_evals == 0:
         return model, error
@@ -56,7 +55,7 @@ def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals
         return Tree(model.codes, values, model.delays)
 
     def objective(x) -> float:
-        err = ev.mean_errors([with_values(x)], suite)[0]
+        err = error_of(with_values(x))
         return float(err) if np.isfinite(err) else 1e300
 
     res = minimize(objective, model.values[slots], method="Nelder-Mead",
@@ -64,6 +63,12 @@ def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals
     if res.fun < error:
         return with_values(res.x), float(res.fun)
     return model, error
+
+
+def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals: int
+                      ) -> tuple[Tree, float]:
+    """Nelder-Mead on the constants against the mean error on the suite windows."""
+    return fit_constants(model, error, lambda t: ev.mean_errors([t], suite)[0], max_evals)
 
 
 def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, evals: int,
@@ -82,23 +87,7 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
         return float(ev.window_errors([tree], starts, n_steps=n_steps).mean())
 
     def refit(tree: Tree, err: float) -> tuple[Tree, float]:
-        slots = np.flatnonzero(tree.codes == CONST)
-        if slots.size == 0 or evals == 0:
-            return tree, err
-
-        def objective(x):
-            values = tree.values.copy()
-            values[slots] = x
-            e = error_of(Tree(tree.codes, values, tree.delays))
-            return e if np.isfinite(e) else 1e300
-
-        res = minimize(objective, tree.values[slots], method="Nelder-Mead",
-                       options={"maxfev": evals, "xatol": 1e-10, "fatol": 1e-14})
-        if res.fun < err:
-            values = tree.values.copy()
-            values[slots] = res.x
-            return Tree(tree.codes, values, tree.delays), float(res.fun)
-        return tree, err
+        return fit_constants(tree, err, error_of, evals)
 
     model = fold_constants(model)
     limit = error_of(model) + allowance

@@ -86,30 +86,54 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
             vel[i, lane] = states[s, 3 + i]
             rates[i, lane] = states[s, 6 + i]
 
+    # Only the leaves the tree reads are filled.
+    used = np.zeros(9 + n_in, dtype=np.bool_)
+    for i in range(size):
+        if codes[i] >= VAR_BASE:
+            used[codes[i] - VAR_BASE] = True
+    data_cols = np.empty(6, dtype=np.int64)  # states read straight from the data
+    n_data = 0
+    if linear:
+        for i in (0, 1, 2, 6, 7, 8):
+            if used[i]:
+                data_cols[n_data] = i
+                n_data += 1
+    rate_cols = np.empty(3, dtype=np.int64)  # integrated rates (angular targets)
+    n_rate = 0
+    if not linear:
+        for i in range(3):
+            if used[6 + i]:
+                rate_cols[n_rate] = i
+                n_rate += 1
+    input_cols = np.empty(n_in, dtype=np.int64)
+    n_used_in = 0
+    for j in range(n_in):
+        if used[9 + j]:
+            input_cols[n_used_in] = j
+            n_used_in += 1
+
     for k in range(n_steps):
-        # Leaves: states then delayed inputs.
         for lane in range(n):
             if not alive[lane]:
                 continue
             idx = starts[lane] + k
-            if linear:
+            for c in range(n_data):
+                features[data_cols[c], lane] = states[idx, data_cols[c]]
+            if need_att:
+                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+                if uses_phi:
+                    features[0, lane] = euler_phi(q0, q1, q2, q3)
+                if uses_theta:
+                    features[1, lane] = euler_theta(q0, q1, q2, q3)
+                if uses_psi:
+                    features[2, lane] = euler_psi(q0, q1, q2, q3)
+            for c in range(n_rate):
+                features[6 + rate_cols[c], lane] = rates[rate_cols[c], lane]
+            if uses_vel:
                 for i in range(3):
-                    features[i, lane] = states[idx, i]
-                    features[6 + i, lane] = states[idx, 6 + i]
-            else:
-                if need_att:
-                    q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
-                    if uses_phi:
-                        features[0, lane] = euler_phi(q0, q1, q2, q3)
-                    if uses_theta:
-                        features[1, lane] = euler_theta(q0, q1, q2, q3)
-                    if uses_psi:
-                        features[2, lane] = euler_psi(q0, q1, q2, q3)
-                for i in range(3):
-                    features[6 + i, lane] = rates[i, lane]
-            for i in range(3):
-                features[3 + i, lane] = vel[i, lane]
-            for j in range(n_in):
+                    features[3 + i, lane] = vel[i, lane]
+            for c in range(n_used_in):
+                j = input_cols[c]
                 features[9 + j, lane] = inputs[idx - delays[j], j]
         eval_lanes(codes, values, size, features, stack, pred, n)
 

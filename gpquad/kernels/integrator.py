@@ -82,7 +82,8 @@ def body_accelerations(vel, rates, dt):
         d0, d1, d2, d3 = rate_increment(rates[t, 0], rates[t, 1], rates[t, 2], dt)
         rotation_matrix(d0, d1, d2, d3, mat)
         for i in range(3):
-            rotated = mat[i, 0] * vel[t + 1, 0] + mat[i, 1] * vel[t + 1, 1] + mat[i, 2] * vel[t + 1, 2]
+            rotated = (mat[i, 0] * vel[t + 1, 0] + mat[i, 1] * vel[t + 1, 1]
+                       + mat[i, 2] * vel[t + 1, 2])
             acc[t, i] = (rotated - vel[t, i]) / dt
             acc[t, 3 + i] = (rates[t + 1, i] - rates[t, i]) / dt
     return acc

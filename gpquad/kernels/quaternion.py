@@ -133,7 +133,8 @@ def euler_array(quat):
     n = quat.shape[0]
     out = np.empty((n, 3))
     for i in range(n):
-        out[i, 0], out[i, 1], out[i, 2] = euler_from_quat(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3])
+        out[i, 0], out[i, 1], out[i, 2] = euler_from_quat(quat[i, 0], quat[i, 1], quat[i, 2],
+                                                          quat[i, 3])
     return out
 
 
