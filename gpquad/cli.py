@@ -22,8 +22,12 @@ def _cmd_run(args) -> int:
         model = run_experiment(cfg, run_dir, progress=not args.quiet)
     except KeyboardInterrupt:
         return 130
-    print("\nDiscovered equations:")
+    print("\nDiscovered equations (inputs minus trim):" if any(model.trim.values())
+          else "\nDiscovered equations:")
     print(model)
+    if any(model.trim.values()):
+        print("\nThe same in the log's raw inputs:")
+        print(model.text(raw=True))
     print(f"\nRun folder: {run_dir}")
     return 0
 
@@ -56,6 +60,8 @@ def _cmd_export(args) -> int:
         for target, eq in model.equations.items():
             expr = eq.sympy_raw() if args.raw_inputs else eq.sympy()
             print(f"{target} = {expr}    delays {eq.used_delays()}")
+    elif args.format == "text":
+        print(model.text(raw=args.raw_inputs))
     else:
         print(json.dumps(model.to_dict(), indent=2))
     return 0
@@ -92,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     exp = sub.add_parser("export", help="print a run's equations")
     exp.add_argument("run", help="run folder or model.json")
-    exp.add_argument("--format", choices=["latex", "markdown", "sympy", "json"], default="sympy")
+    exp.add_argument("--format", choices=["text", "latex", "markdown", "sympy", "json"],
+                     default="text")
     exp.add_argument("--raw-inputs", action="store_true",
                      help="write equations in untrimmed inputs")
     exp.set_defaults(func=_cmd_export)

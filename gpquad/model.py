@@ -59,10 +59,12 @@ class Equation:
         expr = self.sympy_raw() if raw else self.sympy()
         return f"{lhs} = {to_latex(expr, self.delays, self.input_names, digits)}"
 
-    def text(self, digits: int = 3) -> str:
-        expr = round_constants(self.sympy(), digits)
-        delays = ", ".join(f"{n}: t-{d}" for n, d in self.used_delays().items() if d)
-        return f"{self.target} = {expr}" + (f"    [delays {delays}]" if delays else "")
+    def text(self, digits: int = 3, raw: bool = False) -> str:
+        """One line, delayed inputs written u_T(t-5), constants rounded for display."""
+        expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits)
+        shown = {sp.Symbol(n, real=True): sp.Symbol(f"{n}(t-{d})", real=True)
+                 for n, d in self.delays.items() if d}
+        return f"{self.target} = {expr.xreplace(shown)}"
 
     def to_dict(self) -> dict:
         out = {
@@ -144,7 +146,12 @@ class DiscoveredModel:
         return "\n".join(lines) + "\n"
 
     def __str__(self) -> str:
-        return "\n".join(self.equations[t].text() for t in TARGET_NAMES if t in self.equations)
+        return self.text()
+
+    def text(self, raw: bool = False) -> str:
+        """The equations, one per line (raw=True: in the untrimmed inputs)."""
+        return "\n".join(self.equations[t].text(raw=raw) for t in TARGET_NAMES
+                         if t in self.equations)
 
     def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
         """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
