@@ -21,11 +21,12 @@ prediction figure). Nothing here imports matplotlib.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from gpquad import scoring
 from gpquad.config import Config
 from gpquad.data.dataset import Dataset
 from gpquad.errors import GpquadError
@@ -34,10 +35,10 @@ from gpquad.experiments import write_model
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import atomic_write_bytes, write_json
 from gpquad.sweep import ASSEMBLY_CHILD, RunKey, assembly_seed, run_dir
-from gpquad.variables import STATE_NAMES, TARGET_NAMES, TARGET_STATE
+from gpquad.variables import STATE_NAMES, TARGET_NAMES
 
 #: States scored by RSE (the integrated velocities and rates), indices into STATE_NAMES.
-SCORED = tuple(STATE_NAMES.index(TARGET_STATE[t]) for t in TARGET_NAMES)
+SCORED = scoring.SCORED_INDEX
 BEST_NOISE_CHILD = ASSEMBLY_CHILD + 1
 WINDOW_CHILD = ASSEMBLY_CHILD + 2
 
@@ -146,16 +147,11 @@ def diverged(pred: np.ndarray, bound: np.ndarray) -> np.ndarray:
 
 
 def rse(pred: np.ndarray, data: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """Relative squared error of each scored state over the kept windows (steps 1..n):
-    sum (pred - data)^2 / sum (data - mean data)^2; NaN where undefined."""
+    """RSE of each scored state over the kept (not diverged) windows, as
+    `gpquad.scoring.rse` defines it (steps 1..n); NaN when no window is kept."""
     if not keep.any():
         return np.full(len(SCORED), np.nan)
-    p = pred[keep][:, 1:, SCORED].reshape(-1, len(SCORED))
-    d = data[keep][:, 1:, SCORED].reshape(-1, len(SCORED))
-    num = ((p - d) ** 2).sum(axis=0)
-    den = ((d - d.mean(axis=0)) ** 2).sum(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, num / den, np.nan)
+    return scoring.rse(pred[keep], data[keep])
 
 
 def evaluate(model: DiscoveredModel, dataset: Dataset, cfg: Config, seed_seq) -> dict:
@@ -178,7 +174,7 @@ def evaluate(model: DiscoveredModel, dataset: Dataset, cfg: Config, seed_seq) ->
         r = rse(pred, data, ~div)
         out[key] = {"windows": int(len(starts)), "steps": int(steps),
                     "seconds": float(steps * dataset.dt),
-                    "rse": {STATE_NAMES[j]: float(v) for j, v in zip(SCORED, r)},
+                    "rse": {STATE_NAMES[j]: float(v) for j, v in zip(SCORED, r, strict=True)},
                     "diverged": int(div.sum())}
     return out
 
@@ -217,12 +213,14 @@ def assemble_sweep(out, cfg: Config, dataset: Dataset, runs: int) -> Path:
     info = {
         "selection": sw.selection, "assembly": sw.assembly, "runs": runs,
         "input_noise_fraction": sw.input_noise,
-        "input_noise_sd": dict(zip(dataset.input_names, noise_sd(dataset, sw.input_noise).tolist())),
+        "input_noise_sd": dict(zip(dataset.input_names,
+                                   noise_sd(dataset, sw.input_noise).tolist(), strict=True)),
         "best": {"members": best_choice, "metrics": best_metrics,
                  "sizes": {t: best.equations[t].tree.size for t in targets}},
         "full_models": [{"members": c, "metrics": m, "score": float(s),
                          "sizes": {t: fulls[k].equations[t].tree.size for t in targets}}
-                        for k, (c, m, s) in enumerate(zip(chosen, full_metrics, scores))],
+                        for k, (c, m, s) in enumerate(
+                            zip(chosen, full_metrics, scores, strict=True))],
         "median_index": int(median),
         "runs_errors": {t: [{"repetition": r.repetition, "train_error": r.train_error,
                              "validation_error": r.validation_error, "size": r.equation.tree.size}
@@ -287,5 +285,3 @@ def reassemble(out) -> Path:
     info = json.loads((Path(out) / "sweep.json").read_text())
     return assemble_sweep(out, cfg, load_dataset(cfg), int(info["runs"]))
 
-
-__all__ = ["assemble_sweep", "reassemble", "load_runs", "members", "evaluate", "rse", "replace"]

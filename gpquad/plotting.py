@@ -104,7 +104,7 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
         fig, axes = plt.subplots(rows, cols, figsize=(7.0, 2.3 * rows + 0.4), squeeze=False)
         for ax in axes.ravel()[len(targets):]:
             ax.set_visible(False)
-        for ax, target in zip(axes.ravel(), targets):
+        for ax, target in zip(axes.ravel()[: len(targets)], targets, strict=True):
             frames = [read_history(p) for p in histories[target]]
             for h in frames:
                 ax.plot(h["step"], h["best_error"], color="tab:gray", alpha=0.45, linewidth=0.7)
@@ -114,14 +114,22 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
             unit = STATE_UNITS[STATE_NAMES.index(state)]
             if metric == "mse":
                 unit = f"({unit})$^2$"
-            ax.set_yscale("log")
+            values = pd.concat([h["best_error"] for h in frames])
+            values = values[np.isfinite(values) & (values > 0)]
+            if len(values) and values.max() > 10 * values.min():  # log only over decades
+                ax.set_yscale("log")
+            for it in range(1, int(frames[0]["iteration"].max()) + 1):
+                ax.axvline(it * (int(frames[0]["generation"].max()) + 1), color="0.85",
+                           linewidth=0.6, zorder=0)
             ax.set_title(f"${TARGET_LATEX[target_index(target)]}$ ({len(frames)} runs)")
             ax.set_xlabel("model generation")
             ax.set_ylabel(f"suite {metric.upper()} of ${STATE_LATEX[STATE_NAMES.index(state)]}$"
                           f" [{unit}]")
         handles = [plt.Line2D([], [], color="tab:gray", alpha=0.6, linewidth=0.8),
                    plt.Line2D([], [], color="tab:blue", linewidth=1.6)]
-        fig.legend(handles, ["one run (best climber)", "median over runs"], loc="upper center",
-                   ncol=2, frameon=False, bbox_to_anchor=(0.5, 1.03))
+        handles.append(plt.Line2D([], [], color="0.85", linewidth=0.6))
+        fig.legend(handles, ["one run (best climber)", "median over runs",
+                             "iteration boundary (new test suite)"], loc="upper center",
+                   ncol=3, frameon=False, bbox_to_anchor=(0.5, 1.03))
         fig.tight_layout()
         return _save(fig, Path(stem), formats)

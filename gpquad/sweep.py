@@ -21,10 +21,10 @@ skipped from then on.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,14 +120,26 @@ def _resume(folder: Path, fp: str):
         return None, 0, f"{ckpt}: corrupt checkpoint ({exc}); restarting this run from scratch"
 
 
+class OrphanedWorker(RuntimeError):
+    """The sweep process that started this worker has died; the run stops at a checkpoint."""
+
+
 def execute_run(cfg: Config, dataset: Dataset, key: RunKey, out) -> dict:
     """Run (or resume, or skip) one cell of the grid; returns its summary.
 
     Summary keys: target, repetition, train_error, validation_error, skipped (bool),
-    warnings (list of str).
+    warnings (list of str). The run folder is locked (flock) while the run works, so a
+    worker left over from a killed sweep and the resumed sweep never write it together.
     """
     folder = run_dir(Path(out), key)
     folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released by the kernel if this process dies
+        return _execute_locked(cfg, dataset, key, folder)
+
+
+def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) -> dict:
+    parent = os.getppid()
     result_path = folder / "result.json"
     warnings: list[str] = []
     if result_path.exists():
@@ -170,6 +182,9 @@ def execute_run(cfg: Config, dataset: Dataset, key: RunKey, out) -> dict:
                     iteration=state.iteration, iterations=ev.iterations,
                     best_error=float(np.min(state.model_errors)), started=started,
                     state="running")
+            if os.getppid() != parent:  # loky worker whose sweep was killed: stop here
+                raise OrphanedWorker(f"{key.name}: sweep process gone; stopped at iteration "
+                                     f"{state.iteration} (checkpointed)")
     finally:
         writer.close()
     tree, train, val = co.best(state)
@@ -328,15 +343,7 @@ def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
     return {"runs": summaries, "warnings": warnings, "model": model_path}
 
 
-def clear_runs(out) -> None:
-    """Delete every run folder of a sweep (not used by the sweep itself)."""
-    shutil.rmtree(Path(out) / "runs", ignore_errors=True)
-
-
 def default_out(cfg: Config) -> Path:
     """A stable folder name, so that the same command resumes the same sweep."""
     return Path(cfg.output.dir) / f"{cfg.name}-sweep-seed{cfg.seed}"
 
-
-def cpu_count() -> int:
-    return os.cpu_count() or 1

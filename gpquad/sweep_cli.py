@@ -45,7 +45,8 @@ def register(subparsers) -> None:
     sw.add_argument("--backend", choices=["loky", "dask"], default="loky",
                     help="joblib backend: loky (one machine) or dask (a Dask cluster)")
     sw.add_argument("--address", help="Dask scheduler address (with --backend dask; default: "
-                    "a LocalCluster of --jobs workers on 127.0.0.1)")
+                    "a LocalCluster of --jobs workers on 127.0.0.1); --out must then be on a "
+                    "filesystem the workers share")
     sw.add_argument("--out", help="sweep folder (default output.dir/<name>-sweep-seed<S>); "
                     "the same command again resumes it")
     sw.add_argument("--target", action="append", help="target equation (repeatable)")

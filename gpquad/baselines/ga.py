@@ -14,8 +14,8 @@ from twice the median step accepted in the previous generation.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -40,11 +40,16 @@ class GAParams:
 
 @dataclass
 class GAResult:
-    """Best chromosome per generation (G+1, n_p), its cost (G+1,), evaluations, steps."""
+    """Best chromosome per generation (G+1, n_p), its cost (G+1,), evaluations, steps.
+
+    cumulative_evaluations (G+1,): cost evaluations I(theta) used up to each generation
+    (a gradient evaluation counts as one; it also returns I).
+    """
 
     best: np.ndarray
     best_cost: np.ndarray
     evaluations: int
+    cumulative_evaluations: np.ndarray
     step_sizes: list[float] = field(default_factory=list)
 
     @property
@@ -72,7 +77,8 @@ def gradient_step(z: np.ndarray, cost: Callable, grad_z: Callable, alpha0: float
                   max_backtracks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Armijo-backtracked steepest-descent step for each row of z (P, n) in the unit box.
 
-    cost(z) -> I (P,); grad_z(z) -> (I, dI/dz). Returns (new z, new cost, accepted step (0 if none), evals).
+    cost(z) -> I (P,); grad_z(z) -> (I, dI/dz).
+    Returns (new z, new cost, accepted step (0 if none), evaluations).
     """
     c0, g = grad_z(z)
     evals = len(z)
@@ -143,6 +149,7 @@ def run_ga(cost: CostFn, gradient: GradFn, low: np.ndarray, high: np.ndarray,
     n_pairs = (n_off + 1) // 2
     best = [to_theta(z[np.argmin(c)])]
     best_cost = [float(c.min())]
+    cumulative = [evals]
     steps: list[float] = []
     alpha0 = None
     for gen in range(1, G + 1):
@@ -169,7 +176,8 @@ def run_ga(cost: CostFn, gradient: GradFn, low: np.ndarray, high: np.ndarray,
         i = int(np.argmin(c))
         best.append(to_theta(z[i]))
         best_cost.append(float(c[i]))
-    return GAResult(np.array(best), np.array(best_cost), evals, steps)
+        cumulative.append(evals)
+    return GAResult(np.array(best), np.array(best_cost), evals, np.array(cumulative), steps)
 
 
 def generations_to(error: np.ndarray, fraction: float = 0.05) -> int | None:

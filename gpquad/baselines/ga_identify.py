@@ -89,7 +89,7 @@ def assemble(cfg: GAConfig, results: dict[str, GAResult], problems) -> dict[str,
     """Fitted parameters of every identified loop (name -> value)."""
     out = {}
     for loop, res in results.items():
-        out.update({n: float(v) for n, v in zip(problems[loop].names, res.theta)})
+        out.update({n: float(v) for n, v in zip(problems[loop].names, res.theta, strict=True)})
     return out
 
 
@@ -108,26 +108,32 @@ def convergence_study(cfg: GAConfig, progress=None) -> dict:
     """Generations to `study.fraction` of the initial parameter error, gradient vs traditional.
 
     Each seed s uses the same initial populations and random streams for both variants.
-    Returns per-seed generations (None = not reached), evaluations, and the error curves.
+    Returns per-seed generations (None = not reached), cost evaluations (whole run and up to
+    the threshold, all loops), and the error curves.
     """
     rec, _ = simulate(cfg)
     out = {"seeds": list(range(cfg.study.seeds)), "fraction": cfg.study.fraction}
     for label, grad in (("gradient", True), ("traditional", False)):
         gens = {loop: [] for loop in list(cfg.ga.loops) + ["all"]}
-        evals, curves = [], []
+        evals, curves, to_threshold = [], [], []
         for seed in range(cfg.study.seeds):
             results, problems, _ = identify_loops(cfg, rec, grad, seed)
             for loop in cfg.ga.loops:
                 curve = relative_error_curve(cfg, {loop: results[loop]}, problems)
                 gens[loop].append(generations_to(curve, cfg.study.fraction))
             curve = relative_error_curve(cfg, results, problems)
-            gens["all"].append(generations_to(curve, cfg.study.fraction))
+            g_all = generations_to(curve, cfg.study.fraction)
+            gens["all"].append(g_all)
+            if g_all is not None:
+                to_threshold.append(int(sum(r.cumulative_evaluations[g_all]
+                                            for r in results.values())))
             curves.append(curve.tolist())
             evals.append(int(sum(r.evaluations for r in results.values())))
             if progress:
                 progress(f"  {label:11s} seed {seed:2d}: generations to "
                          f"{cfg.study.fraction:.0%} of initial error {gens['all'][-1]}")
         out[label] = {"generations": gens, "evaluations": evals, "curves": curves,
+                      "evaluations_to_threshold": to_threshold,
                       "summary": summarise(gens, cfg.ga.generations)}
     return out
 

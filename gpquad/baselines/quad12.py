@@ -148,7 +148,7 @@ def engine_states(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     R = rotation(phi, theta, psi)
     vel = np.einsum("nji,nj->ni", R, X[:, [1, 3, 5]])
     rates = np.einsum("nij,nj->ni", euler_rate_matrix(phi, theta), X[:, [7, 9, 11]])
-    quat = np.array([quat_from_euler(a, b, c) for a, b, c in zip(phi, theta, psi)])
+    quat = np.array([quat_from_euler(a, b, c) for a, b, c in zip(phi, theta, psi, strict=True)])
     return quat, vel, rates
 
 
@@ -185,7 +185,7 @@ def to_flight(rec: Quad12Record, name: str) -> Flight:
 
 def fly_windows(theta: np.ndarray, states0: np.ndarray, V: np.ndarray, v_hover: float,
                 dt: float, substeps: int) -> np.ndarray:
-    """Fly the model from engine states (W, 9) with voltages V (W, n, 4): engine states (W, n+1, 9)."""
+    """Fly from engine states (W, 9) with voltages V (W, n, 4): engine states (W, n+1, 9)."""
     W, n = V.shape[0], V.shape[1]
     u = decoupled_inputs(V.reshape(W * n, 4), v_hover).reshape(W, n, 4)
     X = replay(np.asarray(theta, float), from_engine_states(states0), np.ascontiguousarray(u),

@@ -14,8 +14,8 @@ in one broadcast call over the samples (P, N).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 import sympy as sp
@@ -57,7 +57,7 @@ class ParametricModel:
     @classmethod
     def from_function(cls, func: Callable, state_names: Sequence[str], input_names: Sequence[str],
                       param_names: Sequence[str], rows: Sequence[str] | None = None
-                      ) -> "ParametricModel":
+                      ) -> ParametricModel:
         """Build from a Python function f(X, U, theta) -> sequence of dX/dt (one per state).
 
         The function is called once with sympy symbols to obtain its symbolic form (so it
@@ -72,8 +72,9 @@ class ParametricModel:
         if len(out) != len(state_names):
             raise GpquadError(f"f returned {len(out)} rates for {len(state_names)} states",
                               field="model")
-        rows = rows or [n for n, e in zip(state_names, out) if e.free_symbols & set(ps)]
-        rhs = {n: e for n, e in zip(state_names, out) if n in rows}
+        rows = rows or [n for n, e in zip(state_names, out, strict=True)
+                        if e.free_symbols & set(ps)]
+        rhs = {n: e for n, e in zip(state_names, out, strict=True) if n in rows}
         return cls(tuple(state_names), tuple(input_names), tuple(param_names), rhs)
 
     def _args(self, X: np.ndarray, U: np.ndarray, theta: np.ndarray) -> list:
@@ -121,7 +122,7 @@ class ParametricModel:
             expr = self.rhs[r]
             if theta is not None:
                 expr = expr.xreplace({self.symbols[p]: sp.Float(float(v))
-                                      for p, v in zip(self.param_names, theta)})
+                                      for p, v in zip(self.param_names, theta, strict=True)})
             out[r] = sp.sstr(expr if digits is None else expr.evalf(digits), full_prec=True)
         return out
 

@@ -81,6 +81,10 @@ class CheckResult:
             lines.append(f"{r.name:<6} {r.rse:>9.3%} {r.worst:>10.3%} {r.rse_raw:>9.3%} "
                          f"{r.round_trip:>11.2e}  "
                          f"{r.status:<13} {r.measured}")
+        lines.append("RSE: integrated states vs the log's measurements after the same low-pass "
+                     "(rates as means over each step), pooled over windows; vs raw: vs the "
+                     "unfiltered measurements (includes what the filter removes); round trip: "
+                     "max |error| vs the processed data (self-test)")
         lines.append(f"verdict: {'PASS' if self.passed else 'FAIL'}")
         lines.extend(self.notes)
         return "\n".join(lines)
@@ -139,9 +143,9 @@ def integration_check(flights: list[Flight], window_steps: int = 750, threshold:
         raw = f.meta.get("reference_raw")
         if ref is None:
             ref = data_states
+            notes.append(f"{f.name}: no measurement reference; compared with the processed data")
         if raw is None:
             raw = ref
-            notes.append(f"{f.name}: no unfiltered reference; compared with the processed data")
         for name, text in f.meta.get("measured", {}).items():
             if not is_measured(text) or name not in measured:
                 measured[name] = text

@@ -28,6 +28,21 @@ def register_reader(name: str, reader: Callable[[Path, DataConfig], list[Flight]
     READERS[name] = reader
 
 
+def _register_log_readers() -> None:
+    """PX4 (ulog2csv folders, .ulg), Betaflight blackbox and resampled tables (gpquad.data)."""
+    from gpquad.data.betaflight import read_betaflight
+    from gpquad.data.px4 import read_px4_csv
+    from gpquad.data.table import read_table_log
+    from gpquad.data.ulog import read_ulog
+
+    for name, reader in (("px4-csv", read_px4_csv), ("ulog", read_ulog),
+                         ("betaflight", read_betaflight), ("table", read_table_log)):
+        READERS.setdefault(name, reader)
+
+
+_register_log_readers()
+
+
 def load_flights(cfg: Config) -> list[Flight]:
     """Every in-flight segment of every configured file (or the simulator's flight)."""
     if not cfg.data.files:
@@ -46,5 +61,14 @@ def load_flights(cfg: Config) -> list[Flight]:
 
 def load_dataset(cfg: Config) -> Dataset:
     """Flights of the config, concatenated and split as the engine needs them."""
-    return build_dataset(load_flights(cfg), validation_fraction=cfg.data.validation_fraction,
+    flights = load_flights(cfg)
+    if cfg.data.files and cfg.data.check_before_run:
+        from gpquad.data.integration_check import integration_check
+
+        check = integration_check(flights, cfg.data.check_steps, cfg.data.check_max_rse)
+        if not check.passed:
+            raise GpquadError(f"{check.failure()}; run `gpquad data check` for the table, or set "
+                              "data.check_before_run = false", source=str(cfg.data.files[0]),
+                              field="data.check_before_run")
+    return build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
                          trim=cfg.data.trim, trim_values=cfg.data.trim_values)

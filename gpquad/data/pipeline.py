@@ -5,8 +5,10 @@ Steps, each set in `[data]` and recorded in `Flight.meta["pipeline"]`:
 1. **One clock.** Every stream (a topic or a group of fields with its own timestamps) is put
    on a uniform clock of `resample_hz`: states are interpolated linearly (quaternions
    component-wise with sign continuity, then normalised), inputs and flags are held (zero-order
-   hold). A grid point inside a gap longer than `max_gap_s` (or 2.5 sample periods of a slow
-   stream) of any required stream is invalid: flights are split there, never interpolated across.
+   hold); a stream much faster than the clock is first smoothed by a centred boxcar of one
+   clock period (anti-aliasing). A grid point inside a gap longer than `max_gap_s` (or 2.5
+   sample periods of a slow stream) of any required stream is invalid: flights are split
+   there, never interpolated across.
 2. **Segmentation.** Keep the in-flight samples (armed and thrust above a threshold, or a time
    range; see the readers), in runs of at least `min_segment_s`.
 3. **Zero-phase FIR low-pass** (`filter_taps`, `cutoff_hz`; paper 200 taps, 5 Hz). The symmetric
@@ -31,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import uniform_filter1d
 from scipy.signal import firwin
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
@@ -40,12 +43,16 @@ from gpquad.kernels.quaternion import euler_array
 
 #: Stream kinds: interpolated states, interpolated quaternion, held inputs/flags.
 KINDS = ("state", "quat", "hold")
+#: Thrust dips shorter than this (s) inside a flight do not end the flight.
+THRUST_DIP_S = 1.0
 #: A slow stream's gap threshold is at least this many of its median sample periods.
 GAP_PERIODS = 2.5
 QUAT_COLS = ("qw", "qx", "qy", "qz")
 RATE_COLS = ("p", "q", "r")
 WORLD_VEL_COLS = ("vx", "vy", "vz")
+POS_COLS = ("x", "y", "z")
 BODY_VEL_COLS = ("u", "v", "w")
+VEL_COLS = {"body": BODY_VEL_COLS, "world": WORLD_VEL_COLS, "position": POS_COLS}
 
 
 @dataclass
@@ -90,7 +97,9 @@ class LogTable:
 
     @property
     def velocity_frame(self) -> str:
-        return "body" if "u" in self.table.columns else "world"
+        """body (u, v, w), world (vx, vy, vz) or position (x, y, z only: differentiated)."""
+        cols = self.table.columns
+        return "body" if "u" in cols else "world" if "vx" in cols else "position"
 
 
 def is_measured(description: str) -> bool:
@@ -153,6 +162,10 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
                                   "not 1", source=s.source, field=s.columns[0])
             values = _continuous_quat(values / norm[:, None])
         period = float(np.median(np.diff(t)))
+        width = int(round(1.0 / (rate_hz * period)))
+        if s.kind == "state" and width >= 2:  # anti-aliasing: centred boxcar of one new period
+            width = 2 * (width // 2) + 1
+            values = uniform_filter1d(values, width, axis=0, mode="nearest")
         clean.append((s, t, values, max(max_gap_s, GAP_PERIODS * period)))
         info.append({"stream": s.name, "rows": len(t), "rate_hz": 1.0 / period,
                      "start_s": float(t[0]), "stop_s": float(t[-1]), "nan_rows": dropped,
@@ -181,7 +194,7 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
                 out /= np.linalg.norm(out, axis=1, keepdims=True)
         for j, c in enumerate(s.columns):
             cols[c] = out[:, j]
-    for row, (_, t, _, gap) in zip(info, clean):
+    for row, (_, t, _, gap) in zip(info, clean, strict=False):
         row["gaps"] = int((np.diff(t) > gap).sum())
     return pd.DataFrame(cols), valid, info
 
@@ -190,7 +203,7 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges of the True runs of a boolean array."""
     m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
     edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=False)]
 
 
 def lowpass_taps(taps: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -243,7 +256,8 @@ def no_flight_error(log: LogTable, data, notes: list[str]) -> GpquadError:
     t = log.table["t"].to_numpy()
     flying = float(log.in_flight.sum()) / log.rate_hz
     gaps = len(runs(~log.valid))
-    detail = f"{flying:.1f} s in flight by segment = '{data.segment}' over {t[0]:.1f}..{t[-1]:.1f} s"
+    detail = (f"{flying:.1f} s in flight by segment = '{data.segment}' over "
+              f"{t[0]:.1f}..{t[-1]:.1f} s")
     if notes:
         detail += f", {len(notes)} piece(s) too short or cut by {gaps} gap(s)"
     return GpquadError(f"no usable flight in the log ({detail}); check arming/thrust, or set "
@@ -262,6 +276,12 @@ def _reference(table: pd.DataFrame, t_out: np.ndarray, rates: np.ndarray) -> np.
     q = np.ascontiguousarray(q)
     if "u" in table.columns:
         vel = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in BODY_VEL_COLS])
+    elif "vx" not in table.columns:  # position only: differences over each step
+        dt = t_out[1] - t_out[0]
+        world = np.column_stack([(np.interp(t_out + dt, t, table[c].to_numpy()) -
+                                  np.interp(t_out, t, table[c].to_numpy())) / dt
+                                 for c in POS_COLS])
+        vel = world_to_body(q, np.ascontiguousarray(world))
     else:
         world = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in WORLD_VEL_COLS])
         vel = world_to_body(q, np.ascontiguousarray(world))
@@ -289,11 +309,12 @@ def _step_means(x: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
-def _filtered_reference(x: np.ndarray, frame: str, rates: np.ndarray) -> np.ndarray:
+def _filtered_reference(x: np.ndarray, frame: str, rates: np.ndarray,
+                        world_vel: np.ndarray | None = None) -> np.ndarray:
     """Filtered (not downsampled-then-derived) measurements (N, 9) on the final clock."""
     q = np.ascontiguousarray(x[:, :4] / np.linalg.norm(x[:, :4], axis=1, keepdims=True))
-    vel = x[:, 4:7]
-    if frame == "world":
+    vel = x[:, 4:7] if world_vel is None else world_vel
+    if frame != "body":
         vel = world_to_body(q, np.ascontiguousarray(vel))
     log_rates = x[:, 7:10] if x.shape[1] >= 10 else rates
     return np.hstack([euler_array(q), vel, log_rates])
@@ -303,7 +324,7 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
     """Filter, downsample and derive rates/velocities for table rows [a, b)."""
     seg = log.table.iloc[a:b]
     t = seg["t"].to_numpy()
-    vel_cols = BODY_VEL_COLS if log.velocity_frame == "body" else WORLD_VEL_COLS
+    vel_cols = VEL_COLS[log.velocity_frame]
     has_rates = all(c in seg.columns for c in RATE_COLS)
     state_cols = list(QUAT_COLS) + list(vel_cols) + (list(RATE_COLS) if has_rates else [])
     inputs = list(log.input_names)
@@ -340,8 +361,17 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
         rates = x_state[:, 7:10]
         steps.append("body rates from the log (filtered)")
         n = len(t)
+    world_vel = ref_vel = None
+    if log.velocity_frame == "position":  # exact inverse of x_{t+1} = x_t + R(q_t) V_t dt
+        n = min(n, len(t) - 1)
+        world_vel = (x_state[1: n + 1, 4:7] - x_state[:n, 4:7]) / dt
+        ref_vel = (filtered_ref[1: n + 1, 4:7] - filtered_ref[:n, 4:7]) / dt
     t, quat, x_state, x_in, rates = t[:n], quat[:n], x_state[:n], x_in[:n], rates[:n]
-    if log.velocity_frame == "world":
+    if world_vel is not None:
+        vel = world_to_body(quat, np.ascontiguousarray(world_vel))
+        steps.append("body velocity from position differences (exact inverse of the "
+                     "integrator's position update)")
+    elif log.velocity_frame == "world":
         vel = world_to_body(quat, np.ascontiguousarray(x_state[:, 4:7]))
         steps.append("body velocity = world velocity rotated by the filtered attitude")
     else:
@@ -354,7 +384,7 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
         "t_start_s": float(t[0]), "t_stop_s": float(t[-1]), "dt": dt,
         "measured": dict(log.measured), "pipeline": steps,
         "reference_raw": _reference(log.table.iloc[a:b], t, rates),
-        "reference": _filtered_reference(filtered_ref[:n], log.velocity_frame, rates),
+        "reference": _filtered_reference(filtered_ref[:n], log.velocity_frame, rates, ref_vel),
     }
     return Flight(name=f"{log.name}#{index}", t=t, quat=quat, vel=np.ascontiguousarray(vel),
                   rates=np.ascontiguousarray(rates), inputs=np.ascontiguousarray(x_in),
@@ -397,5 +427,10 @@ def in_flight_mask(t: np.ndarray, armed: np.ndarray | None, thrust: np.ndarray |
         if thrust is None:
             raise GpquadError("the log has no thrust signal; use segment = 'armed' or 'range'",
                               source=source, field="data.segment")
-        mask &= thrust > data.thrust_threshold
+        flying = thrust > data.thrust_threshold
+        rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 else 1.0
+        for a, b in runs(~flying):  # bridge short throttle dips inside a flight
+            if a > 0 and b < len(t) and (b - a) < THRUST_DIP_S * rate:
+                flying[a:b] = True
+        mask &= flying
     return mask

@@ -176,7 +176,8 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     measured = {}
     streams = [tp.stream("vehicle_attitude", [f"q[{i}]" for i in range(4)],
                          ("qw", "qx", "qy", "qz"), "quat")]
-    measured.update({a: "measured (estimator attitude quaternion)" for a in ("phi", "theta", "psi")})
+    measured.update({a: "measured (estimator attitude quaternion)"
+                     for a in ("phi", "theta", "psi")})
     att = tp.get("vehicle_attitude")
     if "rollspeed" in att.columns:
         s = tp.stream("vehicle_attitude", ["rollspeed", "pitchspeed", "yawspeed"],

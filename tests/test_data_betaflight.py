@@ -1,0 +1,109 @@
+"""Betaflight blackbox reader on the bundled MIT/Apache fixture and the real logs."""
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gpquad.config import DataConfig
+from gpquad.data.betaflight import read_betaflight, read_betaflight_logs, read_frames
+from gpquad.data.integration_check import integration_check
+from gpquad.errors import GpquadError
+
+FIXTURE = Path(__file__).parent / "fixtures" / "btfl_001_cut.bbl"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "betaflight"
+needs_shared = pytest.mark.skipif(not SHARED.is_dir(),
+                                  reason="../shared/data/betaflight is not present")
+DATA = DataConfig(format="betaflight", segment="none", min_segment_s=2.0)
+
+
+def _read_logs(path, data):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tables, skipped = read_betaflight_logs(path, data)
+    return tables, skipped, [str(w.message) for w in caught]
+
+
+def test_fixture_frames_units_and_headers():
+    df, headers, stop = read_frames(FIXTURE, 1)
+    assert stop is None and len(df) == 98
+    assert headers["Firmware revision"].startswith("Betaflight 4.2")
+    assert np.all(np.diff(df["time"].to_numpy()) > 0)
+    tables, skipped, warned = _read_logs(FIXTURE, DATA)
+    log2 = tables[-1]
+    # deg/s -> rad/s, FLU -> FRD: a resting craft's accelerometer reads -1 g on z (FRD)
+    acc = log2.table[["ax", "ay", "az"]].to_numpy()
+    assert np.median(np.linalg.norm(acc, axis=1)) == pytest.approx(9.81, rel=0.05)
+    assert np.median(acc[:, 2]) < -8.5  # z points down: gravity's reaction is along -z
+    assert np.abs(log2.table[["p", "q", "r"]].to_numpy()).max() < 1.0
+    assert log2.table["throttle"].between(0.0, 1.0).all()
+    assert any("header Firmware revision" in n for n in log2.notes)
+    assert log2.measured["u"].startswith("not measured")
+
+
+def test_truncated_log_keeps_decoded_frames_with_a_warning():
+    tables, skipped, warned = _read_logs(FIXTURE, DATA)
+    assert [t.name for t in tables] == ["btfl_001_cut.log1", "btfl_001_cut.log2"]
+    assert any("truncated or corrupt" in w and "log 2 of 2" in w for w in warned)
+    t = tables[1].table["t"].to_numpy()
+    assert t[-1] - t[0] == pytest.approx(10.8, abs=0.1)
+
+
+def test_fixture_flight_and_check():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        flights = read_betaflight(FIXTURE, DATA)
+    assert [f.name for f in flights] == ["btfl_001_cut.log2#0"]
+    (f,) = flights
+    assert f.dt == pytest.approx(0.04) and len(f) == 220
+    check = integration_check(flights, 750, 0.05)
+    assert check.passed and check.row("w").status == "not measured"
+    assert check.row("p").status == "pass"
+
+
+def test_bench_log_has_no_flight_by_throttle():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(GpquadError, match="no usable flight"):
+            read_betaflight(FIXTURE, dataclasses.replace(DATA, segment="auto"))
+
+
+def test_log_index_selects_one_log_and_bad_index_is_an_error():
+    tables, _, _ = _read_logs(FIXTURE, dataclasses.replace(DATA, log_index=1))
+    assert [t.name for t in tables] == ["btfl_001_cut.log1"]
+    with pytest.raises(GpquadError, match="log 5 does not exist"):
+        _read_logs(FIXTURE, dataclasses.replace(DATA, log_index=5))
+
+
+def test_not_a_blackbox_file(tmp_path):
+    bad = tmp_path / "x.bbl"
+    bad.write_bytes(b"\x00" * 1000)
+    with pytest.raises(GpquadError) as err:
+        read_betaflight(bad, DATA)
+    assert str(bad) in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(GpquadError, match="file not found"):
+        read_betaflight(tmp_path / "missing.bbl", DATA)
+
+
+@needs_shared
+def test_multi_log_file_with_damaged_logs():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        flights = read_betaflight(SHARED / "btfl_all.bbl", DataConfig())
+    warned = [str(w.message) for w in caught]
+    assert len(warned) >= 30  # 44 logs, most of them damaged: each skipped with a warning
+    assert any("cannot be decoded" in w for w in warned)
+    assert len(flights) >= 3
+    assert integration_check(flights, 750, 0.05).passed
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ["btfl_002.bbl", "LOG00037.BFL", "gimbal_ghost/btfl_002.bbl"])
+def test_real_logs_load(name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        flights = read_betaflight(SHARED / name, DataConfig())
+    assert flights and all(np.isfinite(f.rates).all() for f in flights)
+    assert all(f.dt == pytest.approx(0.04) for f in flights)
