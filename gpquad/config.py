@@ -157,7 +157,8 @@ class Config:
     evolution: EvolutionConfig = field(default_factory=EvolutionConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
-    base_dir: str = "."  # folder that relative data paths are read from (not a TOML key)
+    # Folder that relative data paths are read from (set by load_config, not a TOML key).
+    base_dir: str = field(default=".", metadata={"toml": False})
 
     def to_dict(self) -> dict:
         out = dataclasses.asdict(self)
@@ -166,10 +167,6 @@ class Config:
 
     def data_paths(self) -> list[Path]:
         return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
-
-
-_SECTIONS = {"data": DataConfig, "simulator": SimulatorConfig, "evolution": EvolutionConfig,
-             "output": OutputConfig, "sweep": SweepConfig}
 
 
 def _type_name(tp) -> str:
@@ -223,21 +220,27 @@ def _coerce(value, tp, source: str, where: str):
     raise bad()  # pragma: no cover
 
 
-def _build(cls, table: dict, source: str, prefix: str):
+def build_dataclass(cls, table: dict, source: str, prefix: str = ""):
+    """Instantiate dataclass `cls` from a TOML table; nested dataclass fields are [sections].
+
+    Unknown keys and wrong types raise GpquadError naming `source` and the dotted field.
+    Fields with metadata {"toml": False} cannot be set from TOML.
+    """
     hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls) if f.name != "base_dir"]
+    names = [f.name for f in dataclasses.fields(cls) if f.metadata.get("toml", True)]
     kwargs = {}
     for key, value in table.items():
         where = f"{prefix}{key}"
         if key not in names:
             raise GpquadError(f"unknown key; allowed keys here are {names}", source=source,
                               field=where)
-        if key in _SECTIONS and cls is Config:
+        tp = hints[key]
+        if dataclasses.is_dataclass(tp):
             if not isinstance(value, dict):
                 raise GpquadError("expected a [section] table", source=source, field=where)
-            kwargs[key] = _build(_SECTIONS[key], value, source, f"{where}.")
+            kwargs[key] = build_dataclass(tp, value, source, f"{where}.")
         else:
-            kwargs[key] = _coerce(value, hints[key], source, where)
+            kwargs[key] = _coerce(value, tp, source, where)
     return cls(**kwargs)
 
 
@@ -355,7 +358,7 @@ def validate_pipeline(d: DataConfig, source: str = "config") -> None:
 
 
 def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:
-    cfg = _build(Config, table, source, "")
+    cfg = build_dataclass(Config, table, source)
     cfg = dataclasses.replace(cfg, base_dir=str(base_dir))
     return validate(cfg, source)
 

@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-import typing
 from pathlib import Path
 
-from gpquad.config import _coerce
+from gpquad.config import build_dataclass
 from gpquad.errors import GpquadError
 
 if sys.version_info >= (3, 11):
@@ -20,24 +19,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
-def build(cls, table: dict, source: str, prefix: str = ""):
-    """Instantiate dataclass `cls` from a TOML table, checking keys and types."""
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    kwargs = {}
-    for key, value in table.items():
-        where = f"{prefix}{key}"
-        if key not in names:
-            raise GpquadError(f"unknown key; allowed keys here are {names}", source=source,
-                              field=where)
-        tp = hints[key]
-        if dataclasses.is_dataclass(tp):
-            if not isinstance(value, dict):
-                raise GpquadError("expected a [section] table", source=source, field=where)
-            kwargs[key] = build(tp, value, source, f"{where}.")
-        else:
-            kwargs[key] = _coerce(value, tp, source, where)
-    return cls(**kwargs)
+#: The project's one TOML-to-dataclass builder (strict keys and types).
+build = build_dataclass
 
 
 def read_toml(path) -> tuple[dict, str]:
