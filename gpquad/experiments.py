@@ -15,7 +15,7 @@ from gpquad.data.io import load_dataset
 from gpquad.evolve.coevolution import Coevolution, RunState
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import HistoryWriter, atomic_write_text, provenance, write_json
-from gpquad.variables import target_index
+from gpquad.variables import TARGET_STATE, target_index
 
 
 def target_seed(master_seed: int, target: str) -> np.random.SeedSequence:
@@ -106,6 +106,12 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     write_json(run_dir / "config.json", cfg.to_dict())
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
+    for target in ev.targets:
+        missing = dataset.unmeasured(TARGET_STATE[target])
+        if missing:
+            print(f"gpquad: warning: {target} integrates {TARGET_STATE[target]}, which "
+                  f"{', '.join(missing)} does not measure; its equation fits the log's "
+                  "placeholder values", file=sys.stderr)
     report = Progress(show, ev.iterations * len(ev.targets))
     report.say(f"gpquad: {dataset.summary()['train_samples']} training samples at "
                f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}")

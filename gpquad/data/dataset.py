@@ -8,7 +8,7 @@ Test windows never span two flights or the train/validation boundary.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,6 +33,8 @@ class Dataset:
     validation: list[tuple[int, int]]
     names: list[str]
     trim: dict[str, float]
+    #: Per flight: source, segment times, which signals are measured, pipeline steps.
+    flight_info: list[dict] = field(default_factory=list)
 
     @property
     def dt(self) -> float:
@@ -50,7 +52,13 @@ class Dataset:
             "train_samples": int(sum(b - a for a, b in self.train)),
             "validation_samples": int(sum(b - a for a, b in self.validation)),
             "trim": self.trim,
+            "flight_info": self.flight_info,
         }
+
+    def unmeasured(self, state: str) -> list[str]:
+        """Flights whose log does not measure `state` (u, v, w, p, q, r)."""
+        return [info["name"] for info in self.flight_info
+                if not info.get("measured", {}).get(state, "measured").startswith("measured")]
 
 
 def flight_arrays(flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -113,4 +121,16 @@ def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: st
             validation.append((cut, stop))
         start = stop
     return Dataset(arrays=arrays, input_names=tuple(input_names), segments=segments, train=train,
-                   validation=validation, names=[f.name for f in flights], trim=trim_map)
+                   validation=validation, names=[f.name for f in flights], trim=trim_map,
+                   flight_info=[_info(f) for f in flights])
+
+
+#: Flight.meta entries worth recording with a run (the rest are arrays).
+_INFO_KEYS = ("source", "log", "segment", "t_start_s", "t_stop_s", "measured", "pipeline",
+              "equations")
+
+
+def _info(flight: Flight) -> dict:
+    info = {"name": flight.name, "samples": len(flight)}
+    info.update({k: flight.meta[k] for k in _INFO_KEYS if k in flight.meta})
+    return info
