@@ -1,0 +1,16 @@
+"""The benchmark command (deselected by default: run with -m bench)."""
+
+import json
+
+import pytest
+
+from gpquad.cli import main
+
+
+@pytest.mark.bench
+def test_bench_json(capsys):
+    assert main(["bench", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["window_steps_per_s"] > 1e6
+    assert result["paper_run_s"] > 0 and set(result["paths"]) == {
+        "rates_and_inputs", "attitude_and_velocity", "linear_target"}
