@@ -172,3 +172,19 @@ def test_interrupt_writes_partial_results(tmp_path, monkeypatch):
         run_experiment(tiny_config(), tmp_path / "run", progress=False)
     data = json.loads((tmp_path / "run" / "model.json").read_text())
     assert data["interrupted"] is True and "p_dot" in data["targets"]
+
+
+def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
+    cfg = tmp_path / "exp.toml"
+    cfg.write_text('seed = 5\n[simulator]\nduration_s = 40.0\n[evolution]\n'
+                   'targets = ["q_dot"]\niterations = 1\nmodel_generations = 5\n'
+                   'test_generations = 2\nwindow_steps = 60\ntest_offset_max = 30\n'
+                   'simplify_generations = 2\n')
+    flight = tmp_path / "flight.parquet"
+    assert main(["simulate", str(cfg), "--out", str(flight)]) == 0
+    assert "1000 samples at 25 Hz" in capsys.readouterr().out
+    assert main(["run", str(cfg), "--data", str(flight), "--out", str(tmp_path / "run"),
+                 "--quiet"]) == 0
+    info = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert info["dataset"]["flights"] == ["flight.parquet"]
+    assert info["dataset"]["train_samples"] + info["dataset"]["validation_samples"] == 1000
