@@ -1,4 +1,4 @@
-"""Command line: gpquad run | simulate | export | bench."""
+"""gpquad command line: run, simulate, export, bench, plus data, baseline, compare, sweep, report."""
 
 from __future__ import annotations
 
@@ -76,7 +76,9 @@ def _cmd_bench(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gpquad", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="gpquad", description="Discover multirotor acceleration equations from flight logs "
+        "by coevolutionary genetic programming.")
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="identify equations from a config")
