@@ -1,4 +1,4 @@
-"""gpquad command line: run, simulate, export, bench, plus data, baseline, compare, sweep, report."""
+"""gpquad command line: run, simulate, export, bench; data, baseline, compare, sweep, report."""
 
 from __future__ import annotations
 
