@@ -260,7 +260,7 @@ def write_predictions(out: Path, cfg: Config, dataset: Dataset, best: Discovered
     buf = io.BytesIO()
     np.savez(buf, t=np.arange(steps + 1) * dataset.dt, data=truth(dataset, start, steps)[0],
              best=best_pred, full=full_pred, start=start, dt=dataset.dt,
-             state_names=np.array(STATE_NAMES))
+             state_names=np.array(STATE_NAMES), targets=np.array(sorted(best.equations)))
     atomic_write_bytes(out / "predictions.npz", buf.getvalue())
 
 

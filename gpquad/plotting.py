@@ -58,6 +58,8 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
     d = np.load(npz_path)
     t, data, best, full = d["t"], d["data"], d["best"], d["full"]
     n = len(full) if n_models is None else n_models
+    targets = d["targets"].tolist() if "targets" in d.files else list(TARGET_NAMES)
+    identified = {TARGET_STATE[t] for t in targets}
     with plt.rc_context(STYLE):
         fig, axes = plt.subplots(3, 2, figsize=(7.0, 6.0), sharex=True)
         for j, name in enumerate(PLOTTED):
@@ -75,6 +77,8 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
             span = max(float(np.ptp(ref)), 1e-3)
             ax.set_ylim(ref.min() - 0.4 * span, ref.max() + 0.4 * span)
             ax.set_ylabel(_label(name))
+            if name not in identified:
+                ax.set_title("not identified: flown with the data's acceleration", fontsize=8)
         for ax in axes[-1]:
             ax.set_xlabel("time from window start [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
@@ -119,7 +123,7 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
             if len(values) and values.max() > 10 * values.min():  # log only over decades
                 ax.set_yscale("log")
             for it in range(1, int(frames[0]["iteration"].max()) + 1):
-                ax.axvline(it * (int(frames[0]["generation"].max()) + 1), color="0.85",
+                ax.axvline(it * (int(frames[0]["generation"].max()) + 1), color="0.9",
                            linewidth=0.6, zorder=0)
             ax.set_title(f"${TARGET_LATEX[target_index(target)]}$ ({len(frames)} runs)")
             ax.set_xlabel("model generation")
@@ -127,7 +131,7 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
                           f" [{unit}]")
         handles = [plt.Line2D([], [], color="tab:gray", alpha=0.6, linewidth=0.8),
                    plt.Line2D([], [], color="tab:blue", linewidth=1.6)]
-        handles.append(plt.Line2D([], [], color="0.85", linewidth=0.6))
+        handles.append(plt.Line2D([], [], color="0.9", linewidth=0.6))
         fig.legend(handles, ["one run (best climber)", "median over runs",
                              "iteration boundary (new test suite)"], loc="upper center",
                    ncol=3, frameon=False, bbox_to_anchor=(0.5, 1.03))

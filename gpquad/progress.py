@@ -1,5 +1,8 @@
 """Live progress of a sweep: runs done and running, best error per equation, ETA.
 
+The best error of an equation is the lowest validation error of its finished runs, or,
+before any has finished, "(suite x)": the lowest suite error among its running runs.
+
 Workers write ``status.json`` in their run folders after every iteration; a
 background thread of the parent polls them, so this works the same for loky and
 dask workers (on a shared filesystem). Modes: ``live`` (a refreshed line on a
@@ -138,11 +141,11 @@ class SweepProgress:
             if t in snap["best_validation"] or t in snap["best_running"]:
                 v = snap["best_validation"].get(t)
                 r = snap["best_running"].get(t)
-                parts.append(f"{t} {v:.3g}" if v is not None else f"{t} ({r:.3g})")
+                parts.append(f"{t} {v:.3g}" if v is not None else f"{t} (suite {r:.3g})")
         return (f"[{snap['done']}/{snap['total']} done, {snap['running']} running, "
                 f"{snap['iterations_done']}/{snap['iterations_total']} iterations, "
                 f"elapsed {_fmt_time(time.time() - self.t0)}, ETA {_fmt_time(self.eta(snap))}] "
-                f"best: " + (", ".join(parts) if parts else "-"))
+                f"best validation error: " + (", ".join(parts) if parts else "-"))
 
     def _loop(self) -> None:
         while not self._stop.wait(self.interval):

@@ -27,7 +27,7 @@ from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import atomic_write_text
 from gpquad.sweep import RunKey, run_dir
 from gpquad.tree.export import to_latex
-from gpquad.variables import TARGET_LATEX, TARGET_NAMES, target_index
+from gpquad.variables import TARGET_LATEX, TARGET_NAMES, TARGET_STATE, target_index
 
 SCORED_STATES = ("u", "v", "w", "p", "q", "r")
 
@@ -57,6 +57,11 @@ def structure_shares(equations: list[Equation]) -> dict[str, float]:
         counts.update({k for k, _ in terms(eq)})
     n = max(len(equations), 1)
     return {k: c / n for k, c in counts.most_common()}
+
+
+def _short(key: str, width: int = 28) -> str:
+    """A structure key for a table cell: long ones are cut."""
+    return key if len(key) <= width else key[: width - 3] + "..."
 
 
 def _equation_latex(eq: Equation, shared: set[str], digits: int = 3) -> str:
@@ -90,7 +95,7 @@ def median_tables(model: DiscoveredModel, runs: dict[str, list[Equation]], fract
         body = _equation_latex(eq, shared)
         lhs = TARGET_LATEX[target_index(t)]
         tex_rows.append(f"${lhs} = {body}$ & {eq.validation_error:.4g} \\\\")
-        top = ", ".join(f"`{k}` {100 * s:.0f}%" for k, s in list(shares.items())[:4])
+        top = ", ".join(f"`{_short(k)}` {100 * s:.0f}%" for k, s in list(shares.items())[:4])
         md_rows.append(f"| {t} | ${lhs} = {body}$ | {eq.validation_error:.4g} | {top} |")
     n = {len(v) for v in runs.values()}
     note = (f"Bold: term structures (numeric factor aside, delays included) found in more than "
@@ -155,10 +160,13 @@ def metrics_tables(assembly: dict) -> tuple[str, str]:
     """(LaTeX, Markdown) metrics tables."""
     rows = metrics_rows(assembly)
     noise = assembly.get("input_noise_fraction", 0)
+    missing = [TARGET_STATE[t] for t in TARGET_NAMES if t not in assembly["best"]["sizes"]]
     head = ["horizon", "model", *SCORED_STATES, "diverged / windows"]
     md = [f"RSE of the integrated states on validation windows (input noise SD = "
           f"{100 * noise:.0f}% of max input; for groups: median [min, max]). "
-          "Diverged windows are left out of the RSE.", "",
+          "Diverged windows are left out of the RSE."
+          + (f" Not identified in this sweep (flown with the data's accelerations): "
+             f"{', '.join(missing)}." if missing else ""), "",
           "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     tex = ["\\begin{tabular}{ll" + "r" * (len(SCORED_STATES) + 1) + "}", "\\hline",
            " & ".join(head) + " \\\\", "\\hline"]

@@ -175,3 +175,32 @@ def test_live_progress_line_reports_counts_and_eta(reference):
     line = prog.line(snap)
     assert line.startswith("[4/4 done, 0 running, 8/8 iterations") and "ETA 0m00s" in line
     assert "a_z" in line and "p_dot" in line
+
+
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
+
+
+def test_paper_config_has_the_papers_numbers_each_line_documented():
+    from gpquad.config import load_config
+
+    cfg = load_config(EXPERIMENTS / "paper.toml")
+    ev, sw = cfg.evolution, cfg.sweep
+    assert (sw.runs, sw.full_models, ev.iterations) == (30, 30, 30)
+    assert (ev.model_generations, ev.test_generations) == (600, 80)
+    assert (ev.n_models, ev.n_tests, ev.suite_size, ev.window_steps) == (14, 5, 6, 750)
+    assert (ev.max_depth, ev.max_delay, ev.p_leaf, ev.p_delay) == (5, 5, 0.7, 0.1)
+    assert (sw.input_noise, sw.window_s, sw.horizons_s) == (0.1, 7.0, (1.0, 7.0, 30.0))
+    assert round(cfg.data.validation_fraction * 13800) == 2000
+    assert cfg.simulator.duration_s * cfg.simulator.rate_hz == 13800
+    for line in (EXPERIMENTS / "paper.toml").read_text().splitlines():
+        if "=" in line and not line.lstrip().startswith("#"):
+            assert "#" in line, f"undocumented setting: {line}"
+
+
+def test_smoke_and_px4_sweep_configs_load():
+    from gpquad.config import load_config
+
+    assert load_config(EXPERIMENTS / "smoke.toml").sweep.runs >= 2
+    px4 = load_config(EXPERIMENTS / "px4_s250_sweep.toml")
+    assert "a_x" not in px4.evolution.targets  # horizontal velocity not measured in this log
+    assert px4.data.format == "px4-csv"
