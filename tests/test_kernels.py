@@ -37,6 +37,11 @@ _leaf = st.one_of(
 prefix_trees = st.recursive(
     _leaf, lambda kids: st.tuples(st.integers(0, 3), kids, kids).map(
         lambda t: [(t[0], 0.0)] + t[1] + t[2]), max_leaves=16)
+# Without division: integrating 1/phi near phi = 0 is chaotic, and then two correct
+# integrators legitimately differ by more than round-off.
+smooth_trees = st.recursive(
+    _leaf, lambda kids: st.tuples(st.integers(0, 2), kids, kids).map(
+        lambda t: [(t[0], 0.0)] + t[1] + t[2]), max_leaves=16)
 
 
 def canonical(quat):
@@ -139,7 +144,7 @@ def test_tree_evaluation_matches_recursive_reference(nodes, lanes):
 
 @settings(max_examples=25, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(prefix_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
+@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
        st.booleans())
 def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared):
     """The kernel's exact shortcuts equal a full-state integration of every window."""
@@ -151,8 +156,7 @@ def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, d
                        60, squared, np.inf, out)
     ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared) for s in starts])
     both_inf = np.isinf(out) & np.isinf(ref)
-    # Round-off (1e-16) differs between the two; trees like 1/theta amplify it, hence 1e-5.
-    np.testing.assert_allclose(out[~both_inf], ref[~both_inf], rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(out[~both_inf], ref[~both_inf], rtol=1e-7, atol=1e-9)
 
 
 def test_true_model_has_zero_error(short_dataset):
