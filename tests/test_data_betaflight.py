@@ -66,8 +66,11 @@ def test_fixture_flight_and_check():
 def test_bench_log_has_no_flight_by_throttle():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with pytest.raises(GpquadError, match="no usable flight"):
+        with pytest.raises(GpquadError) as err:
             read_betaflight(FIXTURE, dataclasses.replace(DATA, segment="auto"))
+    msg = str(err.value)  # names the file, the field and the longest log's reason
+    assert "\n" not in msg and msg.startswith(f"{FIXTURE}, field 'data.segment'")
+    assert "no usable flight" in msg and "(log 2 of 2)" in msg and "0.0 s in flight" in msg
 
 
 def test_log_index_selects_one_log_and_bad_index_is_an_error():
@@ -107,3 +110,20 @@ def test_real_logs_load(name):
         flights = read_betaflight(SHARED / name, DataConfig())
     assert flights and all(np.isfinite(f.rates).all() for f in flights)
     assert all(f.dt == pytest.approx(0.04) for f in flights)
+
+
+@pytest.mark.parametrize("edit, field, words", [
+    (lambda df: df.drop(columns=["gyroADC[1]"]), "gyroADC[1]", "missing field"),
+    (lambda df: df.assign(**{"gyroADC[0]": df["gyroADC[0]"] * 100.0}), "gyroADC[0]", "deg/s"),
+])
+def test_bad_fields_are_one_line_errors_naming_the_field(edit, field, words):
+    """A log without a gyro axis, or a gyro far beyond any rate a craft can reach."""
+    from gpquad.data.betaflight import _log_table
+
+    df, headers, _ = read_frames(FIXTURE, 2)
+    df = df.assign(**{"gyroADC[0]": np.linspace(-300.0, 300.0, len(df))})  # |peak| 300 deg/s
+    with pytest.raises(GpquadError) as err:
+        _log_table(edit(df), headers, DATA, "fixture.bbl (log 2 of 2)", "x")
+    msg = str(err.value)
+    assert "\n" not in msg and words in msg
+    assert msg.startswith("fixture.bbl (log 2 of 2), field '" + field + "'")

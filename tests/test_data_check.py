@@ -138,6 +138,27 @@ def test_table_format_irregular_rows_and_degrees(sim_flight, tmp_path):
         read_table_log(path, data)
 
 
+def test_table_rates_in_degrees_or_another_frame_are_one_line_errors(sim_flight, tmp_path):
+    """The quaternion says how fast the craft turns: rates 57x larger, or of the opposite sign
+    on q and r (FLU rates beside an FRD attitude), name the file and the mapped column."""
+    df = sim_flight.to_frame().drop(columns=["x", "y", "z"], errors="ignore")
+    df = df.rename(columns={"q": "gyro_y"})
+    data = DataConfig(format="table", segment="none", min_segment_s=5.0,
+                      columns={"q": "gyro_y"})
+    path = tmp_path / "deg.csv"
+    df.assign(p=np.degrees(df["p"])).to_csv(path, index=False)
+    with pytest.raises(GpquadError) as err:
+        read_table_log(path, data)
+    msg = str(err.value)
+    assert "\n" not in msg and "57 times" in msg and msg.startswith(f"{path}, field 'p'")
+    path = tmp_path / "flu.csv"
+    df.assign(gyro_y=-df["gyro_y"], r=-df["r"]).to_csv(path, index=False)
+    with pytest.raises(GpquadError) as err:
+        read_table_log(path, data)
+    msg = str(err.value)
+    assert "opposite sign" in msg and msg.startswith(f"{path}, field 'gyro_y'")
+
+
 def test_cli_check_prints_table_writes_png(capsys, tmp_path):
     png = tmp_path / "look.png"
     code = main(["data", "check", str(FIXTURES / "px4_sample_20s.ulg"), "--plot", str(png),

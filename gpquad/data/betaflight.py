@@ -150,9 +150,20 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
         extra["pid"] = (df[pid].to_numpy(float), tuple(pid))
     if "vbatLatest" in df:
         extra["vbat"] = (df[["vbatLatest"]].to_numpy(float) / 100.0, ("vbat",))
+    available = [c for st in streams for c in st.columns] + [c for _, cs in extra.values()
+                                                              for c in cs]
+    inputs = {}
+    for n_in in data.inputs:
+        col = data.columns.get(n_in, DEFAULT_INPUT_COLUMNS.get(n_in))
+        if col is None or col not in available:
+            raise GpquadError(f"no signal '{col}' for input '{n_in}'; available: "
+                              f"{sorted(available)}", source=source, field=f"data.columns.{n_in}")
+        inputs[n_in] = col
     for key, (values, cols) in extra.items():
-        values = np.where(np.isfinite(values), values, 0.0)
-        streams.append(Stream(key, t, values, cols, "hold", source, "time", required=False))
+        used = bool(set(cols) & set(inputs.values()))  # an input: NaN rows are gaps
+        if not used:
+            values = np.where(np.isfinite(values), values, 0.0)
+        streams.append(Stream(key, t, values, cols, "hold", source, "time", required=used))
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
     dt = 1.0 / data.resample_hz
     quat = _gyro_attitude(table, valid, dt)
@@ -160,14 +171,6 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
         table[c] = quat[:, i]
     for c in ("vx", "vy", "vz"):
         table[c] = 0.0
-    inputs = {}
-    for n_in in data.inputs:
-        col = data.columns.get(n_in, DEFAULT_INPUT_COLUMNS.get(n_in))
-        if col is None or col not in table.columns:
-            raise GpquadError(f"no signal '{col}' for input '{n_in}'; available: "
-                              f"{sorted(c for c in table.columns if c != 't')}", source=source,
-                              field=f"data.columns.{n_in}")
-        inputs[n_in] = col
     for n_in, col in inputs.items():
         table[n_in] = table[col]
     tt = table["t"].to_numpy()
@@ -238,8 +241,8 @@ def read_betaflight(path, data) -> list[Flight]:
         try:
             flights.extend(flights_from_log(log, data))
         except GpquadError as exc:
-            errors.append(str(exc))
-    if not flights:
-        raise GpquadError(f"no usable flight in any of {len(tables)} log(s): {errors[0]}",
-                          source=str(path), field="data.segment")
+            errors.append((len(log.table), str(exc)))
+    if not flights:  # the reason of the longest log
+        raise GpquadError(f"no usable flight in any of {len(tables)} log(s); longest: "
+                          f"{max(errors)[1]}", source=str(path), field="data.segment")
     return flights

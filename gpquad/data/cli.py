@@ -156,10 +156,10 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
             try:
                 flights.extend(flights_from_log(log, data))
             except GpquadError as exc:
-                errors.append(exc)
+                errors.append((len(log.table), exc))
                 out(f"  no usable flight: {exc}")
-        if not flights:
-            raise errors[0]
+        if not flights:  # the reason of the longest log, the one most likely meant to fly
+            raise max(errors, key=lambda e: e[0])[1]
     elif fmt in READERS:
         flights = READERS[fmt](path, data)
     else:

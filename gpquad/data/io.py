@@ -7,8 +7,8 @@ simulator's flight is used.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from gpquad.config import Config, DataConfig
 from gpquad.data.dataset import Dataset, build_dataset
@@ -52,7 +52,7 @@ def load_flights(cfg: Config) -> list[Flight]:
     reader = READERS.get(cfg.data.format)
     if reader is None:
         raise GpquadError(f"unknown format '{cfg.data.format}'; known: {sorted(READERS)}",
-                          field="data.format")
+                          source=str(cfg.data.files[0]), field="data.format")
     flights: list[Flight] = []
     for path in cfg.data_paths():
         flights.extend(reader(path, cfg.data))

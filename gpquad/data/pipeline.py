@@ -8,7 +8,8 @@ Steps, each set in `[data]` and recorded in `Flight.meta["pipeline"]`:
    hold); a stream much faster than the clock is first smoothed by a centred boxcar of one
    clock period (anti-aliasing). A grid point inside a gap longer than `max_gap_s` (or 2.5
    sample periods of a slow stream) of any required stream is invalid: flights are split
-   there, never interpolated across.
+   there, never interpolated across. Logged body rates are checked against the rates the
+   quaternion implies (`check_rate_units`): deg/s or a flipped axis is a one-line error.
 2. **Segmentation.** Keep the in-flight samples (armed and thrust above a threshold, or a time
    range; see the readers), in runs of at least `min_segment_s`.
 3. **Zero-phase FIR low-pass** (`filter_taps`, `cutoff_hz`; paper 200 taps, 5 Hz). The symmetric
@@ -40,6 +41,13 @@ from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import rates_from_quaternions, world_to_body
 from gpquad.kernels.quaternion import euler_array
+from gpquad.variables import (
+    BODY_VEL_COLUMNS,
+    POSITION_COLUMNS,
+    QUAT_COLUMNS,
+    RATE_COLUMNS,
+    WORLD_VEL_COLUMNS,
+)
 
 #: Stream kinds: interpolated states, interpolated quaternion, held inputs/flags.
 KINDS = ("state", "quat", "hold")
@@ -47,11 +55,11 @@ KINDS = ("state", "quat", "hold")
 THRUST_DIP_S = 1.0
 #: A slow stream's gap threshold is at least this many of its median sample periods.
 GAP_PERIODS = 2.5
-QUAT_COLS = ("qw", "qx", "qy", "qz")
-RATE_COLS = ("p", "q", "r")
-WORLD_VEL_COLS = ("vx", "vy", "vz")
-POS_COLS = ("x", "y", "z")
-BODY_VEL_COLS = ("u", "v", "w")
+QUAT_COLS = QUAT_COLUMNS
+RATE_COLS = RATE_COLUMNS
+WORLD_VEL_COLS = WORLD_VEL_COLUMNS
+POS_COLS = POSITION_COLUMNS
+BODY_VEL_COLS = BODY_VEL_COLUMNS
 VEL_COLS = {"body": BODY_VEL_COLS, "world": WORLD_VEL_COLS, "position": POS_COLS}
 
 
@@ -148,8 +156,10 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
         check_stream_time(t, s.source, s.field)
         finite = np.isfinite(values).all(axis=1)
         if not finite.any():
+            blank = [c for c, ok in zip(s.columns, np.isfinite(values).any(axis=0), strict=True)
+                     if not ok]
             raise GpquadError(f"every row of '{s.name}' is NaN or empty", source=s.source,
-                              field=",".join(s.columns))
+                              field=",".join(blank or s.columns))
         dropped = int((~finite).sum())
         t, values = t[finite], values[finite]
         if len(t) < 2:
@@ -197,6 +207,56 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
     for row, (_, t, _, gap) in zip(info, clean, strict=False):
         row["gaps"] = int((np.diff(t) > gap).sum())
     return pd.DataFrame(cols), valid, info
+
+
+def check_rate_peak(values: np.ndarray, source: str, fields: tuple[str, ...]) -> None:
+    """Rates (M, 3) beyond MAX_PLAUSIBLE_RATE rad/s are a one-line error naming the axis."""
+    values = np.asarray(values, dtype=float).reshape(-1, len(fields))
+    finite = np.where(np.isfinite(values), np.abs(values), 0.0)
+    peaks = finite.max(axis=0) if len(values) else np.zeros(len(fields))
+    j = int(np.argmax(peaks))
+    if peaks[j] > MAX_PLAUSIBLE_RATE:
+        raise GpquadError(f"body rates reach {peaks[j]:.1f}, implausible in rad/s: degrees "
+                          "where radians are expected? convert deg/s to rad/s", source=source,
+                          field=fields[j])
+
+
+#: Axes rotating less than this (RMS, rad/s) are not used to check the gyro's units.
+UNIT_CHECK_MIN_RATE = 0.05
+
+
+def check_rate_units(table: pd.DataFrame, valid: np.ndarray, source: str,
+                     fields: tuple[str, str, str]) -> None:
+    """Compare the logged body rates with those implied by the quaternion, axis by axis.
+
+    On the longest gap-free run, the least-squares scale s of log rate = s * quaternion rate
+    is about 1 for consistent data, about 57 for deg/s logged as rad/s, and about -1 for an
+    axis whose sign follows another frame (FLU vs FRD). The two last are one-line errors
+    naming `fields[axis]`. Axes that hardly rotate are not judged.
+    """
+    if not all(c in table.columns for c in RATE_COLS) or not valid.any():
+        return
+    a, b = max(runs(valid), key=lambda r: r[1] - r[0])
+    if b - a < 3:
+        return
+    t = table["t"].to_numpy()
+    quat = np.ascontiguousarray(table[list(QUAT_COLS)].to_numpy()[a:b])
+    implied = rates_from_quaternions(quat, float(t[a + 1] - t[a]))
+    logged = table[list(RATE_COLS)].to_numpy()[a: b - 1]
+    for j in range(3):
+        power = float(np.mean(implied[:, j] ** 2))
+        if power < UNIT_CHECK_MIN_RATE ** 2:
+            continue
+        scale = float(np.mean(logged[:, j] * implied[:, j])) / power
+        if 20.0 < scale < 200.0:
+            raise GpquadError(f"body rates are {scale:.0f} times those the attitude quaternion "
+                              "implies: degrees where radians are expected? convert deg/s to "
+                              "rad/s", source=source, field=fields[j])
+        if scale < -0.5:
+            raise GpquadError(f"body rate {RATE_COLS[j]} has the opposite sign of the rate the "
+                              f"attitude quaternion implies (scale {scale:.2f}): rates and "
+                              "attitude in different frames? declare data.frame or flip the "
+                              "column", source=source, field=fields[j])
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:

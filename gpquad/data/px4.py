@@ -25,8 +25,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.flight import Flight
+from gpquad.data.pipeline import (
+    LogTable,
+    Stream,
+    check_rate_peak,
+    check_rate_units,
+    flights_from_log,
+    in_flight_mask,
+    resample,
+)
 from gpquad.errors import GpquadError
 
 #: PX4's ARMING_STATE_ARMED (2016 and later).
@@ -52,8 +60,10 @@ class Topics:
 
     def get(self, topic: str) -> pd.DataFrame:
         if topic not in self.tables:
-            raise GpquadError(f"missing topic '{topic}' (for a ulog2csv folder: a file "
-                              f"*_{topic}_0.csv)", source=self.where, field=topic)
+            hint = ("the .ulg may be truncated before its first message" if
+                    self.where.lower().endswith(".ulg") else f"expected a file *_{topic}_0.csv")
+            raise GpquadError(f"missing topic '{topic}' ({hint})", source=self.where,
+                              field=topic)
         return self.tables[topic]
 
     def column(self, topic: str, name: str) -> np.ndarray:
@@ -137,14 +147,6 @@ def _common_prefix(names: list[str]) -> str:
     return ""
 
 
-def _check_rad(values: np.ndarray, source: str, field: str) -> None:
-    peak = float(np.nanmax(np.abs(values))) if values.size else 0.0
-    if peak > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"body rates reach {peak:.1f}, implausible in rad/s: degrees where "
-                          "radians are expected? convert deg/s to rad/s", source=source,
-                          field=field)
-
-
 def _velocity_stream(tp: Topics, measured: dict) -> Stream:
     topic = "vehicle_local_position"
     t = tp.time(topic)
@@ -179,17 +181,16 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     measured.update({a: "measured (estimator attitude quaternion)"
                      for a in ("phi", "theta", "psi")})
     att = tp.get("vehicle_attitude")
+    rate_fields = None
     if "rollspeed" in att.columns:
-        s = tp.stream("vehicle_attitude", ["rollspeed", "pitchspeed", "yawspeed"],
-                      ("p", "q", "r"), "state")
+        rate_topic, rate_fields = "vehicle_attitude", ("rollspeed", "pitchspeed", "yawspeed")
     elif tp.has("vehicle_angular_velocity"):
-        s = tp.stream("vehicle_angular_velocity", [f"xyz[{i}]" for i in range(3)],
-                      ("p", "q", "r"), "state")
-    else:
-        s = None
-    if s is not None:
-        _check_rad(s.values, s.source, "rollspeed")
-        streams.append(s)
+        rate_topic, rate_fields = "vehicle_angular_velocity", ("xyz[0]", "xyz[1]", "xyz[2]")
+    s_rates = None
+    if rate_fields is not None:
+        s_rates = tp.stream(rate_topic, rate_fields, ("p", "q", "r"), "state")
+        check_rate_peak(s_rates.values, s_rates.source, rate_fields)
+        streams.append(s_rates)
         measured.update({a: "measured (gyro, estimator output)" for a in ("p", "q", "r")})
     else:
         measured.update({a: "measured (derived from the quaternion only)" for a in "pqr"})
@@ -226,8 +227,12 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
                 notes.append(f"skipped topic {s.name}: timestamps not increasing")
         except GpquadError as exc:
             notes.append(f"skipped optional topic: {exc}")
+    inputs = _map_inputs(["t"] + [c for s in streams for c in s.columns], data, tp.where)
+    for s in streams:  # an optional signal used as an input: its gaps split the flight too
+        s.required = s.required or bool(set(s.columns) & set(inputs.values()))
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
-    inputs = _map_inputs(table, data, tp.where)
+    if s_rates is not None:
+        check_rate_units(table, valid, s_rates.source, rate_fields)
     for n_in, col in inputs.items():
         table[n_in] = table[col]
     t = table["t"].to_numpy()
@@ -239,18 +244,18 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
                     streams=info, notes=notes)
 
 
-def _map_inputs(table: pd.DataFrame, data, source: str) -> dict[str, str]:
-    """Input name -> table column, from [data.columns] or the PX4 defaults."""
+def _map_inputs(columns: list[str], data, source: str) -> dict[str, str]:
+    """Input name -> table column (of `columns`), from [data.columns] or the PX4 defaults."""
     out = {}
     for name in data.inputs:
         col = data.columns.get(name, DEFAULT_INPUT_COLUMNS.get(name))
         if col is None:
             raise GpquadError(f"no signal for input '{name}'; map it with [data.columns] "
-                              f"{name} = \"<column>\" (available: {sorted(table.columns)})",
+                              f"{name} = \"<column>\" (available: {sorted(set(columns) - {'t'})})",
                               source=source, field=f"data.columns.{name}")
-        if col not in table.columns:
+        if col not in columns:
             raise GpquadError(f"input '{name}' maps to unknown signal '{col}' (available: "
-                              f"{sorted(c for c in table.columns if c != 't')})", source=source,
+                              f"{sorted(set(columns) - {'t'})})", source=source,
                               field=f"data.columns.{name}")
         out[name] = col
     return out

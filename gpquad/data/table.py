@@ -15,14 +15,21 @@ from pathlib import Path
 import numpy as np
 
 from gpquad.data.flight import (
-    MAX_PLAUSIBLE_RATE,
     Flight,
     _read_table,
     enu_flu_quat,
     flip_body,
     flip_world,
 )
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.pipeline import (
+    LogTable,
+    Stream,
+    check_rate_peak,
+    check_rate_units,
+    flights_from_log,
+    in_flight_mask,
+    resample,
+)
 from gpquad.errors import GpquadError
 from gpquad.variables import (
     BODY_VEL_COLUMNS,
@@ -64,10 +71,9 @@ def table_log(path, data) -> LogTable:
         raise GpquadError("needs body velocity u, v, w, world velocity vx, vy, vz or position "
                           "x, y, z columns", source=source, field="u")
     rates = np.column_stack([col(c) for c in RATE_COLUMNS]) if have(RATE_COLUMNS) else None
-    if rates is not None and np.nanmax(np.abs(rates)) > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"body rates reach {np.nanmax(np.abs(rates)):.1f}, implausible in "
-                          "rad/s: degrees where radians are expected? convert to rad/s",
-                          source=source, field=cols.get("p", "p"))
+    rate_fields = tuple(cols.get(c, c) for c in RATE_COLUMNS)
+    if rates is not None:
+        check_rate_peak(rates, source, rate_fields)
     if data.frame == "ENU/FLU":
         ok = np.isfinite(quat).all(axis=1)
         quat[ok] = enu_flu_quat(quat[ok])
@@ -81,6 +87,8 @@ def table_log(path, data) -> LogTable:
         streams.append(Stream("rates", t, rates, RATE_COLUMNS, "state", source,
                               cols.get("t", "t")))
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
+    if rates is not None:
+        check_rate_units(table, valid, source, rate_fields)
     thrust = table["u_T"].to_numpy() if "u_T" in table.columns else None
     mode_needs_thrust = data.segment in ("auto", "thrust")
     if mode_needs_thrust and thrust is None:
