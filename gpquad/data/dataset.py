@@ -35,6 +35,8 @@ class Dataset:
     trim: dict[str, float]
     #: Per flight: source, segment times, which signals are measured, pipeline steps.
     flight_info: list[dict] = field(default_factory=list)
+    #: The integration check's table when one was run before identification.
+    integration_check: dict | None = None
 
     @property
     def dt(self) -> float:
@@ -53,6 +55,7 @@ class Dataset:
             "validation_samples": int(sum(b - a for a, b in self.validation)),
             "trim": self.trim,
             "flight_info": self.flight_info,
+            "integration_check": self.integration_check,
         }
 
     def unmeasured(self, state: str) -> list[str]:

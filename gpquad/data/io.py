@@ -62,6 +62,7 @@ def load_flights(cfg: Config) -> list[Flight]:
 def load_dataset(cfg: Config) -> Dataset:
     """Flights of the config, concatenated and split as the engine needs them."""
     flights = load_flights(cfg)
+    check = None
     if cfg.data.files and cfg.data.check_before_run:
         from gpquad.data.integration_check import integration_check
 
@@ -70,5 +71,8 @@ def load_dataset(cfg: Config) -> Dataset:
             raise GpquadError(f"{check.failure()}; run `gpquad data check` for the table, or set "
                               "data.check_before_run = false", source=str(cfg.data.files[0]),
                               field="data.check_before_run")
-    return build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
-                         trim=cfg.data.trim, trim_values=cfg.data.trim_values)
+    dataset = build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
+                            trim=cfg.data.trim, trim_values=cfg.data.trim_values)
+    if check is not None:
+        dataset.integration_check = check.to_dict()
+    return dataset
