@@ -1,4 +1,4 @@
-"""gpquad command line: run, simulate, export, bench; data, baseline, compare, sweep, report."""
+"""gpquad command line: run, simulate, export, fly, bench; data, baseline, compare, sweep..."""
 
 from __future__ import annotations
 
@@ -67,6 +67,39 @@ def _cmd_export(args) -> int:
     return 0
 
 
+def _cmd_fly(args) -> int:
+    import numpy as np
+    import pandas as pd
+
+    from gpquad.data.flight import write_flight_file
+    from gpquad.model import DiscoveredModel
+
+    model = DiscoveredModel.load(args.run)
+    path = Path(args.inputs)
+    if not path.is_file():
+        raise GpquadError("file not found", source=str(path))
+    table = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else \
+        pd.read_csv(path)
+    missing = [n for n in model.input_names if n not in table.columns]
+    if missing:
+        raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
+    inputs = table[list(model.input_names)].to_numpy(dtype=float)
+    if not np.all(np.isfinite(inputs)):
+        raise GpquadError("inputs contain NaN", source=str(path), field=model.input_names[0])
+    initial = None
+    if args.initial:
+        try:
+            initial = [float(x) for x in args.initial.split(",")]
+        except ValueError:
+            raise GpquadError("--initial takes 9 numbers: phi,theta,psi,u,v,w,p,q,r",
+                              field="--initial") from None
+    flight = model.fly(inputs, initial, raw_inputs=not args.trimmed)
+    out = write_flight_file(flight, args.out)
+    print(f"flew {len(flight)} samples ({len(flight) * model.dt:.1f} s) with the equations of "
+          f"{args.run}; wrote {out}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from gpquad.bench import format_report, run_benchmark
 
@@ -105,6 +138,15 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--raw-inputs", action="store_true",
                      help="write equations in untrimmed inputs")
     exp.set_defaults(func=_cmd_export)
+
+    fly = sub.add_parser("fly", help="fly a run's equations with given inputs")
+    fly.add_argument("run", help="run folder or model.json")
+    fly.add_argument("--inputs", required=True, help="CSV/Parquet with the input columns")
+    fly.add_argument("--out", required=True, help="flight file to write (.csv or .parquet)")
+    fly.add_argument("--initial", help="initial state phi,theta,psi,u,v,w,p,q,r (default 0)")
+    fly.add_argument("--trimmed", action="store_true",
+                     help="the inputs are already trim-subtracted")
+    fly.set_defaults(func=_cmd_fly)
 
     bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")
     bench.add_argument("--json", action="store_true", help="one JSON object")

@@ -13,10 +13,15 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import sympy as sp
 
+from gpquad.data.flight import Flight
+from gpquad.errors import GpquadError
+from gpquad.kernels.flight_arrays import FlightArrays
+from gpquad.kernels.quaternion import quat_from_euler, rotation_matrix
 from gpquad.tree.encoding import Tree
 from gpquad.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
 from gpquad.tree.operators import CONST
@@ -153,11 +158,56 @@ class DiscoveredModel:
         return "\n".join(self.equations[t].text(raw=raw) for t in TARGET_NAMES
                          if t in self.equations)
 
-    def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
+    def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
+        """Fly the model from an initial state with given inputs (no data needed).
+
+        inputs: (N, n_inputs) control inputs, one row per sample of dt = self.dt; raw (the
+        trim is subtracted here) unless raw_inputs=False. initial_state: 9 values
+        [phi, theta, psi, u, v, w, p, q, r] (rad, m/s, rad/s), default all zero. Inputs
+        before the first row are held at the first row. Targets without an equation have
+        zero acceleration. Returns a Flight (NED/FRD, position from x = 0) that
+        gpquad.data.flight.write_flight_file can save.
+        """
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        n_in = len(self.input_names)
+        if inputs.shape[1] != n_in or len(inputs) < 2:
+            raise GpquadError(f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}",
+                              field="inputs")
+        state0 = np.zeros(9) if initial_state is None else np.asarray(initial_state, float)
+        if state0.shape != (9,) or not np.all(np.isfinite(state0)):
+            raise GpquadError("initial_state needs 9 finite values [phi, theta, psi, u, v, w, "
+                              "p, q, r]", field="initial_state")
+        trim = np.array([self.trim.get(n, 0.0) for n in self.input_names])
+        model_inputs = inputs - trim if raw_inputs else inputs
+        history = max([int(e.tree.delays.max()) for e in self.equations.values()] + [0])
+        n = len(inputs)
+        rows = history + n
+        padded = np.vstack([np.repeat(model_inputs[:1], history, axis=0), model_inputs])
+        quat = np.zeros((rows, 4))
+        quat[history] = quat_from_euler(*state0[:3])
+        states = np.zeros((rows, 9))
+        states[history] = state0
+        arrays = FlightArrays(quat=quat, states=states, acc=np.zeros((rows, 6)),
+                              inputs=np.ascontiguousarray(padded), rot=np.zeros((rows, 9)),
+                              dt=float(self.dt))
+        view = SimpleNamespace(arrays=arrays)
+        flown = self.simulate(view, np.array([history]), n - 1, modelled_only=True)[0]
+        out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
+        world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
+        pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
+        return Flight(name="simulated model", t=np.arange(n) * self.dt, quat=out_quat,
+                      vel=flown[:, 3:6].copy(), rates=flown[:, 6:9].copy(), inputs=inputs,
+                      input_names=self.input_names, pos=pos,
+                      meta={"source": "gpquad.model.DiscoveredModel.fly",
+                            "equations": {t: e.text() for t, e in self.equations.items()}})
+
+    def simulate(self, dataset, starts, n_steps: int, input_noise=None,
+                 modelled_only: bool = False) -> np.ndarray:
         """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
 
-        Targets without an equation use the data's accelerations. input_noise, if given,
-        has shape (n_windows, n_steps, n_inputs) and is added to the recorded inputs.
+        Targets without an equation use the data's accelerations (with modelled_only, zero).
+        input_noise, if given, has shape (n_windows, n_steps, n_inputs) and is added to the
+        recorded inputs.
         """
         from gpquad.kernels.fitness import rollout
 
@@ -176,6 +226,15 @@ class DiscoveredModel:
             sizes[k] = eq.tree.size
             delays[k] = eq.tree.delays
             modelled[k] = True
+        if modelled_only:
+            modelled[:] = True  # the constant-0 placeholders give zero acceleration
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
         return rollout(codes, values, sizes, delays, modelled, dataset.arrays,
                        np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
+
+
+def _rotate(quat, body_vector) -> np.ndarray:
+    """World vector of a body vector."""
+    mat = np.empty((3, 3))
+    rotation_matrix(*quat, mat)
+    return mat @ body_vector

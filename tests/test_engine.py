@@ -188,3 +188,35 @@ def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["dataset"]["flights"] == ["flight.parquet"]
     assert info["dataset"]["train_samples"] + info["dataset"]["validation_samples"] == 1000
+
+
+def test_fly_reproduces_the_simulator_with_the_true_equations(short_flight, tmp_path):
+    """DiscoveredModel.fly with the simulator's own equations and inputs gives its flight."""
+    from gpquad.config import MEDIAN_MODEL
+    from gpquad.data.flight import write_flight_file
+    from gpquad.model import Equation
+    from gpquad.results import write_json
+    from gpquad.tree.export import from_sympy, parse_equation
+
+    names = short_flight.input_names
+    eqs = {}
+    for target, text in MEDIAN_MODEL.items():
+        expr, delays = parse_equation(text, names)
+        eqs[target] = Equation(target, from_sympy(expr, delays, names), names, 0.0, 0.0, {})
+    model = DiscoveredModel(eqs, names, {}, short_flight.dt, 0, {})
+    flown = model.fly(short_flight.inputs)
+    assert np.abs(flown.vel - short_flight.vel).max() < 1e-9
+    assert np.abs(flown.rates - short_flight.rates).max() < 1e-9
+    assert np.abs(flown.pos - short_flight.pos).max() < 1e-9
+    # the same through the command line
+    write_json(tmp_path / "run" / "model.json", model.to_dict())
+    write_flight_file(short_flight, tmp_path / "inputs.csv")
+    out = tmp_path / "flown.csv"
+    assert main(["fly", str(tmp_path / "run"), "--inputs", str(tmp_path / "inputs.csv"),
+                 "--out", str(out)]) == 0
+    from gpquad.data.flight import read_flight_file
+
+    again = read_flight_file(out, names)
+    assert np.abs(again.vel - short_flight.vel).max() < 1e-9
+    assert main(["fly", str(tmp_path / "run"), "--inputs", str(tmp_path / "none.csv"),
+                 "--out", str(out)]) == 2
