@@ -295,3 +295,13 @@ def test_cli_align_two_logs_on_different_clocks(tmp_path, capsys):
     code = main(["data", "align", str(FIXTURES / "px4_sample_20s.ulg"),
                  str(tmp_path / "other.csv"), "--signal", "nope"])
     assert code != 0 and "no signal ['nope']" in capsys.readouterr().err
+
+
+def test_check_reads_an_engine_ready_file_as_gpquad_run_does(capsys, tmp_path, short_flight):
+    """A uniform generic CSV is checked as-is (no re-filtering), like `gpquad run` reads it."""
+    from gpquad.data.flight import write_flight_file
+
+    path = write_flight_file(short_flight, tmp_path / "sim.csv")
+    assert main(["data", "check", str(path), "--plot", str(tmp_path / "s.png")]) == 0
+    out = capsys.readouterr().out
+    assert "(format generic)" in out and "verdict: PASS" in out

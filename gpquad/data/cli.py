@@ -24,8 +24,32 @@ _LOG_READERS = {
 }
 
 
-def guess_format(path: Path) -> str:
-    """Format name from a path: folder -> px4-csv, .ulg, .bbl/.bfl, .csv/.parquet -> table."""
+def _is_generic_file(path: Path) -> bool:
+    """True for a CSV/Parquet already in gpquad's generic format (what `gpquad run` reads)."""
+    import numpy as np
+    import pandas as pd
+
+    from gpquad.data.flight import DT_TOLERANCE
+    from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
+
+    try:
+        if path.suffix.lower() == ".csv":
+            frame = pd.read_csv(path, nrows=2000)
+        else:
+            frame = pd.read_parquet(path)
+    except Exception:  # unreadable here: let the table reader report it properly
+        return False
+    if not {"t", *QUAT_COLUMNS, *RATE_COLUMNS} <= set(frame.columns) or len(frame) < 3:
+        return False
+    steps = np.diff(pd.to_numeric(frame["t"], errors="coerce").to_numpy(dtype=float))
+    dt = np.median(steps)
+    return bool(dt > 0 and np.all(np.abs(steps - dt) <= DT_TOLERANCE * dt))
+
+
+def guess_format(path: Path, allow_generic: bool = True) -> str:
+    """Format name from a path: folder -> px4-csv, .ulg, .bbl/.bfl; .csv/.parquet -> generic
+    when already uniform with the generic columns (as `gpquad run` reads it; only if
+    allow_generic), else table."""
     if path.is_dir():
         return "px4-csv"
     suffix = path.suffix.lower()
@@ -34,7 +58,7 @@ def guess_format(path: Path) -> str:
     if suffix in (".bbl", ".bfl", ".txt"):
         return "betaflight"
     if suffix in (".csv", ".parquet", ".pq"):
-        return "table"
+        return "generic" if allow_generic and _is_generic_file(path) else "table"
     raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, ulog,"
                       " betaflight, table, generic)", source=str(path), field="--format")
 
@@ -144,6 +168,7 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(path))
     cfg = load_config(config) if config else Config()
+    # A config's default format ("generic") does not override what the path says.
     fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
         or guess_format(path)
     data = dataclasses.replace(cfg.data, format=fmt)
@@ -206,7 +231,7 @@ def run_align(path_a, path_b, signals=("p", "q", "r"), fmt_a=None, fmt_b=None, c
     for path, fmt in ((Path(path_a), fmt_a), (Path(path_b), fmt_b)):
         if not path.exists():
             raise GpquadError("no such file or folder", source=str(path))
-        fmt = fmt or guess_format(path)
+        fmt = fmt or guess_format(path, allow_generic=False)
         if fmt not in _LOG_READERS and fmt != "betaflight":
             raise GpquadError(f"alignment reads px4-csv, ulog, betaflight or table logs, not "
                               f"'{fmt}'", source=str(path), field="--format")
