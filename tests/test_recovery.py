@@ -1,4 +1,4 @@
-"""End to end: recover the median model's equations from noise-free simulated data.
+"""End to end: recover the median model's six equations from noise-free simulated data.
 
 Budget: experiments/quickstart.toml (6 iterations of 600 + 80 generations, 250-step
 windows, local search on). benchmarks/recovery.py measures the pass rate over seeds.
@@ -15,7 +15,7 @@ from gpquad.experiments import identify
 QUICKSTART = Path(__file__).resolve().parents[1] / "experiments" / "quickstart.toml"
 
 
-@pytest.mark.parametrize("target", ["p_dot", "a_z"])
+@pytest.mark.parametrize("target", ["p_dot", "a_z", "a_x", "a_y", "q_dot", "r_dot"])
 def test_recovers_median_model_equation(median_dataset, target):
     cfg = override(load_config(QUICKSTART), targets=[target], seed=1)
     eq, _ = identify(median_dataset, target, cfg)
