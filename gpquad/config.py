@@ -85,6 +85,9 @@ class SimulatorConfig:
         "u_Y": {"psi": 0.15},
     })
     input_limit: float = 1.0
+    # Gaussian measurement noise on the recorded flight (not on the dynamics), SD per signal:
+    # "attitude" (rad, a random small rotation), "velocity" (m/s), "rates" (rad/s).
+    measurement_noise: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -303,6 +306,10 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if unknown_eq:
         raise GpquadError(f"unknown targets {sorted(unknown_eq)}", source=source,
                           field="simulator.equations")
+    bad_noise = set(s.measurement_noise) - {"attitude", "velocity", "rates"}
+    if bad_noise or any(v < 0 for v in s.measurement_noise.values()):
+        raise GpquadError("keys attitude, velocity, rates with SD >= 0", source=source,
+                          field="simulator.measurement_noise")
     if s.rate_hz <= 0 or s.duration_s <= 0:
         raise GpquadError("rate_hz and duration_s must be > 0", source=source,
                           field="simulator.rate_hz")

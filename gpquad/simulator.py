@@ -15,7 +15,7 @@ from gpquad.config import SimulatorConfig
 from gpquad.data.flight import Flight
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import integrate_step
-from gpquad.kernels.quaternion import euler_from_quat
+from gpquad.kernels.quaternion import euler_from_quat, quat_mul
 from gpquad.tree.export import parse_equation, symbols_for
 from gpquad.variables import STATE_NAMES, TARGET_NAMES, terminal_names
 
@@ -108,7 +108,29 @@ def simulate(cfg: SimulatorConfig, input_names) -> Flight:
         true_acc[t] = acc
         if t < n - 1:
             integrate_step(quat, vel, rates, pos, acc, dt, mat)
+    if any(cfg.measurement_noise.values()):
+        out_q, out_v, out_w = add_measurement_noise(out_q, out_v, out_w, cfg.measurement_noise,
+                                                    np.random.default_rng([cfg.seed, 1]))
     return Flight(name=f"simulated_seed{cfg.seed}", t=np.arange(n) * dt, quat=out_q, vel=out_v,
                   rates=out_w, inputs=inputs, input_names=tuple(input_names), pos=out_x,
                   meta={"source": "simulator", "true_acc": true_acc,
-                        "equations": dict(cfg.equations)})
+                        "equations": dict(cfg.equations),
+                        "measurement_noise": dict(cfg.measurement_noise)})
+
+
+def add_measurement_noise(quat, vel, rates, sd: dict, rng: np.random.Generator):
+    """Noisy copies of recorded attitude (N, 4), velocity and rates (N, 3).
+
+    Attitude noise is a random rotation by N(0, sd^2) about each body axis; the noise
+    generator is separate from the flight's, so adding noise leaves the flight unchanged.
+    """
+    n = len(quat)
+    noisy_q = quat.copy()
+    if sd.get("attitude", 0.0):
+        half = 0.5 * rng.normal(0.0, sd["attitude"], size=(n, 3))
+        for i in range(n):
+            dq = np.array([1.0, *half[i]]) / np.sqrt(1.0 + half[i] @ half[i])
+            noisy_q[i] = quat_mul(*quat[i], *dq)
+    noisy_v = vel + rng.normal(0.0, sd.get("velocity", 0.0), size=vel.shape)
+    noisy_w = rates + rng.normal(0.0, sd.get("rates", 0.0), size=rates.shape)
+    return noisy_q, noisy_v, noisy_w
