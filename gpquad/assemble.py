@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from gpquad import scoring
-from gpquad.config import Config
+from gpquad.config import Config, load_folder_config
 from gpquad.data.dataset import Dataset
 from gpquad.errors import GpquadError
 from gpquad.evolve.windows import WindowSpace, tile
@@ -266,15 +266,7 @@ def write_predictions(out: Path, cfg: Config, dataset: Dataset, best: Discovered
 
 def load_sweep_config(out) -> Config:
     """The config a sweep folder was run with."""
-    from gpquad.config import config_from_dict
-
-    path = Path(out) / "config.json"
-    if not path.exists():
-        raise GpquadError("not a sweep folder (no config.json)", source=str(out))
-    table = json.loads(path.read_text())
-    base = table.pop("base_dir", ".")
-    cfg = config_from_dict(table, str(path), base)
-    return cfg
+    return load_folder_config(out)
 
 
 def reassemble(out) -> Path:

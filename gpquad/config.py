@@ -398,3 +398,20 @@ def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=Non
     new = dataclasses.replace(cfg, data=data, evolution=ev, output=output, base_dir=base_dir,
                               seed=cfg.seed if seed is None else int(seed))
     return validate(new, "command line")
+
+
+def folder_config_dict(cfg: Config) -> dict:
+    """What a run or sweep folder stores as config.json (with the data files' base folder)."""
+    return {**cfg.to_dict(), "base_dir": cfg.base_dir}
+
+
+def load_folder_config(folder) -> Config:
+    """The config a run or sweep folder was made with (its config.json)."""
+    import json
+
+    path = Path(folder) / "config.json"
+    if not path.exists():
+        raise GpquadError("not a gpquad run or sweep folder (no config.json)", source=str(folder))
+    table = json.loads(path.read_text())
+    base = table.pop("base_dir", ".")
+    return config_from_dict(table, str(path), base)

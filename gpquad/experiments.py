@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.config import Config
+from gpquad.config import Config, folder_config_dict
 from gpquad.data.dataset import Dataset
 from gpquad.data.io import load_dataset
 from gpquad.evolve.coevolution import Coevolution, RunState
@@ -103,7 +103,7 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     run_dir.mkdir(parents=True, exist_ok=True)
     info = {"seed": cfg.seed, "config": cfg.to_dict(), "dataset": dataset.summary(),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}
-    write_json(run_dir / "config.json", cfg.to_dict())
+    write_json(run_dir / "config.json", folder_config_dict(cfg))
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
     for target in ev.targets:

@@ -52,9 +52,9 @@ def _label(name: str) -> str:
     return f"${STATE_LATEX[i]}$ [{STATE_UNITS[i]}]"
 
 
-def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | None = None
-                      ) -> list[Path]:
-    """Six panels (u, v, w, p, q, r) against time: data, best model, envelope."""
+def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | None = None,
+                      best_label: str = "best model") -> list[Path]:
+    """Six panels (u, v, w, p, q, r) against time: data, best model, envelope (if any)."""
     d = np.load(npz_path)
     t, data, best, full = d["t"], d["data"], d["best"], d["full"]
     n = len(full) if n_models is None else n_models
@@ -65,14 +65,15 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
         for j, name in enumerate(PLOTTED):
             ax = axes[j % 3, j // 3]
             k = STATE_NAMES.index(name)
-            with np.errstate(invalid="ignore"):
-                lo = np.nanmin(full[:, :, k], axis=0)
-                hi = np.nanmax(full[:, :, k], axis=0)
-            ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.25, linewidth=0,
-                            label=f"min-max of {n} full models")
+            if len(full):
+                with np.errstate(invalid="ignore"):
+                    lo = np.nanmin(full[:, :, k], axis=0)
+                    hi = np.nanmax(full[:, :, k], axis=0)
+                ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.25, linewidth=0,
+                                label=f"min-max of {n} full models")
             ax.plot(t, data[:, k], color="black", linewidth=1.3, label="data")
             ax.plot(t, best[:, k], color="tab:red", linestyle="--", linewidth=1.3,
-                    label="best model")
+                    label=best_label)
             ref = np.concatenate([data[:, k], best[:, k][np.isfinite(best[:, k])]])
             span = max(float(np.ptp(ref)), 1e-3)
             ax.set_ylim(ref.min() - 0.4 * span, ref.max() + 0.4 * span)
@@ -84,15 +85,22 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="upper center", ncol=3, frameon=False,
                    bbox_to_anchor=(0.5, 1.02))
-        fig.suptitle(f"Prediction over a {t[-1]:.3g} s validation window "
-                     "(envelope clipped to the axes)", y=1.05, fontsize=9)
+        clipped = " (envelope clipped to the axes)" if len(full) else ""
+        fig.suptitle(f"Prediction over a {t[-1]:.3g} s validation window{clipped}", y=1.05,
+                     fontsize=9)
         fig.tight_layout()
         return _save(fig, Path(stem), formats)
 
 
-def read_history(path, iterations_per_gen: int | None = None) -> pd.DataFrame:
-    """A run's history with a cumulative `step` column (model generation count)."""
-    h = pd.read_csv(path, usecols=["iteration", "generation", "best_error"])
+def read_history(path, iterations_per_gen: int | None = None, target: str | None = None
+                 ) -> pd.DataFrame:
+    """A run's history with a cumulative `step` column (model generation count).
+
+    target: keep only that equation's rows (a `gpquad run` history holds every target).
+    """
+    h = pd.read_csv(path, usecols=["target", "iteration", "generation", "best_error"])
+    if target is not None:
+        h = h[h["target"] == target].reset_index(drop=True)
     gens = int(h["generation"].max()) + 1 if iterations_per_gen is None else iterations_per_gen
     h["step"] = h["iteration"] * gens + h["generation"] + 1
     return h
@@ -109,7 +117,7 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
         for ax in axes.ravel()[len(targets):]:
             ax.set_visible(False)
         for ax, target in zip(axes.ravel()[: len(targets)], targets, strict=True):
-            frames = [read_history(p) for p in histories[target]]
+            frames = [read_history(p, target=target) for p in histories[target]]
             for h in frames:
                 ax.plot(h["step"], h["best_error"], color="tab:gray", alpha=0.45, linewidth=0.7)
             merged = pd.concat([h.set_index("step")["best_error"] for h in frames], axis=1)
@@ -125,7 +133,8 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
             for it in range(1, int(frames[0]["iteration"].max()) + 1):
                 ax.axvline(it * (int(frames[0]["generation"].max()) + 1), color="0.9",
                            linewidth=0.6, zorder=0)
-            ax.set_title(f"${TARGET_LATEX[target_index(target)]}$ ({len(frames)} runs)")
+            runs = f"{len(frames)} run" + ("s" if len(frames) != 1 else "")
+            ax.set_title(f"${TARGET_LATEX[target_index(target)]}$ ({runs})")
             ax.set_xlabel("model generation")
             ax.set_ylabel(f"suite {metric.upper()} of ${STATE_LATEX[STATE_NAMES.index(state)]}$"
                           f" [{unit}]")

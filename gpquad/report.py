@@ -199,8 +199,10 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
 
     folder = Path(folder)
     if not (folder / "sweep.json").exists():
-        raise GpquadError("not a sweep folder (no sweep.json); give the --out of a sweep",
-                          source=str(folder))
+        if (folder / "model.json").exists() and (folder / "history.csv").exists():
+            return make_run_report(folder, formats)
+        raise GpquadError("not a sweep folder (no sweep.json) nor a run folder (no model.json); "
+                          "give the --out of a sweep or a run", source=str(folder))
     info = json.loads((folder / "sweep.json").read_text())
     if reassemble or not (folder / "assembly.json").exists():
         rebuild_models(folder)
@@ -230,4 +232,43 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
     tex, md = metrics_tables(assembly)
     written += [atomic_write_text(out / "metrics.tex", tex),
                 atomic_write_text(out / "metrics.md", md)]
+    return written
+
+
+def make_run_report(folder, formats=("png", "pdf"), window_s: float = 7.0) -> list[Path]:
+    """Figures of one `gpquad run` folder, written into FOLDER/report/.
+
+    prediction: the run's equations flown over the first validation window of `window_s`
+    (states without an equation use the data's accelerations); convergence: best suite
+    error against generation for each equation.
+    """
+    import io
+
+    from gpquad import plotting
+    from gpquad.config import load_folder_config
+    from gpquad.data.io import load_dataset
+    from gpquad.evolve.windows import tile
+    from gpquad.results import atomic_write_bytes
+    from gpquad.variables import STATE_NAMES
+
+    folder = Path(folder)
+    cfg = load_folder_config(folder)
+    model = DiscoveredModel.load(folder)
+    out = folder / "report"
+    written = plotting.convergence_figure({t: [folder / "history.csv"] for t in model.equations},
+                                          out / "convergence", cfg.evolution.metric, formats)
+    dataset = load_dataset(cfg)
+    steps_wanted = max(1, int(round(window_s / dataset.dt)))
+    starts, steps = tile(dataset.validation, steps_wanted, cfg.evolution.max_delay)
+    if len(starts):
+        start = starts[:1]
+        pred = model.simulate(dataset, start, steps)[0]
+        data = np.stack([dataset.arrays.states[s:s + steps + 1] for s in start])[0]
+        buf = io.BytesIO()
+        np.savez(buf, t=np.arange(steps + 1) * dataset.dt, data=data, best=pred,
+                 full=np.zeros((0, steps + 1, 9)), start=start, dt=dataset.dt,
+                 state_names=np.array(STATE_NAMES), targets=np.array(sorted(model.equations)))
+        atomic_write_bytes(out / "predictions.npz", buf.getvalue())
+        written += plotting.prediction_figure(out / "predictions.npz", out / "prediction",
+                                              formats, best_label="discovered equations")
     return written

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from gpquad import checkpoint
-from gpquad.config import Config
+from gpquad.config import Config, folder_config_dict
 from gpquad.data.dataset import Dataset
 from gpquad.errors import GpquadError
 from gpquad.evolve.coevolution import Coevolution
@@ -233,7 +233,7 @@ def prepare(cfg: Config, out: Path, runs: int) -> dict:
                        ".spawn(k + 1)[k]; full model k: child 6, spawn(k + 1)[k]",
             **provenance()}
     write_json(info_path, info)
-    write_json(out / "config.json", {**cfg.to_dict(), "base_dir": cfg.base_dir})
+    write_json(out / "config.json", folder_config_dict(cfg))
     return info
 
 

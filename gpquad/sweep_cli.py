@@ -58,7 +58,7 @@ def register(subparsers) -> None:
     mode.add_argument("--jsonl", action="store_true", help="one JSON object per event on stdout")
     sw.set_defaults(func=_cmd_sweep)
 
-    rep = subparsers.add_parser("report", help="figures and tables of a finished sweep")
+    rep = subparsers.add_parser("report", help="figures and tables of a finished sweep or run")
     rep.add_argument("folder", help="sweep folder")
     rep.add_argument("--reassemble", action="store_true",
                      help="rebuild the full models before plotting")

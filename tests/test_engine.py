@@ -220,3 +220,14 @@ def test_fly_reproduces_the_simulator_with_the_true_equations(short_flight, tmp_
     assert np.abs(again.vel - short_flight.vel).max() < 1e-9
     assert main(["fly", str(tmp_path / "run"), "--inputs", str(tmp_path / "none.csv"),
                  "--out", str(out)]) == 2
+
+
+def test_report_of_a_run_folder(tmp_path):
+    from gpquad.report import make_report
+
+    run_experiment(tiny_config(targets=("p_dot", "a_y")), tmp_path / "run", progress=False)
+    written = make_report(tmp_path / "run", formats=("png",))
+    names = sorted(p.name for p in written)
+    assert names == ["convergence.png", "prediction.png"]
+    for p in written:
+        assert p.read_bytes()[:4] == b"\x89PNG" and p.stat().st_size > 20_000
