@@ -75,8 +75,8 @@ class Equation:
         out = {
             "expr": expr_string(self.sympy()),
             "delays": self.delays,
-            "error": self.error,
-            "validation_error": self.validation_error,
+            "error": _json_number(self.error),
+            "validation_error": _json_number(self.validation_error),
             "latex": self.latex(),
             "size": self.tree.size,
             "prefix": {"codes": self.tree.codes.tolist(), "values": self.tree.values.tolist()},
@@ -89,8 +89,11 @@ class Equation:
     def from_dict(cls, target: str, d: dict, input_names, trim) -> Equation:
         delays = [int(d["delays"].get(n, 0)) for n in input_names]
         tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
-        return cls(target, tree, tuple(input_names), float(d["error"]),
-                   float(d.get("validation_error", np.nan)), dict(trim))
+        def number(x):
+            return np.nan if x is None else float(x)
+
+        return cls(target, tree, tuple(input_names), number(d["error"]),
+                   number(d.get("validation_error")), dict(trim))
 
 
 @dataclass
@@ -238,3 +241,8 @@ def _rotate(quat, body_vector) -> np.ndarray:
     mat = np.empty((3, 3))
     rotation_matrix(*quat, mat)
     return mat @ body_vector
+
+
+def _json_number(x: float):
+    """A float for JSON; NaN or inf (no validation data, a diverged model) becomes null."""
+    return float(x) if np.isfinite(x) else None

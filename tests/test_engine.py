@@ -231,3 +231,12 @@ def test_report_of_a_run_folder(tmp_path):
     assert names == ["convergence.png", "prediction.png"]
     for p in written:
         assert p.read_bytes()[:4] == b"\x89PNG" and p.stat().st_size > 20_000
+
+
+def test_no_validation_data_gives_null_not_nan(tmp_path):
+    cfg = dataclasses.replace(tiny_config(), data=DataConfig(validation_fraction=0.0))
+    run_experiment(cfg, tmp_path / "run", progress=False)
+    text = (tmp_path / "run" / "model.json").read_text()
+    assert "NaN" not in text  # strict JSON for other tools
+    assert json.loads(text)["targets"]["p_dot"]["validation_error"] is None
+    assert np.isnan(DiscoveredModel.load(tmp_path / "run").equations["p_dot"].validation_error)
