@@ -79,7 +79,9 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
         raise
     tree, train, val = co.best(state)
-    return Equation(target, tree, dataset.input_names, train, val, dataset.trim), state
+    front = [Equation(target, t, dataset.input_names, err, np.nan, dataset.trim).summary()
+             for t, err in co.front(state)]
+    return Equation(target, tree, dataset.input_names, train, val, dataset.trim, front), state
 
 
 def write_model(run_dir: Path, model: DiscoveredModel) -> None:

@@ -38,6 +38,8 @@ class Equation:
     error: float
     validation_error: float
     trim: dict[str, float] = field(default_factory=dict)
+    #: Simpler or other alternatives: the run's size/error Pareto front, as JSON records.
+    candidates: list[dict] = field(default_factory=list)
 
     @property
     def delays(self) -> dict[str, int]:
@@ -71,6 +73,11 @@ class Equation:
                  for n, d in self.delays.items() if d}
         return f"{self.target} = {expr.xreplace(shown)}"
 
+    def summary(self) -> dict:
+        """A short JSON record: expression, delays used, training error, size."""
+        return {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
+                "error": _json_number(self.error), "size": self.tree.size}
+
     def to_dict(self) -> dict:
         out = {
             "expr": expr_string(self.sympy()),
@@ -83,6 +90,8 @@ class Equation:
         }
         if any(self.trim.values()):
             out["expr_raw"] = expr_string(self.sympy_raw())
+        if self.candidates:
+            out["candidates"] = self.candidates
         return out
 
     @classmethod
@@ -93,7 +102,7 @@ class Equation:
             return np.nan if x is None else float(x)
 
         return cls(target, tree, tuple(input_names), number(d["error"]),
-                   number(d.get("validation_error")), dict(trim))
+                   number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])))
 
 
 @dataclass

@@ -106,6 +106,10 @@ def test_run_folder_contents(tmp_path):
     import sympy as sp
 
     sp.sympify(p_dot["expr"])  # parsable
+    front = p_dot["candidates"]  # size/error Pareto front: bigger only if more accurate
+    assert front and all(a["size"] < b["size"] and a["error"] > b["error"]
+                         for a, b in zip(front, front[1:]))
+    assert front[-1]["error"] == pytest.approx(p_dot["error"])  # no pruning: the best climber
     history = (run / "history.csv").read_text().splitlines()
     assert len(history) == 1 + TINY.iterations * TINY.model_generations
     loaded = DiscoveredModel.load(run)

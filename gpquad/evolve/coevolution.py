@@ -222,6 +222,20 @@ class Coevolution:
         return model, error, float(validation)
 
 
+    def front(self, state: RunState) -> list[tuple[Tree, float]]:
+        """The climbers on the size/error Pareto front (training data), smallest first:
+        each is more accurate than every smaller one (alternatives to the best equation)."""
+        train = self.tiled_errors(state.models, self.dataset.train)
+        order = sorted(range(len(state.models)),
+                       key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)))
+        front, best = [], np.inf
+        for i in order:
+            if train[i] < best:
+                front.append((state.models[i], float(train[i])))
+                best = train[i]
+        return front
+
+
 def clone_state(state: RunState) -> RunState:
     """A deep copy (trees are immutable)."""
     return dataclasses.replace(
