@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from gpquad import checkpoint
 from gpquad.config import Config, folder_config_dict
 from gpquad.data.dataset import Dataset
 from gpquad.data.io import load_dataset
+from gpquad.errors import GpquadError
 from gpquad.evolve.coevolution import Coevolution, RunState
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import HistoryWriter, atomic_write_text, provenance, write_json
@@ -55,23 +58,42 @@ class Progress:
 
 
 def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter | None = None,
-             progress: Progress | None = None, state: RunState | None = None
+             progress: Progress | None = None, state: RunState | None = None,
+             checkpoint_path: Path | None = None, history_start: int | None = None
              ) -> tuple[Equation, RunState]:
     """Run the coevolution for one target; returns its best equation and final state.
 
+    With checkpoint_path, the state is saved atomically after every iteration together
+    with the history file's size, and a run is continued from an existing checkpoint
+    (the history is cut back to the size the checkpoint recorded; a run that starts
+    afresh cuts it back to `history_start`, where this target's rows begin).
     On KeyboardInterrupt the exception is re-raised with the partial result attached
     as `exc.partial = (equation, state)`.
     """
     ev = cfg.evolution
     co = Coevolution(dataset, target, ev)
+    if state is None and checkpoint_path is not None and checkpoint_path.exists():
+        try:
+            state, meta = checkpoint.load(checkpoint_path)
+            if history is not None:
+                history.truncate(int(meta["history_bytes"]))
+        except (checkpoint.CorruptCheckpoint, KeyError) as exc:
+            print(f"gpquad: warning: {checkpoint_path}: {exc}; restarting {target}",
+                  file=sys.stderr)
+            state = None
     if state is None:
         state = co.init_state(target_seed(cfg.seed, target))
+        if history is not None and history_start is not None:
+            history.truncate(history_start)
     try:
         while state.iteration < ev.iterations:
             co.iterate(state)
             if history is not None:
                 history.write(state.history)
             state.history.clear()
+            if checkpoint_path is not None:
+                checkpoint.save(checkpoint_path, state,
+                                {"history_bytes": history.size() if history else 0})
             if progress is not None:
                 progress.iteration(target, state, ev.iterations)
     except KeyboardInterrupt as exc:
@@ -82,6 +104,21 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
     front = [Equation(target, t, dataset.input_names, err, np.nan, dataset.trim).summary()
              for t, err in co.front(state)]
     return Equation(target, tree, dataset.input_names, train, val, dataset.trim, front), state
+
+
+def _same_config(run_dir: Path, cfg: Config) -> bool:
+    """Whether run_dir already holds a run of this config (then it is resumed).
+
+    A folder with another config is refused rather than mixed.
+    """
+    path = run_dir / "config.json"
+    if not path.exists():
+        return False
+    saved = json.loads(path.read_text())
+    if saved != json.loads(json.dumps(folder_config_dict(cfg))):
+        raise GpquadError("the folder holds a run of a different config; give another --out "
+                          "(or the same config to resume)", source=str(run_dir), field="--out")
+    return True
 
 
 def write_model(run_dir: Path, model: DiscoveredModel) -> None:
@@ -102,10 +139,12 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     show = cfg.output.progress if progress is None else progress
     started = time.time()
     dataset = load_dataset(cfg)
+    resuming = _same_config(run_dir, cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     info = {"seed": cfg.seed, "config": cfg.to_dict(), "dataset": dataset.summary(),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}
-    write_json(run_dir / "config.json", folder_config_dict(cfg))
+    if not resuming:
+        write_json(run_dir / "config.json", folder_config_dict(cfg))
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
     for target in ev.targets:
@@ -122,11 +161,28 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     model = DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
                             cfg.to_dict())
     timings = {}
+    done_dir = run_dir / "checkpoints"
     try:
+        # Where the history of finished targets ends (the header, before any target).
+        history_end = len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
         for target in ev.targets:
+            done = done_dir / f"{target}.json"
+            if resuming and done.exists():  # finished before the interruption
+                record = json.loads(done.read_text())
+                equations[target] = Equation.from_dict(target, record["equation"],
+                                                       dataset.input_names, dataset.trim)
+                history_end = int(record["history_bytes"])
+                report.done += ev.iterations
+                report.say(f"  {target}: finished earlier (resumed from {done})")
+                continue
             t0 = time.perf_counter()
-            equations[target], _ = identify(dataset, target, cfg, history, report)
+            equations[target], _ = identify(dataset, target, cfg, history, report,
+                                            checkpoint_path=done_dir / f"{target}.ckpt",
+                                            history_start=history_end)
             timings[target] = time.perf_counter() - t0
+            history_end = history.size()
+            write_json(done, {"equation": equations[target].to_dict(),
+                              "history_bytes": history_end})
             report.say(f"  -> {equations[target].text()}  (validation error "
                        f"{equations[target].validation_error:.4g})")
     except KeyboardInterrupt as exc:
@@ -135,8 +191,8 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
             equations[partial[0].target] = partial[0]
         model = dataclasses.replace(model, interrupted=True)
         write_model(run_dir, model)
-        print(f"\ngpquad: interrupted; the equations found so far are in {run_dir}",
-              file=sys.stderr)
+        print(f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
+              "command with the same --out resumes", file=sys.stderr)
         raise
     finally:
         history.close()

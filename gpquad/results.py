@@ -86,10 +86,23 @@ class HistoryWriter:
         self._writer = csv.DictWriter(self._fh, fieldnames=self.FIELDS)
         if new:
             self._writer.writeheader()
+            self._fh.flush()
 
     def write(self, rows) -> None:
+        """Append rows and push them to disk (a checkpoint may record the size next)."""
         self._writer.writerows(rows)
         self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def size(self) -> int:
+        """Bytes written so far (header included)."""
+        return self._fh.tell()
+
+    def truncate(self, size: int) -> None:
+        """Drop everything after `size` bytes (rows of an interrupted iteration)."""
+        self._fh.flush()
+        self._fh.truncate(size)
+        self._fh.seek(size)
 
     def close(self) -> None:
         self._fh.close()

@@ -159,23 +159,38 @@ def test_cli_run_and_errors(tmp_path, capsys):
     assert "evolution.window_step" in capsys.readouterr().err
 
 
-def test_interrupt_writes_partial_results(tmp_path, monkeypatch):
+def test_interrupt_writes_partial_results_and_the_same_command_resumes(tmp_path, monkeypatch):
     from gpquad.evolve import coevolution
+
+    cfg = tiny_config(targets=("p_dot", "a_y", "r_dot"))
+    reference = run_experiment(cfg, tmp_path / "straight", progress=False)
 
     calls = {"n": 0}
     original = coevolution.Coevolution.iterate
 
     def iterate_then_interrupt(self, state):
         calls["n"] += 1
-        if calls["n"] == 2:
+        if calls["n"] == 4:  # second iteration of the second target
             raise KeyboardInterrupt
         return original(self, state)
 
     monkeypatch.setattr(coevolution.Coevolution, "iterate", iterate_then_interrupt)
     with pytest.raises(KeyboardInterrupt):
-        run_experiment(tiny_config(), tmp_path / "run", progress=False)
+        run_experiment(cfg, tmp_path / "run", progress=False)
     data = json.loads((tmp_path / "run" / "model.json").read_text())
-    assert data["interrupted"] is True and "p_dot" in data["targets"]
+    assert data["interrupted"] is True and set(data["targets"]) == {"p_dot", "a_y"}
+    monkeypatch.setattr(coevolution.Coevolution, "iterate", original)
+    calls["n"] = 0
+    resumed = run_experiment(cfg, tmp_path / "run", progress=False)
+    for name in ("model.json", "history.csv", "equations.tex"):
+        assert (tmp_path / "run" / name).read_bytes() == \
+            (tmp_path / "straight" / name).read_bytes(), name
+    assert resumed.to_dict() == reference.to_dict()
+    # a different config in the same folder is refused, not mixed
+    from gpquad.errors import GpquadError
+
+    with pytest.raises(GpquadError, match="different config"):
+        run_experiment(dataclasses.replace(cfg, seed=99), tmp_path / "run", progress=False)
 
 
 def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
@@ -244,3 +259,30 @@ def test_no_validation_data_gives_null_not_nan(tmp_path):
     assert "NaN" not in text  # strict JSON for other tools
     assert json.loads(text)["targets"]["p_dot"]["validation_error"] is None
     assert np.isnan(DiscoveredModel.load(tmp_path / "run").equations["p_dot"].validation_error)
+
+
+def test_damaged_checkpoint_restarts_that_target(tmp_path, monkeypatch, capsys):
+    from gpquad.evolve import coevolution
+
+    cfg = tiny_config(targets=("p_dot", "a_y"))
+    run_experiment(cfg, tmp_path / "straight", progress=False)
+    original = coevolution.Coevolution.iterate
+    calls = {"n": 0}
+
+    def iterate_then_interrupt(self, state):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return original(self, state)
+
+    monkeypatch.setattr(coevolution.Coevolution, "iterate", iterate_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(cfg, tmp_path / "run", progress=False)
+    ckpt = tmp_path / "run" / "checkpoints" / "a_y.ckpt"
+    ckpt.write_bytes(ckpt.read_bytes()[:50])  # truncated, as by a crash mid-copy
+    monkeypatch.setattr(coevolution.Coevolution, "iterate", original)
+    run_experiment(cfg, tmp_path / "run", progress=False)
+    assert "restarting a_y" in capsys.readouterr().err
+    for name in ("model.json", "history.csv"):
+        assert (tmp_path / "run" / name).read_bytes() == \
+            (tmp_path / "straight" / name).read_bytes(), name
