@@ -151,3 +151,11 @@ def test_sub_and_div_operand_order():
     tree = Tree.from_lists([SUB, VAR_BASE + 6, DIV, CONST, VAR_BASE + 7], [0, 0, 0, 2.0, 0],
                            [0] * 4)
     assert str(to_sympy(tree, INPUTS)) == "p - 2.0/q"
+
+
+def test_division_by_an_identically_zero_subtree_exports_like_the_kernel():
+    # p / (q - q): the kernel's protected division gives 1; sympy alone would give zoo
+    tree = Tree.from_lists([DIV, VAR_BASE + 6, SUB, VAR_BASE + 7, VAR_BASE + 7], [0.0] * 5,
+                           [0] * 4)
+    assert to_sympy(tree, INPUTS) == 1
+    assert naive.eval_tree(tree.codes, tree.values, np.arange(13.0)) == 1.0

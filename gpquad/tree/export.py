@@ -15,7 +15,7 @@ from sympy.parsing.sympy_parser import parse_expr
 
 from gpquad.errors import GpquadError
 from gpquad.tree.encoding import Tree
-from gpquad.tree.operators import ADD, CONST, DIV, MUL, OPERATOR_BY_CODE, VAR_BASE
+from gpquad.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, OPERATOR_BY_CODE, VAR_BASE
 from gpquad.variables import STATE_LATEX, STATE_NAMES, input_latex, terminal_names
 
 
@@ -40,6 +40,8 @@ def to_sympy(tree: Tree, input_names) -> sp.Expr:
             return syms[c - VAR_BASE]
         left = build()
         right = build()
+        if c == DIV and right.is_Number and abs(float(right)) < DIV_EPS:
+            return sp.Integer(1)  # protected division, as the kernels evaluate it
         return OPERATOR_BY_CODE[c].sympy(left, right)
 
     return build()
