@@ -90,8 +90,9 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
         return fit_constants(tree, err, error_of, evals)
 
     model = fold_constants(model)
-    limit = error_of(model) + allowance
-    model, err = refit(model, error_of(model))
+    base = error_of(model)
+    limit = base + allowance
+    model, err = refit(model, base)
     changed = True
     while changed and model.size > 1:
         changed = False
