@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import sympy as sp
@@ -202,8 +201,7 @@ class DiscoveredModel:
         arrays = FlightArrays(quat=quat, states=states, acc=np.zeros((rows, 6)),
                               inputs=np.ascontiguousarray(padded), rot=np.zeros((rows, 9)),
                               dt=float(self.dt))
-        view = SimpleNamespace(arrays=arrays)
-        flown = self.simulate(view, np.array([history]), n - 1, modelled_only=True)[0]
+        flown = self._rollout(arrays, np.array([history]), n - 1, None, missing_from_data=False)[0]
         out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
         world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
         pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
@@ -213,14 +211,19 @@ class DiscoveredModel:
                       meta={"source": "gpquad.model.DiscoveredModel.fly",
                             "equations": {t: e.text() for t, e in self.equations.items()}})
 
-    def simulate(self, dataset, starts, n_steps: int, input_noise=None,
-                 modelled_only: bool = False) -> np.ndarray:
+    def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
         """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
 
-        Targets without an equation use the data's accelerations (with modelled_only, zero).
-        input_noise, if given, has shape (n_windows, n_steps, n_inputs) and is added to the
-        recorded inputs.
+        Targets without an equation use the data's accelerations. input_noise, if given,
+        has shape (n_windows, n_steps, n_inputs) and is added to the recorded inputs.
         """
+        return self._rollout(dataset.arrays, starts, n_steps, input_noise,
+                             missing_from_data=True)
+
+    def _rollout(self, arrays: FlightArrays, starts, n_steps: int, input_noise,
+                 missing_from_data: bool) -> np.ndarray:
+        """The rollout kernel over `arrays`; targets without an equation take the data's
+        acceleration (missing_from_data) or zero."""
         from gpquad.kernels.fitness import rollout
 
         capacity = max(e.tree.size for e in self.equations.values())
@@ -238,10 +241,10 @@ class DiscoveredModel:
             sizes[k] = eq.tree.size
             delays[k] = eq.tree.delays
             modelled[k] = True
-        if modelled_only:
+        if not missing_from_data:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
-        return rollout(codes, values, sizes, delays, modelled, dataset.arrays,
+        return rollout(codes, values, sizes, delays, modelled, arrays,
                        np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
 
 
