@@ -100,9 +100,10 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         tree, train, val = co.best(state)
         exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
         raise
-    tree, train, val = co.best(state)
+    train_errors = co.training_errors(state)
+    tree, train, val = co.best(state, train_errors)
     front = [Equation(target, t, dataset.input_names, err, np.nan, dataset.trim).summary()
-             for t, err in co.front(state)]
+             for t, err in co.front(state, train_errors)]
     return Equation(target, tree, dataset.input_names, train, val, dataset.trim, front), state
 
 

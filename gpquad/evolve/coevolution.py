@@ -200,12 +200,16 @@ class Coevolution:
             return np.full(len(trees), np.nan)
         return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
 
-    def best(self, state: RunState) -> tuple[Tree, float, float]:
+    def training_errors(self, state: RunState) -> np.ndarray:
+        """Each climber's error over the whole training data (NaN: no window fits)."""
+        return self.tiled_errors(state.models, self.dataset.train)
+
+    def best(self, state: RunState, train=None) -> tuple[Tree, float, float]:
         """The climber with the lowest error over the whole training data, with its training
         and validation errors. With prune_tolerance > 0 it is pruned first: subtrees become
         constants while the error grows by less than prune_tolerance times the error of the
-        best constant model."""
-        train = self.tiled_errors(state.models, self.dataset.train)
+        best constant model. `train` may pass training_errors(state) computed already."""
+        train = self.training_errors(state) if train is None else train
         i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
         model, error = state.models[i], float(train[i])
         if self.cfg.prune_tolerance > 0:
@@ -222,10 +226,10 @@ class Coevolution:
         return model, error, float(validation)
 
 
-    def front(self, state: RunState) -> list[tuple[Tree, float]]:
+    def front(self, state: RunState, train=None) -> list[tuple[Tree, float]]:
         """The climbers on the size/error Pareto front (training data), smallest first:
         each is more accurate than every smaller one (alternatives to the best equation)."""
-        train = self.tiled_errors(state.models, self.dataset.train)
+        train = self.training_errors(state) if train is None else train
         order = sorted(range(len(state.models)),
                        key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)))
         front, best = [], np.inf
