@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -73,6 +74,7 @@ def _cmd_fly(args) -> int:
 
     from gpquad.data.flight import write_flight_file
     from gpquad.model import DiscoveredModel
+    from gpquad.variables import TARGET_NAMES
 
     model = DiscoveredModel.load(args.run)
     path = Path(args.inputs)
@@ -83,6 +85,13 @@ def _cmd_fly(args) -> int:
     missing = [n for n in model.input_names if n not in table.columns]
     if missing:
         raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
+    absent = [t for t in TARGET_NAMES if t not in model.equations]
+    if absent and not args.zero_missing:
+        raise GpquadError(f"the run has no equation for {absent}; identify all six targets, or "
+                          "give --zero-missing to fly them as zero acceleration",
+                          source=str(args.run), field="targets")
+    if "t" in table.columns:
+        _check_input_clock(table["t"].to_numpy(dtype=float), model.dt, str(path))
     inputs = table[list(model.input_names)].to_numpy(dtype=float)
     if not np.all(np.isfinite(inputs)):
         raise GpquadError("inputs contain NaN", source=str(path), field=model.input_names[0])
@@ -98,6 +107,18 @@ def _cmd_fly(args) -> int:
     print(f"flew {len(flight)} samples ({len(flight) * model.dt:.1f} s) with the equations of "
           f"{args.run}; wrote {out}")
     return 0
+
+
+def _check_input_clock(t, dt: float, source: str) -> None:
+    """The inputs' time column must tick at the model's sample time (inputs are not resampled)."""
+    import numpy as np
+
+    steps = np.diff(t)
+    if len(steps) and (not np.all(np.isfinite(steps))
+                       or np.max(np.abs(steps - dt)) > 1e-6 * max(dt, 1.0) + 1e-9 * abs(t).max()):
+        raise GpquadError(f"the inputs are not sampled every {dt:g} s, the model's sample time "
+                          f"(steps {np.min(steps):.6g} to {np.max(steps):.6g} s); resample them "
+                          "to the model's rate", source=source, field="t")
 
 
 def _cmd_bench(args) -> int:
@@ -146,6 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--initial", help="initial state phi,theta,psi,u,v,w,p,q,r (default 0)")
     fly.add_argument("--trimmed", action="store_true",
                      help="the inputs are already trim-subtracted")
+    fly.add_argument("--zero-missing", action="store_true",
+                     help="fly targets the run has no equation for as zero acceleration")
     fly.set_defaults(func=_cmd_fly)
 
     bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")
@@ -179,8 +202,29 @@ def main(argv=None) -> int:
     try:
         return int(args.func(args) or 0)
     except GpquadError as exc:
-        print(f"gpquad: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(str(exc))
+    except KeyboardInterrupt:
+        print("\ngpquad: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`gpquad ... | head`): stop quietly, as Unix
+        # tools do, and keep Python from complaining when it flushes stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except OSError as exc:
+        if exc.filename is None:
+            raise
+        return _fail(f"{exc.filename}: {exc.strerror or exc}; check the path and that it is a "
+                     "writable folder (or a readable file)")
+
+
+def _fail(message: str) -> int:
+    """The one top-level error path: one line on stderr, exit code 2."""
+    try:
+        print(f"gpquad: error: {message}", file=sys.stderr)
+    except BrokenPipeError:
+        pass
+    return 2
 
 
 if __name__ == "__main__":

@@ -313,8 +313,52 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if s.rate_hz <= 0 or s.duration_s <= 0:
         raise GpquadError("rate_hz and duration_s must be > 0", source=source,
                           field="simulator.rate_hz")
+    if round(s.rate_hz * s.duration_s) < 2:
+        raise GpquadError(f"{s.duration_s} s at {s.rate_hz} Hz is less than two samples; fly "
+                          "for longer", source=source, field="simulator.duration_s")
     validate_sweep(cfg.sweep, source)
+    _validate_names(cfg, source)
     return cfg
+
+
+def _validate_names(cfg: Config, source: str) -> None:
+    """Seeds, names and lists whose mistakes would otherwise pass silently."""
+    if not 0 <= cfg.seed < 2 ** 63:
+        raise GpquadError(f"seed {cfg.seed} is out of range; give an integer in [0, 2^63)",
+                          source=source, field="seed")
+    targets = cfg.evolution.targets
+    if len(set(targets)) != len(targets):
+        raise GpquadError(f"a target is listed twice in {list(targets)}; give each once",
+                          source=source, field="evolution.targets")
+    files = [str(Path(cfg.base_dir, f).resolve()) for f in cfg.data.files]
+    twice = sorted({f for f in files if files.count(f) > 1})
+    if twice:
+        raise GpquadError(f"{twice[0]} is given twice; give each flight once",
+                          source=source, field="data.files")
+    for name in cfg.data.inputs if not isinstance(cfg.data.inputs, str) else ():
+        reason = reserved_name(name)
+        if reason:
+            raise GpquadError(f"input name '{name}' {reason}; rename it (e.g. 'u_{name}') with "
+                              "[data.columns]", source=source, field="data.inputs")
+
+
+def reserved_name(name: str) -> str | None:
+    """Why `name` cannot name a variable of an exported equation, or None if it can.
+
+    model.json stores sympy-parsable strings: a name that sympy reads as a constant or a
+    function (E, I, N, S, pi, beta, ...) or a Python keyword (lambda) would change their meaning.
+    """
+    import keyword
+
+    import sympy
+
+    if not name.isidentifier():
+        return "is not an identifier (letters, digits and _)"
+    if keyword.iskeyword(name):
+        return "is a Python keyword"
+    if hasattr(sympy, name) or name in ("oo", "zoo", "nan"):
+        return "is a sympy name (a constant or function when the equations are read back)"
+    return None
 
 
 def validate_sweep(sw: SweepConfig, source: str = "config") -> None:
@@ -379,6 +423,10 @@ def load_config(path) -> Config:
         table = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
+    data = table.get("data")
+    if isinstance(data, dict) and data.get("files") == []:
+        raise GpquadError("files = [] lists no flight; list flight files, or remove the key to "
+                          "fly the reference simulator", source=str(path), field="data.files")
     return config_from_dict(table, str(path), str(path.parent.resolve()))
 
 
@@ -407,11 +455,10 @@ def folder_config_dict(cfg: Config) -> dict:
 
 def load_folder_config(folder) -> Config:
     """The config a run or sweep folder was made with (its config.json)."""
-    import json
+    from gpquad.results import read_json
 
     path = Path(folder) / "config.json"
-    if not path.exists():
-        raise GpquadError("not a gpquad run or sweep folder (no config.json)", source=str(folder))
-    table = json.loads(path.read_text())
+    table = read_json(path, "gpquad run or sweep folder",
+                      "give a folder written by `gpquad run` or `gpquad sweep`")
     base = table.pop("base_dir", ".")
     return config_from_dict(table, str(path), base)

@@ -17,7 +17,7 @@ from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.evolve.coevolution import Coevolution, RunState
 from gpquad.model import DiscoveredModel, Equation
-from gpquad.results import HistoryWriter, atomic_write_text, provenance, write_json
+from gpquad.results import HistoryWriter, atomic_write_text, provenance, read_json, write_json
 from gpquad.variables import TARGET_STATE, target_index
 
 
@@ -115,11 +115,26 @@ def _same_config(run_dir: Path, cfg: Config) -> bool:
     path = run_dir / "config.json"
     if not path.exists():
         return False
-    saved = json.loads(path.read_text())
+    saved = read_json(path, "run folder", "the folder's config.json is damaged: give another "
+                      "--out, or delete the folder to start again")
     if saved != json.loads(json.dumps(folder_config_dict(cfg))):
         raise GpquadError("the folder holds a run of a different config; give another --out "
                           "(or the same config to resume)", source=str(run_dir), field="--out")
     return True
+
+
+def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
+    """A finished target's (equation, history end) from its record; None, with a warning,
+    when the record is damaged (the target is then identified again)."""
+    try:
+        record = json.loads(path.read_text())
+        equation = Equation.from_dict(path.stem, record["equation"], dataset.input_names,
+                                      dataset.trim)
+        return equation, int(record["history_bytes"])
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError) as exc:
+        print(f"gpquad: warning: {path}: damaged record of a finished equation "
+              f"({type(exc).__name__}); identifying {path.stem} again", file=sys.stderr)
+        return None
 
 
 def write_model(run_dir: Path, model: DiscoveredModel) -> None:
@@ -168,11 +183,10 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
         history_end = len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
         for target in ev.targets:
             done = done_dir / f"{target}.json"
-            if resuming and done.exists():  # finished before the interruption
-                record = json.loads(done.read_text())
-                equations[target] = Equation.from_dict(target, record["equation"],
-                                                       dataset.input_names, dataset.trim)
-                history_end = int(record["history_bytes"])
+            record = _finished_record(done, dataset) if resuming and done.exists() else None
+            if record is not None:  # finished before the interruption
+                equations[target] = record[0]
+                history_end = record[1]
                 report.done += ev.iterations
                 report.say(f"  {target}: finished earlier (resumed from {done})")
                 continue

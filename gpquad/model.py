@@ -10,7 +10,6 @@ the same equation in the log's raw inputs (u = u' + trim).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from gpquad.data.flight import Flight
 from gpquad.errors import GpquadError
 from gpquad.kernels.flight_arrays import FlightArrays
 from gpquad.kernels.quaternion import quat_from_euler, rotation_matrix
+from gpquad.results import read_json
 from gpquad.tree.encoding import Tree
 from gpquad.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
 from gpquad.tree.operators import CONST
@@ -143,7 +143,12 @@ class DiscoveredModel:
         path = Path(path)
         if path.is_dir():
             path = path / "model.json"
-        return cls.from_dict(json.loads(path.read_text()))
+        d = read_json(path, "gpquad run folder", "give the folder a `gpquad run` wrote")
+        try:
+            return cls.from_dict(d)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
+                              "model.json a `gpquad run` wrote", source=str(path)) from None
 
     def to_sympy(self) -> dict[str, sp.Expr]:
         return {t: e.sympy() for t, e in self.equations.items()}

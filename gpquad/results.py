@@ -69,6 +69,28 @@ def atomic_write_text(path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode())
 
 
+def read_json(path, what: str = "file", fix: str = "") -> dict:
+    """A JSON object from `path`; a missing or damaged file is a GpquadError naming it.
+
+    `what` says what the file is ("run folder's model"), `fix` what the user can do about it.
+    """
+    from gpquad.errors import GpquadError
+
+    path = Path(path)
+    if not path.is_file():
+        raise GpquadError(f"no {path.name} here: not a {what}" + (f"; {fix}" if fix else ""),
+                          source=str(path.parent))
+    try:
+        obj = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise GpquadError(f"damaged JSON ({exc}); " + (fix or "restore or delete the file"),
+                          source=str(path)) from None
+    if not isinstance(obj, dict):
+        raise GpquadError("damaged JSON (not an object); " + (fix or "restore or delete it"),
+                          source=str(path))
+    return obj
+
+
 def write_json(path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
 

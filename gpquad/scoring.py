@@ -18,7 +18,6 @@ API: `validation_windows`, `rse`, `score_model`, `load_run`, `run_dataset`, `com
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import numpy as np
 from gpquad.data.dataset import Dataset, build_dataset
 from gpquad.errors import GpquadError
 from gpquad.evolve.windows import tile
+from gpquad.results import read_json
 
 SCORED_STATES = ("u", "v", "w", "p", "q", "r")
 SCORED_INDEX = (3, 4, 5, 6, 7, 8)
@@ -105,12 +105,10 @@ class RunInfo:
 def load_run(run_dir) -> RunInfo:
     """Read a GP or baseline run folder (model.json + run.json)."""
     run_dir = Path(run_dir)
-    path = run_dir / "model.json"
-    if not path.is_file():
-        raise GpquadError("no model.json here; give a run folder", source=str(run_dir))
-    d = json.loads(path.read_text())
-    info = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").is_file() \
-        else {}
+    fix = "give a folder written by `gpquad run` or `gpquad baseline`"
+    d = read_json(run_dir / "model.json", "run folder", fix)
+    info = read_json(run_dir / "run.json", "run folder", fix) \
+        if (run_dir / "run.json").is_file() else {}
     if d.get("kind") == "baseline":
         from gpquad.baselines.flyable import from_model_dict
 
@@ -137,9 +135,8 @@ def run_dataset(run_dir) -> Dataset:
     """
     run_dir = Path(run_dir)
     info_path = run_dir / "run.json"
-    if not info_path.is_file():
-        raise GpquadError("no run.json here; give a run folder", source=str(run_dir))
-    info = json.loads(info_path.read_text())
+    info = read_json(info_path, "run folder",
+                     "give a folder written by `gpquad run` or `gpquad baseline`")
     if "scoring_data" in info:
         from gpquad.data.flight import read_flight_file
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -16,9 +17,14 @@ def _cmd_sweep(args) -> int:
     mode = "jsonl" if args.jsonl else "quiet" if args.quiet else "live"
     if not cfg.output.progress and mode == "live":
         mode = "quiet"
-    result = run_sweep(cfg, out, runs=args.runs, jobs=args.jobs, backend=args.backend,
-                       address=args.address, progress=SweepProgress(mode),
-                       assemble=not args.no_assemble)
+    try:
+        result = run_sweep(cfg, out, runs=args.runs, jobs=args.jobs, backend=args.backend,
+                           address=args.address, progress=SweepProgress(mode),
+                           assemble=not args.no_assemble)
+    except KeyboardInterrupt:
+        print(f"\ngpquad: interrupted; finished runs and checkpoints are in {out}; the same "
+              "command resumes the sweep", file=sys.stderr)
+        return 130
     if mode != "jsonl":
         print(f"sweep folder: {out}" + (f"\nbest full model: {result['model']}"
                                         if result["model"] else ""))

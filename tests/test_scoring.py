@@ -113,11 +113,18 @@ def test_compare_table_and_cli(quad12_run, gp_run, tmp_path, capsys):
     assert np.isnan(rows[1]["mean_rse"]) and "inputs" in rows[1]["note"]
     assert "| ga-gradient |" in format_table(rows)
     out = tmp_path / "cmp"
+    # The GP run cannot fly the baseline's flight (other inputs): the table is still written,
+    # and the command exits 2 saying which run and why, instead of a NaN row and exit 0.
     assert main(["compare", str(gp_run), str(quad12_run), "--horizon", "50",
-                 "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "| gp |" in text and (tmp_path / "cmp.csv").is_file()
+                 "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert "| gp |" in captured.out and (tmp_path / "cmp.csv").is_file()
     assert (tmp_path / "cmp.md").read_text().count("\n|") >= 3
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "could not be scored on common data" in err[0]
+    # Runs on the same flight compare cleanly: exit 0.
+    assert main(["compare", str(quad12_run), str(quad12_run), "--horizon", "50",
+                 "--out", str(out)]) == 0
 
 
 def test_scoring_errors_are_one_line(tmp_path):

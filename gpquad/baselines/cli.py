@@ -5,6 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from gpquad.errors import GpquadError
+
 METHODS = ("ga-gradient", "ga", "pem")
 
 
@@ -45,6 +47,13 @@ def _cmd_compare(args) -> int:
     writer.writerows(rows)
     atomic_write_text(out.with_suffix(".csv"), buf.getvalue())
     print(f"saved {out.with_suffix('.md')} and {out.with_suffix('.csv')}")
+    unscored = [r for r in rows if r.get("note")]
+    if unscored:
+        first = unscored[0]
+        raise GpquadError(f"{len(unscored)} of {len(rows)} runs could not be scored on common "
+                          f"data ({Path(first['run']).name}: {first['note']}); compare runs "
+                          "made on the same flights and inputs, or give --data-from",
+                          field="compare")
     return 0
 
 

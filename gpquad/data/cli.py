@@ -8,6 +8,7 @@ states and inputs. Exits non-zero with a one-line reason when the data cannot be
 from __future__ import annotations
 
 import dataclasses
+import sys
 import warnings
 from pathlib import Path
 
@@ -249,7 +250,14 @@ def run_align(path_a, path_b, signals=("p", "q", "r"), fmt_a=None, fmt_b=None, c
     res = estimate_offset(ta, xa, tb, xb, rate_hz=cfg.data.resample_hz, max_lag_s=max_lag_s)
     out(f"clock offset (B - A): {res.offset_s:+.4f} s; correlation {res.correlation:.3f}; "
         f"residual RMSE of {', '.join(signals)}: {res.rmse:.4g}; overlap {res.overlap_s:.1f} s")
+    if not res.correlation >= WEAK_CORRELATION:
+        print(f"gpquad: warning: correlation {res.correlation:.2f} is below "
+              f"{WEAK_CORRELATION}: the offset is not reliable; choose a --signal that both logs "
+              "excite, or a longer overlap", file=sys.stderr)
     return 0
+
+
+WEAK_CORRELATION = 0.5  # below it the correlation peak does not identify an offset
 
 
 def _cmd_align(args) -> int:

@@ -199,9 +199,13 @@ def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | 
 def write_flight_file(flight: Flight, path) -> Path:
     """Write a flight in the generic format (by suffix: .csv or .parquet)."""
     path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet", ".pq"):
+        raise GpquadError(f"cannot tell the format from '{path.suffix or 'no suffix'}'; name the "
+                          "file .csv or .parquet", source=str(path), field="--out")
     path.parent.mkdir(parents=True, exist_ok=True)
     frame = flight.to_frame()
-    if path.suffix.lower() == ".csv":
+    if suffix == ".csv":
         frame.to_csv(path, index=False, float_format="%.17g")
     else:
         frame.to_parquet(path, index=False)

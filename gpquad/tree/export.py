@@ -107,6 +107,9 @@ def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple
                  "Symbol": sp.Symbol}
     try:
         expr = parse_expr(plain, local_dict=dict(syms), global_dict=namespace)
+    except NameError:  # a call of an unknown function, such as sin(p) or exp(u_R)
+        raise GpquadError(f"cannot parse '{text}': equations use + - * / and integer powers "
+                          "of states, inputs and numbers, no functions", source=source) from None
     except (sp.SympifyError, SyntaxError, TypeError, TokenError) as exc:
         raise GpquadError(f"cannot parse '{text}' ({exc})", source=source) from None
     unknown = {str(s) for s in expr.free_symbols} - set(syms)
