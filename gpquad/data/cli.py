@@ -103,6 +103,12 @@ def describe_log(log) -> str:
             lines.append(f"  {label}: " + "; ".join(parts))
     lines.append(f"  inputs: {', '.join(log.input_names)}; other columns: "
                  f"{', '.join(c for c in log.table.columns if c not in ('t', *log.input_names))}")
+    if log.levels:
+        from gpquad.data.levels import describe_levels
+
+        used = ", ".join(f"{n} = {c}" for n, c in log.input_columns.items())
+        lines.append(f"  input levels (data.inputs; used: {log.input_level}: {used}):")
+        lines.extend(describe_levels(log.levels, log.input_level, log.units))
     lines.extend(f"  note: {n}" for n in log.notes)
     return "\n".join(lines)
 
@@ -160,7 +166,7 @@ def quick_look(flights, path: Path, title: str) -> Path:
 def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -> int:
     """The `data check` command; returns 0 when the data is usable, raises GpquadError if not."""
     from gpquad.config import Config, load_config, validate
-    from gpquad.data.integration_check import integration_check
+    from gpquad.data.integration_check import integration_check, screen_segments
     from gpquad.data.io import READERS
     from gpquad.data.pipeline import flights_from_log
 
@@ -191,14 +197,20 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
                           field="--format")
     out(describe_flights(flights))
-    check = integration_check(flights, data.check_steps, data.check_max_rse)
+    try:
+        flights, dropped, check = screen_segments(flights, data.check_steps,
+                                                  data.check_max_rse, source=str(path))
+    except GpquadError:  # nothing passes: the pooled table, then the one-line reason
+        out(integration_check(flights, data.check_steps, data.check_max_rse).table())
+        raise
     out(check.table())
+    if dropped:
+        out(f"{len(flights)} segment(s) pass the integration check and are used; "
+            f"{len(dropped)} dropped (warnings above the verdict)")
     png = Path(plot) if plot else Path(f"{path.stem or path.name}_check.png")
     quick_look(flights, png, f"{path.name}: {len(flights)} segment(s), "
                f"{'PASS' if check.passed else 'FAIL'}")
     out(f"quick-look plot: {png}")
-    if not check.passed:
-        raise GpquadError(check.failure(), source=str(path), field="data.check_max_rse")
     return 0
 
 

@@ -7,6 +7,7 @@ simulator's flight is used.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -43,8 +44,23 @@ def _register_log_readers() -> None:
 _register_log_readers()
 
 
+def _read_file(cfg: Config, reader, path: Path) -> list[Flight]:
+    flights = reader(path, cfg.data)
+    for f in flights:
+        f.meta["file"] = str(path)
+    return flights
+
+
+def held_out_paths(cfg: Config) -> list[Path]:
+    """Files held out whole for validation (`data.validation` as a list), resolved."""
+    if isinstance(cfg.data.validation, str):
+        return []
+    return [(Path(cfg.base_dir) / f).resolve() for f in cfg.data.validation]
+
+
 def load_flights(cfg: Config) -> list[Flight]:
-    """Every in-flight segment of every configured file (or the simulator's flight)."""
+    """Every in-flight segment of every configured file (or the simulator's flight), then
+    those of the files held out for validation that `data.files` does not list."""
     if not cfg.data.files:
         from gpquad.simulator import simulate
 
@@ -53,26 +69,38 @@ def load_flights(cfg: Config) -> list[Flight]:
     if reader is None:
         raise GpquadError(f"unknown format '{cfg.data.format}'; known: {sorted(READERS)}",
                           source=str(cfg.data.files[0]), field="data.format")
+    paths = cfg.data_paths()
+    paths += [p for p in held_out_paths(cfg) if p not in paths]
     flights: list[Flight] = []
-    for path in cfg.data_paths():
-        flights.extend(reader(path, cfg.data))
+    for path in paths:
+        flights.extend(_read_file(cfg, reader, path))
     return flights
 
 
 def load_dataset(cfg: Config) -> Dataset:
-    """Flights of the config, concatenated and split as the engine needs them."""
+    """Flights of the config, screened by the integration check, concatenated and split.
+
+    A segment that fails the integration check is dropped with a warning; the data is
+    refused only when no segment passes.
+    """
     flights = load_flights(cfg)
     check = None
     if cfg.data.files and cfg.data.check_before_run:
-        from gpquad.data.integration_check import integration_check
+        from gpquad.data.integration_check import screen_segments
 
-        check = integration_check(flights, cfg.data.check_steps, cfg.data.check_max_rse)
-        if not check.passed:
-            raise GpquadError(f"{check.failure()}; run `gpquad data check` for the table, or set "
-                              "data.check_before_run = false", source=str(cfg.data.files[0]),
-                              field="data.check_before_run")
+        flights, dropped, check = screen_segments(
+            flights, cfg.data.check_steps, cfg.data.check_max_rse,
+            source=str(cfg.data.files[0]), field="data.check_before_run")
+        for note in dropped:
+            warnings.warn(note, stacklevel=2)
+    held = {str(p) for p in held_out_paths(cfg)}
+    if held and not any(f.meta.get("file") in held for f in flights):
+        raise GpquadError("no usable segment of the held-out files is left for validation",
+                          source=str(cfg.data.files[0]), field="data.validation")
     dataset = build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
-                            trim=cfg.data.trim, trim_values=cfg.data.trim_values)
+                            trim=cfg.data.trim, trim_values=cfg.data.trim_values,
+                            held_out=[f.meta.get("file") in held for f in flights]
+                            if held else None)
     if check is not None:
         dataset.integration_check = check.to_dict()
     return dataset
