@@ -206,7 +206,7 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
     out(check.table())
     if dropped:
         out(f"{len(flights)} segment(s) pass the integration check and are used; "
-            f"{len(dropped)} dropped (warnings above the verdict)")
+            f"{len(dropped)} dropped (listed after the verdict)")
     png = Path(plot) if plot else Path(f"{path.stem or path.name}_check.png")
     quick_look(flights, png, f"{path.name}: {len(flights)} segment(s), "
                f"{'PASS' if check.passed else 'FAIL'}")
@@ -230,6 +230,9 @@ def register(subparsers) -> None:
     check.add_argument("--plot", help="quick-look PNG path (default <name>_check.png)")
     check.set_defaults(func=_cmd_check)
     _register_align(sub)
+    from gpquad.data.score import register_export
+
+    register_export(sub)
 
 
 def run_align(path_a, path_b, signals=("p", "q", "r"), fmt_a=None, fmt_b=None, config=None,

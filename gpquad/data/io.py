@@ -13,12 +13,15 @@ from pathlib import Path
 
 from gpquad.config import Config, DataConfig
 from gpquad.data.dataset import Dataset, build_dataset
-from gpquad.data.flight import Flight, read_flight_file
+from gpquad.data.flight import Flight
 from gpquad.errors import GpquadError
 
 
 def _read_generic(path: Path, data: DataConfig) -> list[Flight]:
-    return [read_flight_file(path, data.inputs, data.frame, data.columns)]
+    """One flight per file; an export of `gpquad data export` gives one per segment."""
+    from gpquad.data.export import read_generic
+
+    return read_generic(path, data)
 
 
 READERS: dict[str, Callable[[Path, DataConfig], list[Flight]]] = {"generic": _read_generic}
