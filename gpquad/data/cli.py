@@ -21,6 +21,7 @@ _LOG_READERS = {
     "px4-csv": ("gpquad.data.px4", "read_px4_folder_log"),
     "ulog": ("gpquad.data.ulog", "read_ulog_log"),
     "table": ("gpquad.data.table", "table_log"),
+    "ardupilot": ("gpquad.data.ardupilot", "ardupilot_log_table"),
 }
 
 
@@ -57,10 +58,13 @@ def guess_format(path: Path, allow_generic: bool = True) -> str:
         return "ulog"
     if suffix in (".bbl", ".bfl", ".txt"):
         return "betaflight"
+    if suffix == ".bin":
+        return "ardupilot"
     if suffix in (".csv", ".parquet", ".pq"):
         return "generic" if allow_generic and _is_generic_file(path) else "table"
-    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, ulog,"
-                      " betaflight, table, generic)", source=str(path), field="--format")
+    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, "
+                      "ulog, betaflight, ardupilot, table, generic)", source=str(path),
+                      field="--format")
 
 
 def _log_tables(path: Path, fmt: str, data) -> list:

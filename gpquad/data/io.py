@@ -34,13 +34,15 @@ def register_reader(name: str, reader: Callable[[Path, DataConfig], list[Flight]
 
 def _register_log_readers() -> None:
     """PX4 (ulog2csv folders, .ulg), Betaflight blackbox and resampled tables (gpquad.data)."""
+    from gpquad.data.ardupilot import read_ardupilot
     from gpquad.data.betaflight import read_betaflight
     from gpquad.data.px4 import read_px4_csv
     from gpquad.data.table import read_table_log
     from gpquad.data.ulog import read_ulog
 
     for name, reader in (("px4-csv", read_px4_csv), ("ulog", read_ulog),
-                         ("betaflight", read_betaflight), ("table", read_table_log)):
+                         ("betaflight", read_betaflight), ("table", read_table_log),
+                         ("ardupilot", read_ardupilot)):
         READERS.setdefault(name, reader)
 
 
