@@ -43,11 +43,15 @@ class DataConfig:
     files: tuple[str, ...] = ()  # empty: fly the reference simulator
     format: str = "generic"
     frame: str = "NED/FRD"
-    inputs: tuple[str, ...] = DEFAULT_INPUTS
+    # input names, or a level for log readers: "rates" | "torque" | "sticks" | "motors"
+    # (gpquad.data.levels); the default names take "rates" wherever a log has rate set-points
+    inputs: tuple[str, ...] | str = DEFAULT_INPUTS
     columns: dict[str, str] = field(default_factory=dict)  # canonical name -> file column
     trim: str = "none"  # none | mean | given
     trim_values: dict[str, float] = field(default_factory=dict)
     validation_fraction: float = 2000 / 13800  # paper: 11,800 train + 2,000 validation
+    # "fraction" (the last validation_fraction of every flight) or files held out whole
+    validation: tuple[str, ...] | str = "fraction"
     # Log pipeline (formats px4-csv, ulog, betaflight, table; see gpquad.data.pipeline).
     log_index: int = 0  # Betaflight: which log of a multi-log file (1-based); 0 = every log
     resample_hz: float = 100.0  # common clock before filtering (paper: 100 Hz)
@@ -64,6 +68,9 @@ class DataConfig:
     check_steps: int = 750  # integration-check window (paper: 750 steps)
     check_max_rse: float = 0.05  # integration check passes below this RSE (paper: 5 %)
     check_before_run: bool = True  # refuse to start a run on a dataset that fails the check
+    # an attitude step this much larger than the gyro explains (deg per clock sample) is an
+    # estimator reset: the flight is split there (as at a change of a reset counter)
+    max_attitude_step_deg: float = 5.0
 
 
 @dataclass(frozen=True)
@@ -295,12 +302,7 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if not 0.0 <= d.validation_fraction < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="data.validation_fraction")
     validate_pipeline(d, source)
-    if not d.inputs or len(set(d.inputs)) != len(d.inputs):
-        raise GpquadError("need distinct input names", source=source, field="data.inputs")
-    clash = set(d.inputs) & set(STATE_NAMES)
-    if clash:
-        raise GpquadError(f"input names {sorted(clash)} clash with state names", source=source,
-                          field="data.inputs")
+    validate_inputs(d, source)
     s = cfg.simulator
     unknown_eq = set(s.equations) - set(TARGET_NAMES)
     if unknown_eq:
@@ -406,6 +408,33 @@ def validate_pipeline(d: DataConfig, source: str = "config") -> None:
         raise GpquadError("must be >= 0", source=source, field="data.min_segment_s")
     if d.rates_from not in ("quaternion", "log"):
         raise GpquadError("choose quaternion or log", source=source, field="data.rates_from")
+
+
+def validate_inputs(d: DataConfig, source: str = "config") -> None:
+    """data.inputs: distinct names, or a level that a log reader resolves; data.validation."""
+    from gpquad.data.levels import LEVELS
+
+    if isinstance(d.inputs, str):
+        if d.inputs not in LEVELS:
+            raise GpquadError(f"choose a level {list(LEVELS)} or a list of input names",
+                              source=source, field="data.inputs")
+        if d.format in ("generic", "table") or not d.files:
+            raise GpquadError(f"input level '{d.inputs}' is chosen by a log reader (px4-csv, "
+                              "ulog, betaflight, ardupilot); the simulator, generic files and "
+                              "tables need a list of input names",
+                              source=source, field="data.inputs")
+    else:
+        if not d.inputs or len(set(d.inputs)) != len(d.inputs):
+            raise GpquadError("need distinct input names", source=source, field="data.inputs")
+        clash = set(d.inputs) & set(STATE_NAMES)
+        if clash:
+            raise GpquadError(f"input names {sorted(clash)} clash with state names",
+                              source=source, field="data.inputs")
+    if isinstance(d.validation, str) and d.validation != "fraction":
+        raise GpquadError("choose \"fraction\" or a list of flight files held out whole",
+                          source=source, field="data.validation")
+    if d.max_attitude_step_deg <= 0:
+        raise GpquadError("must be > 0", source=source, field="data.max_attitude_step_deg")
 
 
 def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:

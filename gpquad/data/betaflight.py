@@ -29,14 +29,13 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight, flip_body
+from gpquad.data.levels import paper_names, resolve_inputs
 from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample, runs
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import body_accelerations, integrate
 from gpquad.kernels.quaternion import quat_from_euler
 
 G = 9.80665
-DEFAULT_INPUT_COLUMNS = {"u_R": "roll_stick", "u_P": "pitch_stick", "u_Y": "yaw_stick",
-                         "u_T": "throttle"}
 HEADER_KEYS = ("Firmware revision", "Craft name", "looptime", "P interval", "motorOutput",
                "minthrottle", "maxthrottle", "acc_1G", "rates", "rc_rates", "gyro_lowpass_hz")
 
@@ -152,13 +151,12 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
         extra["vbat"] = (df[["vbatLatest"]].to_numpy(float) / 100.0, ("vbat",))
     available = [c for st in streams for c in st.columns] + [c for _, cs in extra.values()
                                                               for c in cs]
-    inputs = {}
-    for n_in in data.inputs:
-        col = data.columns.get(n_in, DEFAULT_INPUT_COLUMNS.get(n_in))
-        if col is None or col not in available:
-            raise GpquadError(f"no signal '{col}' for input '{n_in}'; available: "
-                              f"{sorted(available)}", source=source, field=f"data.columns.{n_in}")
-        inputs[n_in] = col
+    supported = {"sticks": paper_names("pitch_stick", "roll_stick", "yaw_stick", "throttle")}
+    if "setpoint" in extra:
+        supported["rates"] = paper_names("q_sp", "p_sp", "r_sp", "throttle_sp")
+    if "motor" in extra and len(extra["motor"][1]) >= 4:
+        supported["motors"] = {m: m for m in extra["motor"][1][:4]}
+    inputs, chosen = resolve_inputs(data, supported, available, source)
     for key, (values, cols) in extra.items():
         used = bool(set(cols) & set(inputs.values()))  # an input: NaN rows are gaps
         if not used:
@@ -182,8 +180,9 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
     measured.update({a: "not measured (Betaflight logs no velocity; zero)" for a in "uvw"})
     notes = [f"header {k}: {headers[k]}" for k in HEADER_KEYS if k in headers]
     return LogTable(name=name, source=source, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(data.inputs), measured=measured,
-                    streams=info, notes=notes)
+                    rate_hz=data.resample_hz, input_names=tuple(inputs), measured=measured,
+                    streams=info, notes=notes, levels=supported, input_level=chosen,
+                    input_columns=inputs)
 
 
 def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:

@@ -22,6 +22,7 @@ _LOG_READERS = {
     "px4-csv": ("gpquad.data.px4", "read_px4_folder_log"),
     "ulog": ("gpquad.data.ulog", "read_ulog_log"),
     "table": ("gpquad.data.table", "table_log"),
+    "ardupilot": ("gpquad.data.ardupilot", "ardupilot_log_table"),
 }
 
 
@@ -58,10 +59,13 @@ def guess_format(path: Path, allow_generic: bool = True) -> str:
         return "ulog"
     if suffix in (".bbl", ".bfl", ".txt"):
         return "betaflight"
+    if suffix == ".bin":
+        return "ardupilot"
     if suffix in (".csv", ".parquet", ".pq"):
         return "generic" if allow_generic and _is_generic_file(path) else "table"
-    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, ulog,"
-                      " betaflight, table, generic)", source=str(path), field="--format")
+    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, "
+                      "ulog, betaflight, ardupilot, table, generic)", source=str(path),
+                      field="--format")
 
 
 def _log_tables(path: Path, fmt: str, data) -> list:
@@ -104,6 +108,12 @@ def describe_log(log) -> str:
             lines.append(f"  {label}: " + "; ".join(parts))
     lines.append(f"  inputs: {', '.join(log.input_names)}; other columns: "
                  f"{', '.join(c for c in log.table.columns if c not in ('t', *log.input_names))}")
+    if log.levels:
+        from gpquad.data.levels import describe_levels
+
+        used = ", ".join(f"{n} = {c}" for n, c in log.input_columns.items())
+        lines.append(f"  input levels (data.inputs; used: {log.input_level}: {used}):")
+        lines.extend(describe_levels(log.levels, log.input_level, log.units))
     lines.extend(f"  note: {n}" for n in log.notes)
     return "\n".join(lines)
 
@@ -161,7 +171,7 @@ def quick_look(flights, path: Path, title: str) -> Path:
 def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -> int:
     """The `data check` command; returns 0 when the data is usable, raises GpquadError if not."""
     from gpquad.config import Config, load_config, validate
-    from gpquad.data.integration_check import integration_check
+    from gpquad.data.integration_check import integration_check, screen_segments
     from gpquad.data.io import READERS
     from gpquad.data.pipeline import flights_from_log
 
@@ -192,14 +202,20 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
                           field="--format")
     out(describe_flights(flights))
-    check = integration_check(flights, data.check_steps, data.check_max_rse)
+    try:
+        flights, dropped, check = screen_segments(flights, data.check_steps,
+                                                  data.check_max_rse, source=str(path))
+    except GpquadError:  # nothing passes: the pooled table, then the one-line reason
+        out(integration_check(flights, data.check_steps, data.check_max_rse).table())
+        raise
     out(check.table())
+    if dropped:
+        out(f"{len(flights)} segment(s) pass the integration check and are used; "
+            f"{len(dropped)} dropped (listed after the verdict)")
     png = Path(plot) if plot else Path(f"{path.stem or path.name}_check.png")
     quick_look(flights, png, f"{path.name}: {len(flights)} segment(s), "
                f"{'PASS' if check.passed else 'FAIL'}")
     out(f"quick-look plot: {png}")
-    if not check.passed:
-        raise GpquadError(check.failure(), source=str(path), field="data.check_max_rse")
     return 0
 
 
@@ -219,6 +235,9 @@ def register(subparsers) -> None:
     check.add_argument("--plot", help="quick-look PNG path (default <name>_check.png)")
     check.set_defaults(func=_cmd_check)
     _register_align(sub)
+    from gpquad.data.score import register_export
+
+    register_export(sub)
 
 
 def run_align(path_a, path_b, signals=("p", "q", "r"), fmt_a=None, fmt_b=None, config=None,

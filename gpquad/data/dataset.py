@@ -90,8 +90,13 @@ def _trim(flights: list[Flight], mode: str, given: dict, input_names) -> dict[st
 
 
 def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: str = "none",
-                  trim_values: dict | None = None) -> Dataset:
-    """Concatenate flights, compute accelerations and rotations, split train/validation."""
+                  trim_values: dict | None = None, held_out: list[bool] | None = None
+                  ) -> Dataset:
+    """Concatenate flights, compute accelerations and rotations, split train/validation.
+
+    held_out: per flight, True = validation whole, False = training whole; None = the last
+    `validation_fraction` of every flight validates.
+    """
     if not flights:
         raise GpquadError("no flight data", field="data.files")
     input_names = flights[0].input_names
@@ -115,10 +120,12 @@ def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: st
     )
     segments, train, validation = [], [], []
     start = 0
-    for f in flights:
+    for k, f in enumerate(flights):
         stop = start + len(f)
         segments.append((start, stop))
         cut = stop - int(round(validation_fraction * len(f)))
+        if held_out is not None:
+            cut = start if held_out[k] else stop
         train.append((start, cut))
         if cut < stop:
             validation.append((cut, stop))

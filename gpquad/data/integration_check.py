@@ -188,3 +188,31 @@ def integration_check(flights: list[Flight], window_steps: int = 750, threshold:
     if n_windows == 0:
         raise GpquadError("flights too short for the integration check", field="data.files")
     return CheckResult(rows, window_steps, n_windows, threshold, notes)
+
+
+def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: float = 0.05,
+                    source: str = "", field: str = "data.check_max_rse"
+                    ) -> tuple[list[Flight], list[str], CheckResult]:
+    """Check every segment on its own; drop those that fail, keep the rest.
+
+    Returns (kept flights, one warning per dropped segment naming its time span and the
+    failing states, the pooled check of the kept ones). Raises GpquadError (naming `field`)
+    when no segment passes, with the reason of the longest one.
+    """
+    kept, dropped, results = [], [], []
+    for f in flights:
+        result = integration_check([f], window_steps, threshold)
+        results.append((len(f), f, result))
+        if result.passed:
+            kept.append(f)
+        else:
+            dropped.append(f"dropped segment {f.name} ({f.t[0]:.2f}..{f.t[-1]:.2f} s): "
+                           f"{result.failure()}")
+    if not kept:
+        _, worst, result = max(results, key=lambda r: r[0])
+        where = f" (every segment fails; longest {worst.name})" if len(flights) > 1 else ""
+        raise GpquadError(f"{result.failure()}{where}; run `gpquad data check` for the table, or "
+                          "set data.check_before_run = false", source=source, field=field)
+    check = integration_check(kept, window_steps, threshold)
+    check.notes.extend(dropped)
+    return kept, dropped, check

@@ -102,6 +102,11 @@ class LogTable:
     measured: dict[str, str]
     streams: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: Input levels the log supports (level -> {input name: column}), the choice, its map.
+    levels: dict[str, dict[str, str]] = field(default_factory=dict)
+    input_level: str = "explicit"
+    input_columns: dict[str, str] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
 
     @property
     def velocity_frame(self) -> str:

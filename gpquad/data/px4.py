@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.flight import Flight
+from gpquad.data.levels import check_input_rates, resolve_inputs
 from gpquad.data.pipeline import (
     LogTable,
     Stream,
@@ -35,14 +36,14 @@ from gpquad.data.pipeline import (
     in_flight_mask,
     resample,
 )
+from gpquad.data.px4_signals import UNITS, counter_labels, optional_streams, torque_stream
+from gpquad.data.px4_signals import levels as px4_levels
+from gpquad.data.resets import reset_mask
 from gpquad.errors import GpquadError
 
 #: PX4's ARMING_STATE_ARMED (2016 and later).
 ARMED = 2
-#: Default input name -> table column.
-DEFAULT_INPUT_COLUMNS = {"u_R": "roll_cmd", "u_P": "pitch_cmd", "u_Y": "yaw_cmd",
-                         "u_T": "thrust_cmd"}
-REQUIRED_TOPICS = ("vehicle_attitude", "vehicle_local_position", "actuator_controls_0")
+REQUIRED_TOPICS = ("vehicle_attitude", "vehicle_local_position")
 
 
 class Topics:
@@ -73,15 +74,26 @@ class Topics:
                               source=self.sources.get(topic, self.where), field=name)
         return pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
 
+    def time_field(self, topic: str) -> str:
+        """`timestamp_sample` where the topic logs it (increasing), else `timestamp`."""
+        df = self.get(topic)
+        if "timestamp_sample" in df.columns:
+            ts = pd.to_numeric(df["timestamp_sample"], errors="coerce").to_numpy(dtype=float)
+            if len(ts) > 1 and np.isfinite(ts).all() and (np.diff(ts) > 0).all():
+                return "timestamp_sample"
+        return "timestamp"
+
     def time(self, topic: str) -> np.ndarray:
-        """Topic timestamps in s (from microseconds)."""
-        return self.column(topic, "timestamp") * 1e-6
+        """Topic times in s (from microseconds)."""
+        return self.column(topic, self.time_field(topic)) * 1e-6
 
     def stream(self, topic: str, fields, columns, kind: str, required: bool = True,
-               scale: float = 1.0, offset: float = 0.0) -> Stream:
-        values = np.column_stack([(self.column(topic, f) - offset) * scale for f in fields])
+               scale=1.0, offset: float = 0.0) -> Stream:
+        scales = np.broadcast_to(np.asarray(scale, dtype=float), (len(fields),))
+        values = np.column_stack([(self.column(topic, f) - offset) * k
+                                  for f, k in zip(fields, scales, strict=True)])
         return Stream(topic, self.time(topic), values, tuple(columns), kind,
-                      self.sources.get(topic, self.where), "timestamp", required)
+                      self.sources.get(topic, self.where), self.time_field(topic), required)
 
 
 _TOPIC_FILE = re.compile(r"^(?P<topic>.+)_(?P<inst>\d+)\.csv$")
@@ -135,7 +147,8 @@ def read_px4_folder(path) -> Topics:
 
 _WANTED = {"vehicle_attitude", "vehicle_angular_velocity", "vehicle_local_position",
            "actuator_controls_0", "vehicle_status", "vehicle_rates_setpoint", "input_rc",
-           "actuator_outputs"}
+           "actuator_outputs", "control_state", "vehicle_torque_setpoint",
+           "vehicle_thrust_setpoint", "actuator_motors", "esc_status"}
 
 
 def _common_prefix(names: list[str]) -> str:
@@ -195,29 +208,11 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     else:
         measured.update({a: "measured (derived from the quaternion only)" for a in "pqr"})
     streams.append(_velocity_stream(tp, measured))
-    streams.append(tp.stream("actuator_controls_0", [f"control[{i}]" for i in range(4)],
-                             ("roll_cmd", "pitch_cmd", "yaw_cmd", "thrust_cmd"), "hold"))
+    torque = torque_stream(tp)
+    streams.extend(torque if isinstance(torque, list) else [torque])
     notes = []
     armed_ok = False
-    optional = []
-    if tp.has("vehicle_status"):
-        optional.append(lambda: tp.stream("vehicle_status", ["arming_state", "nav_state"],
-                                          ("arming_state", "nav_state"), "hold", required=False))
-    if tp.has("vehicle_rates_setpoint"):
-        optional.append(lambda: tp.stream("vehicle_rates_setpoint",
-                                          ["roll", "pitch", "yaw", "thrust"],
-                                          ("p_sp", "q_sp", "r_sp", "thrust_sp"), "hold",
-                                          required=False))
-    if tp.has("input_rc"):
-        optional.append(lambda: tp.stream("input_rc", [f"values[{i}]" for i in range(8)],
-                                          tuple(f"rc_{i}" for i in range(8)), "hold",
-                                          required=False, scale=1 / 500, offset=1500.0))
-    if tp.has("actuator_outputs"):
-        lo, hi = tp.params.get("PWM_MIN", 1000.0), tp.params.get("PWM_MAX", 2000.0)
-        optional.append(lambda: tp.stream("actuator_outputs", [f"output[{i}]" for i in range(4)],
-                                          tuple(f"motor_{i}" for i in range(4)), "hold",
-                                          required=False, scale=1 / (hi - lo), offset=lo))
-    for make in optional:
+    for make in optional_streams(tp):
         try:
             s = make()
             if len(s.t) >= 2 and np.all(np.diff(s.t) > 0):
@@ -227,12 +222,19 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
                 notes.append(f"skipped topic {s.name}: timestamps not increasing")
         except GpquadError as exc:
             notes.append(f"skipped optional topic: {exc}")
-    inputs = _map_inputs(["t"] + [c for s in streams for c in s.columns], data, tp.where)
+    columns = ["t"] + [c for s in streams for c in s.columns]
+    supported = px4_levels(columns, tp.params)
+    inputs, chosen = resolve_inputs(data, supported, columns, tp.where)
     for s in streams:  # an optional signal used as an input: its gaps split the flight too
         s.required = s.required or bool(set(s.columns) & set(inputs.values()))
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
     if s_rates is not None:
         check_rate_units(table, valid, s_rates.source, rate_fields)
+    bad, splits = reset_mask(table, data.resample_hz, counter_labels(table.columns),
+                             data.max_attitude_step_deg)
+    valid &= ~bad
+    notes.extend(splits)
+    notes.extend(check_input_rates(info, inputs, {s.name: s.columns for s in streams}))
     for n_in, col in inputs.items():
         table[n_in] = table[col]
     t = table["t"].to_numpy()
@@ -240,25 +242,9 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     thrust = table["thrust_cmd"].to_numpy()
     mask = in_flight_mask(t, armed, thrust, data, tp.where)
     return LogTable(name=name, source=tp.where, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(data.inputs), measured=measured,
-                    streams=info, notes=notes)
-
-
-def _map_inputs(columns: list[str], data, source: str) -> dict[str, str]:
-    """Input name -> table column (of `columns`), from [data.columns] or the PX4 defaults."""
-    out = {}
-    for name in data.inputs:
-        col = data.columns.get(name, DEFAULT_INPUT_COLUMNS.get(name))
-        if col is None:
-            raise GpquadError(f"no signal for input '{name}'; map it with [data.columns] "
-                              f"{name} = \"<column>\" (available: {sorted(set(columns) - {'t'})})",
-                              source=source, field=f"data.columns.{name}")
-        if col not in columns:
-            raise GpquadError(f"input '{name}' maps to unknown signal '{col}' (available: "
-                              f"{sorted(set(columns) - {'t'})})", source=source,
-                              field=f"data.columns.{name}")
-        out[name] = col
-    return out
+                    rate_hz=data.resample_hz, input_names=tuple(inputs), measured=measured,
+                    streams=info, notes=notes, levels=supported, input_level=chosen,
+                    input_columns=inputs, units=UNITS)
 
 
 def read_px4_folder_log(path, data) -> LogTable:

@@ -1,0 +1,157 @@
+"""`gpquad score RUN_DIR --data LOG` and `gpquad data export LOG --out FILE`.
+
+Scoring flies a run's equations over the windows of another flight (or the held-out part of
+one it trained on) with `gpquad.scoring`'s definition: RSE of the integrated states u, v, w,
+p, q, r over non-overlapping windows of `--horizon-s`, each from the recorded state with the
+recorded inputs. A state the log does not measure is NaN; a window is diverged when the
+prediction is non-finite or leaves 10 x the data's largest |state|.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.errors import GpquadError
+
+#: A prediction beyond this multiple of the data's largest |state| counts as diverged.
+DIVERGENCE_FACTOR = 10.0
+PARTS = ("auto", "all", "validation")
+
+
+def _part(cfg, path: Path, part: str) -> str:
+    """Which windows to score: the whole log, or the held-out part of a training log."""
+    from gpquad.data.io import held_out_paths
+
+    if part != "auto":
+        return part
+    if path in held_out_paths(cfg):
+        return "all"
+    if cfg.data.files and path in cfg.data_paths():
+        if not isinstance(cfg.data.validation, str):
+            raise GpquadError("this log trained the run whole (data.validation lists other "
+                              "files); give --part all to score it anyway", source=str(path),
+                              field="--part")
+        return "validation"
+    return "all"
+
+
+def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
+              part: str = "auto") -> dict:
+    """RSE per state, window counts and what was scored (see the module docstring)."""
+    from gpquad.config import load_folder_config
+    from gpquad.data.cli import guess_format
+    from gpquad.data.dataset import build_dataset
+    from gpquad.data.integration_check import screen_segments
+    from gpquad.data.io import READERS
+    from gpquad.scoring import (
+        SCORED_INDEX,
+        SCORED_STATES,
+        load_run,
+        model_view,
+        rse,
+        validation_windows,
+    )
+
+    if part not in PARTS:
+        raise GpquadError(f"choose one of {list(PARTS)}", field="--part")
+    if not horizon_s > 0:
+        raise GpquadError("must be > 0", field="--horizon-s")
+    run = load_run(run_dir)
+    cfg = load_folder_config(run_dir)
+    path = Path(log).resolve()
+    if not path.exists():
+        raise GpquadError("no such file or folder", source=str(log), field="--data")
+    fmt = fmt or guess_format(path)
+    if fmt not in READERS:
+        raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(log),
+                          field="--format")
+    which = _part(cfg, path, part)
+    data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
+    flights = READERS[fmt](path, data)
+    dropped: list[str] = []
+    if data.check_before_run:
+        flights, dropped, _ = screen_segments(flights, data.check_steps, data.check_max_rse,
+                                              source=str(log))
+    dataset = build_dataset(flights, validation_fraction=data.validation_fraction,
+                            held_out=None if which == "validation" else [True] * len(flights))
+    if tuple(run.model.input_names) != tuple(dataset.input_names):
+        raise GpquadError(f"the run's equations read inputs {list(run.model.input_names)} but "
+                          f"the log gives {list(dataset.input_names)}; score with the run's "
+                          "input level", source=str(log), field="data.inputs")
+    steps = max(1, int(round(horizon_s / dataset.dt)))
+    starts, steps = validation_windows(dataset, steps, run.max_delay)
+    pred = run.model.simulate(model_view(dataset, run.trim), starts, steps)
+    truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
+    limit = DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max()
+    with np.errstate(invalid="ignore"):
+        block = pred[:, :, SCORED_INDEX]
+        diverged = ~np.isfinite(block).all(axis=(1, 2)) | (np.abs(block) > limit).any(axis=(1, 2))
+    values = rse(pred, truth)
+    scores = {}
+    for s, v in zip(SCORED_STATES, values, strict=True):
+        scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
+    return {"run": str(run_dir), "data": str(log), "format": fmt, "part": which,
+            "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
+            "diverged": int(diverged.sum()), "rse": scores,
+            "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
+            "dropped": dropped}
+
+
+def format_score(result: dict) -> str:
+    head = " ".join(f"{s:>8}" for s in result["rse"])
+    vals = " ".join(f"{v:>8.4g}" for v in result["rse"].values())
+    lines = [f"score of {result['run']} on {result['data']} ({result['part']} part, "
+             f"{len(result['segments'])} segment(s), inputs {', '.join(result['input_names'])})",
+             f"RSE of the integrated states over {result['windows']} window(s) of "
+             f"{result['steps']} steps ({result['horizon_s']:.2f} s); "
+             f"{result['diverged']} diverged; NaN = not measured by the log",
+             head, vals]
+    lines.extend(f"warning: {d}" for d in result["dropped"])
+    return "\n".join(lines)
+
+
+def _cmd_score(args) -> int:
+    result = score_log(args.run, args.data, args.horizon_s, args.format, args.part)
+    print(json.dumps(result) if args.json else format_score(result))
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add `gpquad score`."""
+    p = subparsers.add_parser("score", help="RSE of a run's equations flown over a flight log")
+    p.add_argument("run", help="run folder")
+    p.add_argument("--data", required=True, help="log: ulog2csv folder, .ulg, .bbl, .bin, "
+                                                 ".csv/.parquet (an export or generic file)")
+    p.add_argument("--format", help="log format (default: from the path)")
+    p.add_argument("--horizon-s", type=float, default=7.0, help="window length, s (default 7)")
+    p.add_argument("--part", default="auto", choices=PARTS,
+                   help="all windows, or the held-out part (auto: the held-out part of a log "
+                        "the run trained on, else all)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=_cmd_score)
+
+
+def _cmd_export(args) -> int:
+    from gpquad.data.export import export_flights, write_export
+
+    flights, dropped = export_flights(args.path, args.format, args.config)
+    for d in dropped:
+        print(f"warning: {d}")
+    out = write_export(flights, args.out)
+    print(f"wrote {len(flights)} segment(s), {sum(len(f) for f in flights)} samples, inputs "
+          f"{', '.join(flights[0].input_names)}, to {out}")
+    return 0
+
+
+def register_export(sub) -> None:
+    """Add `gpquad data export` to the `data` sub-commands."""
+    p = sub.add_parser("export", help="engine-ready data after the pipeline, as CSV/Parquet")
+    p.add_argument("path", help="log: ulog2csv folder, .ulg, .bbl/.BFL, .bin, .csv/.parquet")
+    p.add_argument("--out", required=True, help="output .csv or .parquet")
+    p.add_argument("--format", help="log format (default: from the path)")
+    p.add_argument("--config", help="experiment TOML whose [data] settings to use")
+    p.set_defaults(func=_cmd_export)
