@@ -5,6 +5,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from gpquad.config import DataConfig
@@ -127,3 +128,23 @@ def test_bad_fields_are_one_line_errors_naming_the_field(edit, field, words):
     msg = str(err.value)
     assert "\n" not in msg and words in msg
     assert msg.startswith("fixture.bbl (log 2 of 2), field '" + field + "'")
+
+
+def test_garbage_piece_overlapping_the_clock_is_dropped(monkeypatch):
+    """Damaged bytes can decode into frames whose clock re-runs a stretch of the log: the
+    shorter of two pieces that overlap in time is dropped with a warning; without that check
+    both would be flown as separate flights."""
+    import gpquad.data.betaflight as bf
+
+    df, headers, _ = read_frames(FIXTURE, 2)
+    t = df["time"].to_numpy()
+    garbage = df.iloc[100:1600].copy()  # 3 s of frames
+    garbage["time"] = t[100:1600] - t[100] + t[len(t) // 2]  # the clock runs again mid-log
+    damaged = pd.concat([df, garbage], ignore_index=True)
+    monkeypatch.setattr(bf, "read_frames", lambda path, index: (damaged, headers, None))
+    tables, skipped, warned = _read_logs(FIXTURE, dataclasses.replace(DATA, log_index=2))
+    assert len(tables) == 1 and len(tables[0].table) > 0
+    assert any("overlaps a longer piece" in w and "piece 1" in w for w in warned)
+    assert bf._overlapping([(0, 10), (10, 14)], np.r_[np.arange(10.0), 2.0, 3.0, 4.0, 5.0]) \
+        == [1]
+    assert bf._overlapping([(0, 10), (10, 14)], np.arange(14.0)) == []

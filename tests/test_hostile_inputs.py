@@ -147,6 +147,37 @@ def case_compare_of_damaged_run_json(tmp):
     return ["compare", str(tmp / "run"), "--out", str(tmp / "cmp")], ["run.json", "damaged"]
 
 
+def case_table_time_in_microseconds(tmp):
+    (tmp / "c.toml").write_text(QUICK)
+    assert main(["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")]) == 0
+    text = (tmp / "f.csv").read_text().splitlines()
+    rows = [text[0]] + [",".join([repr(float(r.split(",")[0]) * 1e6)] + r.split(",")[1:])
+                        for r in text[1:]]
+    (tmp / "us.csv").write_text("\n".join(rows) + "\n")
+    return ["data", "check", str(tmp / "us.csv"), "--format", "table"], \
+        ["us.csv", "field 't'", "microseconds"]
+
+
+def case_px4_topic_with_only_a_header(tmp):
+    from px4_reset_edit import SHARED_S250, make_yaw_reset_log
+
+    if not SHARED_S250.is_dir():
+        pytest.skip("../shared/data is not present")
+    log = make_yaw_reset_log(tmp / "px4")
+    att = log / "log1_vehicle_attitude_0.csv"
+    att.write_text(att.read_text().splitlines()[0] + "\n")
+    return ["data", "check", str(log)], ["vehicle_attitude", "no rows"]
+
+
+def case_pem_unseen_as_short_as_its_windows(tmp):
+    text = (Path(__file__).parents[1] / "experiments" / "baseline_pem.toml").read_text()
+    text = text.replace("unseen_s = [120.0, 120.0]", "unseen_s = [10.0, 10.0]")
+    assert "unseen_s = [10.0, 10.0]" in text
+    (tmp / "pem.toml").write_text(text)
+    return ["baseline", "pem", str(tmp / "pem.toml"), "--out", str(tmp / "o")], \
+        ["simulator.unseen_s", "pem.toml"]
+
+
 CASES = [v for k, v in sorted(globals().items()) if k.startswith("case_")]
 
 

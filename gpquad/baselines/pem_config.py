@@ -92,6 +92,10 @@ def validate(cfg: PemConfig, source: str) -> PemConfig:
             "simulator.true_params")
     require(s.rate_hz > 0 and s.train_s > 0 and s.substeps >= 1, "rate_hz, train_s > 0 and "
             "substeps >= 1", source, "simulator.rate_hz")
+    require(len(s.unseen_s) >= 1 and min(s.unseen_s) > p.open_loop_windows_s > 0,
+            f"each unseen flight must be longer than pem.open_loop_windows_s = "
+            f"{p.open_loop_windows_s:g} s (> 0), which the open-loop test windows span; lengthen "
+            "them or shorten the windows", source, "simulator.unseen_s")
     require(p.method in ("SLSQP", "trust-constr"), "choose SLSQP or trust-constr", source,
             "pem.method")
     require(p.bound_factor > 1.0, "must be > 1", source, "pem.bound_factor")

@@ -97,6 +97,21 @@ def _pieces(t: np.ndarray, max_gap_s: float) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=False) if b - a > 1]
 
 
+def _overlapping(pieces: list[tuple[int, int]], t: np.ndarray) -> list[int]:
+    """Pieces whose time span overlaps a longer piece's: one clock cannot run twice, so the
+    shorter is garbage decoded from damaged bytes."""
+    kept: list[tuple[float, float]] = []
+    bad = []
+    for k in sorted(range(len(pieces)), key=lambda k: -(pieces[k][1] - pieces[k][0])):
+        a, b = pieces[k]
+        lo, hi = t[a], t[b - 1]
+        if any(lo < k_hi and k_lo < hi for k_lo, k_hi in kept):
+            bad.append(k)
+        else:
+            kept.append((lo, hi))
+    return sorted(bad)
+
+
 def _gyro_attitude(table: pd.DataFrame, valid: np.ndarray, dt: float) -> np.ndarray:
     """Quaternions (N, 4) integrated from the gyro per valid run, levelled by the accelerometer."""
     rates = table[["p", "q", "r"]].to_numpy(dtype=float)
@@ -214,6 +229,12 @@ def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:
                 if len(pieces) > 1 and t[b - 1] - t[a] < 1.0]
         if tiny:
             skipped.append(f"{source}: {len(tiny)} piece(s) shorter than 1 s dropped")
+        for k in _overlapping(pieces, t):
+            if k not in tiny:
+                a, b = pieces[k]
+                skipped.append(f"{source}: piece {k} ({t[a]:.2f}..{t[b - 1]:.2f} s) overlaps "
+                               "a longer piece of the same log in time: damaged frames, dropped")
+                tiny.append(k)
         for k, (a, b) in enumerate(pieces):
             if k in tiny:
                 continue

@@ -14,6 +14,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from gpquad.data.plausibility import (
+    check_excitation,
+    check_rates_follow_quaternion,
+    check_sample_rate,
+)
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import world_to_body
 from gpquad.variables import (
@@ -168,6 +173,7 @@ def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | 
     df = _read_table(path)
     t = _column(df, "t", columns, source)
     dt = check_time(t, source, columns.get("t", "t"))
+    check_sample_rate(dt, source, columns.get("t", "t"))
     quat = np.column_stack([_column(df, c, columns, source) for c in QUAT_COLUMNS])
     rates = np.column_stack([_column(df, c, columns, source) for c in RATE_COLUMNS])
     check_units(quat, rates, source)
@@ -192,6 +198,10 @@ def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | 
         raise GpquadError(f"unknown frame '{frame}'", source=source, field="frame")
     if not has_body:
         vel = world_to_body(np.ascontiguousarray(quat), np.ascontiguousarray(vel))
+    check_rates_follow_quaternion(quat, rates, dt, source, tuple(columns.get(c, c) for c in
+                                                                   RATE_COLUMNS),
+                                  columns.get("qw", "qw"))
+    check_excitation(rates, vel, inputs, [columns.get(c, c) for c in input_names], source)
     return Flight(name=path.name, t=t - t[0], quat=quat, vel=vel, rates=rates, inputs=inputs,
                   input_names=tuple(input_names), pos=pos, meta={"source": source, "dt": dt})
 

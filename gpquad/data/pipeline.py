@@ -144,6 +144,11 @@ def _continuous_quat(q: np.ndarray) -> np.ndarray:
     return q * flips[:, None]
 
 
+#: A state stream logged slower than this (median period) has its clock in the wrong unit
+#: (events and modes may be sparse).
+MIN_STREAM_HZ = 0.2
+
+
 def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
              ) -> tuple[pd.DataFrame, np.ndarray, list[dict]]:
     """Put streams on one uniform clock over their common time span.
@@ -157,6 +162,9 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
         if s.kind not in KINDS:
             raise ValueError(f"unknown stream kind {s.kind}")
         t = np.asarray(s.t, dtype=float)
+        if len(t) == 0:
+            raise GpquadError(f"'{s.name}' has no rows (a header only?); give a log in which it "
+                              "was recorded", source=s.source, field=s.field)
         values = np.asarray(s.values, dtype=float).reshape(len(t), -1)
         check_stream_time(t, s.source, s.field)
         finite = np.isfinite(values).all(axis=1)
@@ -177,6 +185,10 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
                                   "not 1", source=s.source, field=s.columns[0])
             values = _continuous_quat(values / norm[:, None])
         period = float(np.median(np.diff(t)))
+        if s.kind in ("quat", "state") and not 1.0 / period >= MIN_STREAM_HZ:
+            raise GpquadError(f"'{s.name}' is logged every {period:.6g} s, slower than "
+                              f"{MIN_STREAM_HZ:g} Hz: time in microseconds or milliseconds? give "
+                              "it in seconds", source=s.source, field=s.field)
         width = int(round(1.0 / (rate_hz * period)))
         if s.kind == "state" and width >= 2:  # anti-aliasing: centred boxcar of one new period
             width = 2 * (width // 2) + 1
