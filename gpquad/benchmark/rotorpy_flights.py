@@ -159,8 +159,9 @@ def check_flight(spec: FlightSpec, t, states, ref, flown: int, rotor_limits) -> 
         raise GpquadError(f"flight {spec.mode}/{spec.name} (seed {spec.seed}) {what}{at}; "
                           "lower the excitation", field="EXCITATION")
 
-    if flown < len(t) or not np.all(np.isfinite(states)):
-        fail("diverged (non-finite state)", min(flown, len(t) - 1))
+    finite = np.isfinite(states[:flown]).all(axis=1)
+    if flown < len(t) or not finite.all():
+        fail("diverged (non-finite state)", int(np.argmin(finite)) if not finite.all() else flown)
     tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (states[:, 6]**2 + states[:, 7]**2),
                                         -1.0, 1.0)))
     tracking = np.linalg.norm(states[:, 0:3] - ref[:, 0:3], axis=1)
