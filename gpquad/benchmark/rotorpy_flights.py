@@ -242,6 +242,9 @@ def _result(folder: Path, specs: list[FlightSpec], mode: str, noisy: bool) -> di
            for role in ROLES}
     out.update({"input_names": INPUT_NAMES, "config": dict(DATA_CONFIG),
                 "vehicles": list(VEHICLES), "seeds": [s.seed for s in specs],
+                "flights": [{"path": str(folder / f"{s.name}.parquet"), "vehicle": s.vehicle,
+                             "role": s.role, "seed": s.seed, "duration_s": s.duration_s}
+                            for s in specs],
                 "mode": mode, "noisy": noisy})
     return out
 
@@ -261,14 +264,16 @@ def _cached(folder: Path, wanted: dict, specs: list[FlightSpec]) -> bool:
 def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None) -> dict:
     """The rotorpy flights of a mode, generated once and cached under cache_dir/<mode>[-noisy].
 
-    mode "angle" or "rate". Returns {"train", "validation", "test": [paths], "input_names",
-    "config": [data] fields for gpquad's pipeline, "vehicles", "seeds", "mode", "noisy"}.
+    mode "angle" or "rate". Returns {"train", "validation", "test": [absolute paths],
+    "input_names", "config": [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per
+    flight, in the order train, validation, test per vehicle), "flights" (path, vehicle, role,
+    seed, duration_s of each), "mode", "noisy"}.
     Files are 100 Hz gpquad "table" logs (Parquet, NED/FRD); the noisy variant is the clean
     flights plus sensor noise. Each file and then the manifest are written atomically; a
     cache made with other settings is regenerated. progress: optional callable(str).
     """
     specs = flight_plan(mode)
-    folder = Path(cache_dir) / (f"{mode}-noisy" if noisy else mode)
+    folder = Path(cache_dir).resolve() / (f"{mode}-noisy" if noisy else mode)
     wanted = settings(mode, noisy)
     if _cached(folder, wanted, specs):
         return _result(folder, specs, mode, noisy)
@@ -277,7 +282,7 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None)
         clean = ensure_flights(mode, False, cache_dir, progress)
         clean_meta = json.loads((Path(clean["train"][0]).parent / "manifest.json").read_text())
         for s in specs:
-            frame = pd.read_parquet(Path(cache_dir) / mode / f"{s.name}.parquet")
+            frame = pd.read_parquet(Path(cache_dir).resolve() / mode / f"{s.name}.parquet")
             atomic_write_bytes(folder / f"{s.name}.parquet",
                                _parquet_bytes(add_sensor_noise(frame, s.seed)))
             flights[s.name] = clean_meta["flights"][s.name]
