@@ -106,9 +106,10 @@ def _f(theta, vehicle, x, u):
     return xdot, np.array([psi, acc[0], acc[1], acc[2]])
 
 
-def linearise(theta, vehicle, h: float = 1e-6):
-    """Continuous (A, B, C, D) about hover (x = 0, u = Omega_h) by central differences."""
-    om = hover_speed(theta, vehicle)
+def linearise(theta, vehicle, omega_h: float | None = None, h: float = 1e-6):
+    """Continuous (A, B, C, D) about x = 0, u = Omega_h (default: the equilibrium hover
+    speed; the paper uses its measured 407 rad/s) by central differences."""
+    om = hover_speed(theta, vehicle) if omega_h is None else float(omega_h)
     x0, u0 = np.zeros(6), np.full(4, om)
     A, C = np.empty((6, 6)), np.empty((4, 6))
     B, D = np.empty((6, 4)), np.empty((4, 4))

@@ -72,14 +72,19 @@ def step_tests(theta, vehicle, tracker, cfg: LqConfig) -> tuple[dict, list]:
 
 
 def joystick_reference(cfg: LqConfig, rng: np.random.Generator) -> np.ndarray:
-    """refs (N + 1, 4): psi_r = 0 and OU accelerations (a_z at half the SD), clipped."""
+    """refs (N + 1, 4): psi_r = 0 and accelerations (a_z at half the SD), clipped: an OU
+    process of time constant joystick_tau_s smoothed by a first-order lag of tau / 5 (a
+    thumb on a stick cannot move faster)."""
     n = int(round(cfg.joystick_s / cfg.dt)) + 1
     decay = np.exp(-cfg.dt / cfg.joystick_tau_s)
+    lag = np.exp(-cfg.dt / (0.2 * cfg.joystick_tau_s))
     sd = cfg.joystick_sd_m_s2 * np.array([1.0, 1.0, 0.5])
     shocks = rng.standard_normal((n, 3)) * sd * np.sqrt(1 - decay ** 2)
+    ou = np.zeros(3)
     a = np.zeros((n, 3))
     for k in range(1, n):
-        a[k] = decay * a[k - 1] + shocks[k]
+        ou = decay * ou + shocks[k]
+        a[k] = lag * a[k - 1] + (1 - lag) * ou
     refs = np.zeros((n, 4))
     refs[:, 1:] = np.clip(a, -cfg.max_ref_m_s2, cfg.max_ref_m_s2)
     return refs
