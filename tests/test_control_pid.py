@@ -203,3 +203,10 @@ def test_bad_inputs(tmp_path, capsys):
     run = _run_folder(tmp_path)
     assert main(["control", "pid", str(run), "--courses", "0"]) == 2
     assert "--courses" in capsys.readouterr().err
+
+
+def test_documented_config_is_the_defaults():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "experiments" / "control.toml"
+    assert load_control_config(path) == ControlConfig()
