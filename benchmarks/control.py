@@ -1,7 +1,8 @@
 """Transfer of the evolved PID (issue 12's measurements), run niced:
 
     PYTHONPATH=. nice -n 5 python benchmarks/control.py --model results/qs --seeds 5
-    PYTHONPATH=. nice -n 5 python benchmarks/control.py --model results/px4-rates --seeds 1 --courses 5
+    PYTHONPATH=. nice -n 5 python benchmarks/control.py --model results/px4-rates \
+        --seeds 1 --courses 5
 
 For each seed: `gpquad control pid MODEL --seed S --courses C` (evolution on the model, then
 the test courses on the model and, for a simulator-identified model, on the truth plant, three
