@@ -210,3 +210,18 @@ def test_documented_config_is_the_defaults():
 
     path = Path(__file__).resolve().parents[1] / "experiments" / "control.toml"
     assert load_control_config(path) == ControlConfig()
+
+
+def test_waypoint_passed_counts_as_reached():
+    """Side and forward forces of 0.5 and 0.3 m/s^2 would hold the craft 0.5 / kp_y = 1 m
+    beside and 0.3 / kp_x = 0.6 m beyond the waypoint, outside the 0.5 m radius: passing the
+    waypoint (projection beyond it) switches legs, at the first step north of 3 m."""
+    plant = truth_plant(dict(MEDIAN_MODEL, a_y="-9.2*phi - 0.6*v + 0.5",
+                             a_x="10.0*theta - 0.6*u + 0.3"), NAMES, 0.04)
+    cfg = PidConfig()
+    d = design_point(plant, np.array([0.5, 0.5, 0.5, 0.2]))
+    c = make_controller(cfg.nominal_gains, d, -np.ones(4), np.ones(4), cfg)
+    f = fly(plant, c, np.array([[3.0, 0.0, 0.0], [3.0, 5.0, 0.0]]), np.zeros((300, 4)))
+    k = int(np.argmax(f.pos[:, 0] >= 3.0))
+    assert k > 0 and f.target[k] == 1 and f.target[k - 1] == 0
+    assert abs(f.pos[k, 1]) > 0.5  # it did not come within the radius

@@ -46,7 +46,7 @@ class PidConfig:
     sigma0: float = 0.5  # CMA-ES initial step, in decades
     popsize: int = 12
     generations: int = 40
-    courses_per_generation: int = 2  # common random courses for the whole population
+    courses_per_generation: int = 3  # common random courses for the whole population
     deviation_scale_m: float = 1.0  # d0 of the fitness (progress / (1 + rmse / d0))
     repetitions: int = 3  # flights per test course on each plant, with different noise (Fig. 3)
     course: CourseConfig = field(default_factory=CourseConfig)

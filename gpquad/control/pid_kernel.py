@@ -14,6 +14,8 @@ the heading frame (world rotated by -psi) and [u, v, w] the body velocity:
   inner PD   alpha_roll* = kp_roll (phi* - level * phi) - kd_roll p   (and pitch, yaw with
              psi* = 0 and a wrapped yaw error); level = 1 for rate-level inputs, 0 for
              angle-level inputs (the plant closes the angle loop itself).
+  waypoints  the next waypoint is flown to once the current one is within waypoint_radius or
+             has been passed (the position's projection on the leg is beyond it)
   inputs     u[chan[i]] = hover[chan[i]] + scale[i] * command_i for i = roll, pitch, yaw,
              thrust (scale = 1 / d acc / d input), every input clipped to [lo, hi]; the plant
              receives the clipped input plus the noise row of the step.
@@ -136,11 +138,16 @@ def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale,
         if not ok:
             flown = k - 1 if k > 0 else 0
             break
-        while wp < n_wp:  # waypoint switching
+        while wp < n_wp:  # waypoint switching: within the radius, or past the waypoint
             d2 = 0.0
+            along = 0.0
+            leg2 = 0.0
             for i in range(3):
                 d2 += (waypoints[wp, i] - pos[i]) ** 2
-            if d2 < ctrl[4] ** 2:
+                a = waypoints[wp - 1, i] if wp > 0 else 0.0
+                along += (pos[i] - a) * (waypoints[wp, i] - a)
+                leg2 += (waypoints[wp, i] - a) ** 2
+            if d2 < ctrl[4] ** 2 or along >= leg2:
                 wp += 1
             else:
                 break
