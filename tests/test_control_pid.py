@@ -98,6 +98,15 @@ def test_noise_and_limits_reach_the_plant():
     assert f.states[1, 6] == pytest.approx(2.0 * (0.1 + 0.05) * DT)  # plant sees the noise
 
 
+def test_command_limit():
+    """command_limit 0.05 caps the roll input at hover + 0.05 (it would be 0.35 without)."""
+    plant = truth_plant(LINEAR, NAMES, DT)
+    c = _controller(plant, PidConfig(command_limit=0.05))
+    f = fly(plant, c, np.array([[3.0, 4.0, 2.0]]), np.zeros((2, 4)))
+    assert f.inputs[0, 1] == pytest.approx(0.05)
+    assert f.inputs[0, 3] == pytest.approx(0.5 + 6.0 / -20.0)  # thrust is not limited
+
+
 def test_course_measures_by_hand():
     wp = np.array([[4.0, 0.0, 0.0], [4.0, 3.0, 0.0]])
     pos = np.array([[2.0, 1.0, 0.0], [5.0, 2.0, 0.0], [4.0, 3.0, 0.0]])
@@ -190,6 +199,12 @@ def test_bad_inputs(tmp_path, capsys):
     bad.write_text("[pid]\ninput_level = \"torque\"\n")
     with pytest.raises(GpquadError, match="pid.input_level"):
         load_control_config(bad)
+    bad.write_text("[pid]\nmodel_form = \"raw\"\n")
+    with pytest.raises(GpquadError, match="pid.model_form"):
+        load_control_config(bad)
+    bad.write_text("[pid]\ncommand_limit = -1.0\n")
+    with pytest.raises(GpquadError, match="pid.command_limit"):
+        load_control_config(bad)
     bad.write_text("[pid]\nnominal_gains = [1.0, 2.0]\n")
     with pytest.raises(GpquadError, match="pid.nominal_gains"):
         load_control_config(bad)
@@ -225,3 +240,24 @@ def test_waypoint_passed_counts_as_reached():
     k = int(np.argmax(f.pos[:, 0] >= 3.0))
     assert k > 0 and f.target[k] == 1 and f.target[k - 1] == 0
     assert abs(f.pos[k, 1]) > 0.5  # it did not come within the radius
+
+
+def test_model_forms_differ_where_protected_division_fires():
+    """q_dot = -100 / (34 / u_P): the tree gives -100 at u_P = trim (protected division),
+    the simplified equation -100 u_P / 34 gives 0."""
+    from gpquad.control.plant import model_plant
+    from gpquad.model import DiscoveredModel, Equation
+    from gpquad.tree.encoding import Tree
+    from gpquad.tree.operators import CONST, DIV, VAR_BASE
+
+    u_p = VAR_BASE + 9 + NAMES.index("u_P")
+    tree = Tree.from_lists([DIV, CONST, DIV, CONST, u_p], [0, -100.0, 0, 34.0, 0], [0] * 4)
+    trim = {"u_P": 0.2, "u_R": 0.0, "u_Y": 0.0, "u_T": 0.0}
+    model = DiscoveredModel({"q_dot": Equation("q_dot", tree, NAMES, 0.0, 0.0, trim)}, NAMES,
+                            trim, 0.04, 1, {})
+    at_trim = np.array([0.2, 0.0, 0.0, 0.0])
+    assert model_plant(model, "tree").accelerations(np.zeros(9), at_trim)[4] == -100.0
+    assert model_plant(model).accelerations(np.zeros(9), at_trim)[4] == pytest.approx(0.0)
+    off = np.array([0.54, 0.0, 0.0, 0.0])  # u_P - trim = 0.34: both -1
+    assert model_plant(model, "tree").accelerations(np.zeros(9), off)[4] == pytest.approx(-1.0)
+    assert model_plant(model).accelerations(np.zeros(9), off)[4] == pytest.approx(-1.0)

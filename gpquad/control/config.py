@@ -35,10 +35,12 @@ class PidConfig:
     """Nested PID loops (paper section 3.3) and the evolution of their gains."""
 
     input_level: str = "rate"  # rate: inputs command rates/torques | angle: they command angles
+    model_form: str = "simplified"  # fly the simplified equations | "tree": the raw trees
     max_angle_rad: float = 0.35  # outer loops' pitch and roll set-points are clipped to this
     input_noise: float = 0.10  # input noise SD as a fraction of each input's maximum (paper)
     input_margin: float = 0.25  # inputs clipped to the training range widened by this x span
     integral_limit: float = 5.0  # |altitude error integral| limit, m s
+    command_limit: float = 0.0  # > 0: |roll, pitch, yaw input - hover| limit (input units)
     # Nominal gains: CMA-ES searches log10(gain / nominal) in [-span, +span].
     nominal_gains: tuple[float, ...] = (30.0, 8.0, 30.0, 8.0, 10.0, 4.0,
                                         0.5, 1.0, 0.5, 1.0, 2.0, 0.2, 2.0)
@@ -79,6 +81,8 @@ def validate(cfg: ControlConfig, source: str) -> ControlConfig:
     p, c, q = cfg.pid, cfg.pid.course, cfg.lq
     require(p.input_level in ("rate", "angle"), "choose rate or angle", source,
             "pid.input_level")
+    require(p.model_form in ("simplified", "tree"), "choose simplified or tree", source,
+            "pid.model_form")
     require(len(p.nominal_gains) == len(GAIN_NAMES) and all(g > 0 for g in p.nominal_gains),
             f"give {len(GAIN_NAMES)} positive gains {list(GAIN_NAMES)}", source,
             "pid.nominal_gains")
@@ -90,6 +94,7 @@ def validate(cfg: ControlConfig, source: str) -> ControlConfig:
     require(p.popsize >= 2 and p.generations >= 1 and p.courses_per_generation >= 1
             and p.repetitions >= 1, "popsize >= 2, generations, courses and repetitions >= 1",
             source, "pid.popsize")
+    require(p.command_limit >= 0, "must be >= 0 (0: no limit)", source, "pid.command_limit")
     require(p.deviation_scale_m > 0 and p.integral_limit >= 0, "must be > 0", source,
             "pid.deviation_scale_m")
     require(c.legs >= 1, "must be >= 1", source, "pid.course.legs")

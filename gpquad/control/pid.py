@@ -24,14 +24,16 @@ class Controller:
     level: float  # 1: rate-level inputs (inner loop on the angle error), 0: angle-level
     waypoint_radius: float
     integral_limit: float
+    command_limit: float = 0.0
 
     def ctrl(self) -> np.ndarray:
         return np.array([self.design.g_x, self.design.g_y, self.max_angle, self.level,
-                         self.waypoint_radius, self.integral_limit, 0.0, 0.0, 0.0])
+                         self.waypoint_radius, self.integral_limit, self.command_limit, 0.0, 0.0])
 
     def with_gains(self, gains) -> Controller:
         return Controller(np.asarray(gains, float), self.design, self.lo, self.hi, self.max_angle,
-                          self.level, self.waypoint_radius, self.integral_limit)
+                          self.level, self.waypoint_radius, self.integral_limit,
+                          self.command_limit)
 
     def gains_dict(self) -> dict[str, float]:
         return dict(zip(GAIN_NAMES, self.gains.tolist(), strict=True))
@@ -41,7 +43,7 @@ def make_controller(gains, design: DesignPoint, lo, hi, cfg: PidConfig) -> Contr
     return Controller(np.asarray(gains, float), design, np.asarray(lo, float),
                       np.asarray(hi, float), cfg.max_angle_rad,
                       1.0 if cfg.input_level == "rate" else 0.0,
-                      cfg.course.waypoint_radius_m, cfg.integral_limit)
+                      cfg.course.waypoint_radius_m, cfg.integral_limit, cfg.command_limit)
 
 
 @dataclass

@@ -19,7 +19,9 @@ the heading frame (world rotated by -psi) and [u, v, w] the body velocity:
   inputs     u[chan[i]] = hover[chan[i]] + scale[i] * command_i for i = roll, pitch, yaw,
              thrust (scale = 1 / d acc / d input), every input clipped to [lo, hi]; the plant
              receives the clipped input plus the noise row of the step.
-ctrl (9,) = [g_x, g_y, max_angle, level, waypoint_radius, integral_limit, 0, 0, 0].
+             With command_limit > 0, the roll, pitch and yaw inputs stay within +-command_limit
+             of hover (for rate-level inputs: a rate limit, as PX4's MC_*RATE_MAX).
+ctrl (9,) = [g_x, g_y, max_angle, level, waypoint_radius, integral_limit, command_limit, 0, 0].
 """
 
 import math
@@ -167,7 +169,10 @@ def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale,
         for j in range(n_in):
             history[row, j] = hover[j]
         for a in range(4):
-            history[row, chan[a]] += scale[a] * cmd[a]
+            dev = scale[a] * cmd[a]
+            if a < 3 and ctrl[6] > 0.0:
+                dev = min(max(dev, -ctrl[6]), ctrl[6])
+            history[row, chan[a]] += dev
         for j in range(n_in):
             u = min(max(history[row, j], lo[j]), hi[j])
             inputs[k, j] = u

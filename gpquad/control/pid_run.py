@@ -67,7 +67,7 @@ def run_pid(run_dir, cfg: ControlConfig, out_dir, courses: int = 1, seed: int | 
     p = cfg.pid
     started = time.time()
     model, run_cfg, dataset = load_run(run_dir)
-    plant = model_plant(model)
+    plant = model_plant(model, p.model_form)
     sd, lo, hi, span = input_ranges(dataset, p.input_noise, p.input_margin)
     design = design_point(plant, span, source=str(run_dir / "model.json"))
     truth = None

@@ -67,9 +67,20 @@ def plant_from_trees(name: str, trees: dict[str, Tree], input_names, trim, dt: f
                  np.asarray(trim, dtype=float), float(dt))
 
 
-def model_plant(model) -> Plant:
-    """The discovered model's equations (inputs minus the model's trim)."""
-    trees = {t: e.tree for t, e in model.equations.items()}
+def model_plant(model, form: str = "simplified") -> Plant:
+    """The discovered model's equations (inputs minus the model's trim).
+
+    form "simplified": the sympy-simplified equations of model.json's `expr`, re-encoded;
+    "tree": the evolved trees exactly as the fitness kernels evaluate them, with protected
+    division (|b| < 1e-6 gives 1). The two differ where a protected denominator crosses
+    zero: the quickstart's q_dot tree (-100.85 / (34.02 / u_P) - q) / 0.3025 is
+    -3.31 q - 9.80 u_P as an equation, but the tree gives q_dot = -333 rad/s^2 whenever
+    |u_P - trim| < 1e-6, which noise around hover hits now and then."""
+    if form == "tree":
+        trees = {t: e.tree for t, e in model.equations.items()}
+    else:
+        trees = {t: from_sympy(e.sympy(), e.delays, model.input_names)
+                 for t, e in model.equations.items()}
     trim = [model.trim.get(n, 0.0) for n in model.input_names]
     return plant_from_trees("model", trees, model.input_names, trim, model.dt)
 
