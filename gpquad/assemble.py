@@ -34,7 +34,8 @@ from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.experiments import write_model
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import atomic_write_bytes, write_json
-from gpquad.sweep import ASSEMBLY_CHILD, RunKey, assembly_seed, run_dir
+from gpquad.seeding import ASSEMBLY_CHILD, assembly_seed
+from gpquad.sweep_folders import RunKey, run_dir
 from gpquad.variables import STATE_NAMES, TARGET_NAMES
 
 #: States scored by RSE (the integrated velocities and rates), indices into STATE_NAMES.

@@ -185,7 +185,7 @@ def _extensions():
     """Sub-command groups contributed by other packages of gpquad (data, baselines, sweeps)."""
     registers = []
     for module, name in (("gpquad.data.cli", "register"), ("gpquad.baselines.cli", "register"),
-                         ("gpquad.sweep_cli", "register"), ("gpquad.data.score", "register"),
+                         ("gpquad.sweep_cli", "register"), ("gpquad.score_cli", "register"),
                          ("gpquad.control.cli", "register")):
         try:
             mod = __import__(module, fromlist=[name])

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gpquad.config_names import validate_names
+from gpquad.config_tables import build_dataclass
 from gpquad.errors import GpquadError
 from gpquad.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 
@@ -179,81 +179,6 @@ class Config:
         return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
 
 
-def _type_name(tp) -> str:
-    return getattr(tp, "__name__", str(tp)).replace("typing.", "")
-
-
-def _coerce(value, tp, source: str, where: str):
-    """Check `value` against the annotation `tp`; return it in the dataclass's form."""
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-
-    def bad():
-        return GpquadError(f"expected {_type_name(tp)}, got {type(value).__name__} {value!r}",
-                           source=source, field=where)
-
-    if origin in (typing.Union, types.UnionType):
-        for arg in args:
-            try:
-                return _coerce(value, arg, source, where)
-            except GpquadError:
-                continue
-        raise bad()
-    if tp is type(None):
-        if value is None:
-            return None
-        raise bad()
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise bad()
-    if tp is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-        raise bad()
-    if tp is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        raise bad()
-    if tp is str:
-        if isinstance(value, str):
-            return value
-        raise bad()
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise bad()
-        return tuple(_coerce(v, args[0], source, f"{where}[{i}]") for i, v in enumerate(value))
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise bad()
-        return {str(k): _coerce(v, args[1], source, f"{where}.{k}") for k, v in value.items()}
-    raise bad()  # pragma: no cover
-
-
-def build_dataclass(cls, table: dict, source: str, prefix: str = ""):
-    """Instantiate dataclass `cls` from a TOML table; nested dataclass fields are [sections].
-
-    Unknown keys and wrong types raise GpquadError naming `source` and the dotted field.
-    Fields with metadata {"toml": False} cannot be set from TOML.
-    """
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls) if f.metadata.get("toml", True)]
-    kwargs = {}
-    for key, value in table.items():
-        where = f"{prefix}{key}"
-        if key not in names:
-            raise GpquadError(f"unknown key; allowed keys here are {names}", source=source,
-                              field=where)
-        tp = hints[key]
-        if dataclasses.is_dataclass(tp):
-            if not isinstance(value, dict):
-                raise GpquadError("expected a [section] table", source=source, field=where)
-            kwargs[key] = build_dataclass(tp, value, source, f"{where}.")
-        else:
-            kwargs[key] = _coerce(value, tp, source, where)
-    return cls(**kwargs)
-
-
 def _check_probability(value: float, source: str, where: str):
     if not 0.0 <= value <= 1.0:
         raise GpquadError(f"must be a probability in [0, 1], got {value}", source=source,
@@ -319,48 +244,8 @@ def validate(cfg: Config, source: str = "config") -> Config:
         raise GpquadError(f"{s.duration_s} s at {s.rate_hz} Hz is less than two samples; fly "
                           "for longer", source=source, field="simulator.duration_s")
     validate_sweep(cfg.sweep, source)
-    _validate_names(cfg, source)
+    validate_names(cfg, source)
     return cfg
-
-
-def _validate_names(cfg: Config, source: str) -> None:
-    """Seeds, names and lists whose mistakes would otherwise pass silently."""
-    if not 0 <= cfg.seed < 2 ** 63:
-        raise GpquadError(f"seed {cfg.seed} is out of range; give an integer in [0, 2^63)",
-                          source=source, field="seed")
-    targets = cfg.evolution.targets
-    if len(set(targets)) != len(targets):
-        raise GpquadError(f"a target is listed twice in {list(targets)}; give each once",
-                          source=source, field="evolution.targets")
-    files = [str(Path(cfg.base_dir, f).resolve()) for f in cfg.data.files]
-    twice = sorted({f for f in files if files.count(f) > 1})
-    if twice:
-        raise GpquadError(f"{twice[0]} is given twice; give each flight once",
-                          source=source, field="data.files")
-    for name in cfg.data.inputs if not isinstance(cfg.data.inputs, str) else ():
-        reason = reserved_name(name)
-        if reason:
-            raise GpquadError(f"input name '{name}' {reason}; rename it (e.g. 'u_{name}') with "
-                              "[data.columns]", source=source, field="data.inputs")
-
-
-def reserved_name(name: str) -> str | None:
-    """Why `name` cannot name a variable of an exported equation, or None if it can.
-
-    model.json stores sympy-parsable strings: a name that sympy reads as a constant or a
-    function (E, I, N, S, pi, beta, ...) or a Python keyword (lambda) would change their meaning.
-    """
-    import keyword
-
-    import sympy
-
-    if not name.isidentifier():
-        return "is not an identifier (letters, digits and _)"
-    if keyword.iskeyword(name):
-        return "is a Python keyword"
-    if hasattr(sympy, name) or name in ("oo", "zoo", "nan"):
-        return "is a sympy name (a constant or function when the equations are read back)"
-    return None
 
 
 def validate_sweep(sw: SweepConfig, source: str = "config") -> None:

@@ -18,12 +18,9 @@ from gpquad.errors import GpquadError
 from gpquad.evolve.coevolution import Coevolution, RunState
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import HistoryWriter, atomic_write_text, provenance, read_json, write_json
-from gpquad.variables import TARGET_STATE, target_index
-
-
-def target_seed(master_seed: int, target: str) -> np.random.SeedSequence:
-    """Seed of one target's run: independent of which other targets are run."""
-    return np.random.SeedSequence([int(master_seed), target_index(target)])
+from gpquad.runloop import evolve, final_equation
+from gpquad.seeding import target_seed
+from gpquad.variables import TARGET_STATE
 
 
 def default_run_dir(cfg: Config) -> Path:
@@ -85,26 +82,15 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         state = co.init_state(target_seed(cfg.seed, target))
         if history is not None and history_start is not None:
             history.truncate(history_start)
+    report = None if progress is None else (
+        lambda st: progress.iteration(target, st, ev.iterations))
     try:
-        while state.iteration < ev.iterations:
-            co.iterate(state)
-            if history is not None:
-                history.write(state.history)
-            state.history.clear()
-            if checkpoint_path is not None:
-                checkpoint.save(checkpoint_path, state,
-                                {"history_bytes": history.size() if history else 0})
-            if progress is not None:
-                progress.iteration(target, state, ev.iterations)
+        evolve(co, state, ev.iterations, history, checkpoint_path, on_iteration=report)
     except KeyboardInterrupt as exc:
         tree, train, val = co.best(state)
         exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
         raise
-    train_errors = co.training_errors(state)
-    tree, train, val = co.best(state, train_errors)
-    front = [Equation(target, t, dataset.input_names, err, np.nan, dataset.trim).summary()
-             for t, err in co.front(state, train_errors)]
-    return Equation(target, tree, dataset.input_names, train, val, dataset.trim, front), state
+    return final_equation(co, state, dataset, target), state
 
 
 def _same_config(run_dir: Path, cfg: Config) -> bool:

@@ -94,7 +94,7 @@ class SweepProgress:
     # ----------------------------------------------------------------- polling
     def snapshot(self) -> dict:
         """Counts, per-target best errors and iteration totals read from the run folders."""
-        from gpquad.sweep import run_dir
+        from gpquad.sweep_folders import run_dir
 
         done = running = iters = 0
         best_val: dict[str, float] = {}

@@ -25,7 +25,7 @@ from gpquad.assemble import reassemble as rebuild_models
 from gpquad.errors import GpquadError
 from gpquad.model import DiscoveredModel, Equation
 from gpquad.results import atomic_write_text
-from gpquad.sweep import RunKey, run_dir
+from gpquad.sweep_folders import RunKey, run_dir
 from gpquad.tree.export import to_latex
 from gpquad.variables import TARGET_LATEX, TARGET_NAMES, TARGET_STATE, target_index
 

@@ -1,16 +1,8 @@
 """Resumable sweeps: every configured equation identified `runs` times, in parallel.
 
-Layout of a sweep folder::
-
-    DIR/sweep.json                      seed, config fingerprint, grid, provenance
-    DIR/config.json                     the config
-    DIR/runs/<target>/rep<k>/           one run: checkpoint.bin, history.csv,
-                                        status.json (live), result.json (when finished)
-    DIR/model.json, DIR/models/ ...     full models (gpquad.assemble)
-
-Seeds: run (target, k) uses ``SeedSequence(seed).spawn(7)[target_index].spawn(k + 1)[k]``,
-so its result depends on neither the number of jobs, the finishing order, nor the other
-runs of the grid. Child 6 of the root seeds the full-model assembly.
+The folder layout is `gpquad.sweep_folders`; the seeds are `gpquad.seeding.run_seed`, so a
+run's result depends on neither the number of jobs, the finishing order, nor the other runs
+of the grid. The loop of one run is `gpquad.runloop`, the same as `gpquad run`'s.
 
 Kill safety: after each iteration the run appends its history rows to history.csv,
 fsyncs it, then atomically replaces checkpoint.bin, which records history.csv's length.
@@ -22,11 +14,9 @@ skipped from then on.
 from __future__ import annotations
 
 import fcntl
-import hashlib
 import json
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -36,57 +26,13 @@ from gpquad.config import Config, folder_config_dict
 from gpquad.data.dataset import Dataset
 from gpquad.errors import GpquadError
 from gpquad.evolve.coevolution import Coevolution
-from gpquad.model import Equation
 from gpquad.results import HistoryWriter, provenance, write_json
-from gpquad.variables import TARGET_NAMES, target_index
+from gpquad.runloop import evolve, final_equation
+from gpquad.seeding import run_seed
+from gpquad.sweep_folders import RunKey, fingerprint, grid, run_dir
+from gpquad.variables import target_index
 
-#: Index of the root seed's child that seeds full-model assembly (after the six targets).
-ASSEMBLY_CHILD = len(TARGET_NAMES)
 BACKENDS = ("loky", "dask")
-
-
-@dataclass(frozen=True)
-class RunKey:
-    """One cell of the grid."""
-
-    target: str
-    repetition: int
-
-    @property
-    def name(self) -> str:
-        return f"{self.target}/rep{self.repetition:03d}"
-
-
-def run_seed(master_seed: int, target: str, repetition: int) -> np.random.SeedSequence:
-    """Seed of run (target, repetition), spawned from the master seed."""
-    per_target = np.random.SeedSequence(int(master_seed)).spawn(len(TARGET_NAMES) + 1)
-    return per_target[target_index(target)].spawn(repetition + 1)[repetition]
-
-
-def assembly_seed(master_seed: int, index: int) -> np.random.SeedSequence:
-    """Seed of full model `index` (bootstrap draw and input noise)."""
-    child = np.random.SeedSequence(int(master_seed)).spawn(ASSEMBLY_CHILD + 1)[ASSEMBLY_CHILD]
-    return child.spawn(index + 1)[index]
-
-
-def grid(cfg: Config, runs: int | None = None) -> list[RunKey]:
-    """Every (target, repetition), target-major."""
-    n = cfg.sweep.runs if runs is None else runs
-    return [RunKey(t, k) for t in cfg.evolution.targets for k in range(n)]
-
-
-def run_dir(out: Path, key: RunKey) -> Path:
-    return Path(out) / "runs" / key.target / f"rep{key.repetition:03d}"
-
-
-def fingerprint(cfg: Config) -> str:
-    """Hash of everything a run's result depends on (seed, data, simulator, evolution)."""
-    d = cfg.to_dict()
-    relevant = {k: d[k] for k in ("seed", "data", "simulator", "evolution")}
-    relevant["data_paths"] = [str(p) for p in cfg.data_paths()]
-    relevant["evolution"].pop("targets")  # adding targets to a sweep keeps earlier runs valid
-    blob = json.dumps(relevant, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
 
 
 # --------------------------------------------------------------------------- one run
@@ -168,27 +114,23 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
     _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
             iterations=ev.iterations, best_error=float(np.min(state.model_errors)),
             started=started, state="running")
+    def after_iteration(st):
+        _status(status, target=key.target, repetition=key.repetition,
+                iteration=st.iteration, iterations=ev.iterations,
+                best_error=float(np.min(st.model_errors)), started=started, state="running")
+        if os.getppid() != parent:  # loky worker whose sweep was killed: stop here
+            raise OrphanedWorker(f"{key.name}: sweep process gone; stopped at iteration "
+                                 f"{st.iteration} (checkpointed)")
+
     writer = HistoryWriter(hist)
     try:
-        while state.iteration < ev.iterations:
-            co.iterate(state)
-            writer.write(state.history)
-            state.history.clear()
-            checkpoint.fsync_file(hist)
-            meta = {"fingerprint": fp, "target": key.target, "repetition": key.repetition,
-                    "history_bytes": hist.stat().st_size}
-            checkpoint.save(ckpt, state, meta)
-            _status(status, target=key.target, repetition=key.repetition,
-                    iteration=state.iteration, iterations=ev.iterations,
-                    best_error=float(np.min(state.model_errors)), started=started,
-                    state="running")
-            if os.getppid() != parent:  # loky worker whose sweep was killed: stop here
-                raise OrphanedWorker(f"{key.name}: sweep process gone; stopped at iteration "
-                                     f"{state.iteration} (checkpointed)")
+        evolve(co, state, ev.iterations, writer, ckpt,
+               {"fingerprint": fp, "target": key.target, "repetition": key.repetition},
+               after_iteration)
     finally:
         writer.close()
-    tree, train, val = co.best(state)
-    eq = Equation(key.target, tree, dataset.input_names, train, val, dataset.trim)
+    eq = final_equation(co, state, dataset, key.target)
+    train, val = eq.error, eq.validation_error
     result = {"target": key.target, "repetition": key.repetition,
               "seed": {"master": cfg.seed, "spawn_key": list(
                   run_seed(cfg.seed, key.target, key.repetition).spawn_key)},

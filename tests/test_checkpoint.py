@@ -15,7 +15,8 @@ from gpquad import checkpoint
 from gpquad.data.io import load_dataset
 from gpquad.evolve.coevolution import Coevolution, RunState
 from gpquad.progress import SweepProgress
-from gpquad.sweep import RunKey, run_dir, run_sweep
+from gpquad.sweep import run_sweep
+from gpquad.sweep_folders import RunKey, run_dir
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from gpquad.cli import main
 from gpquad.config import DataConfig, config_from_dict
 from gpquad.data.ardupilot import ardupilot_log_table, read_ardupilot
 from gpquad.data.dataflash import DataFlashLog
-from gpquad.data.export import read_generic
+from gpquad.data.generic import read_generic
 from gpquad.data.integration_check import screen_segments
 from gpquad.data.io import load_dataset
 from gpquad.data.px4 import read_px4_csv, read_px4_folder_log

@@ -12,7 +12,9 @@ import pytest
 from gpquad.config import config_from_dict
 from gpquad.errors import GpquadError
 from gpquad.progress import SweepProgress
-from gpquad.sweep import RunKey, assembly_seed, fingerprint, grid, run_dir, run_seed, run_sweep
+from gpquad.seeding import assembly_seed, run_seed
+from gpquad.sweep import run_sweep
+from gpquad.sweep_folders import RunKey, fingerprint, grid, run_dir
 from gpquad.variables import TARGET_NAMES
 
 #: A tiny study: 2 equations x 2 repetitions on a 60 s simulated flight.

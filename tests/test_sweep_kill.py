@@ -14,7 +14,7 @@ import pytest
 from test_sweep import result_files
 
 from gpquad.checkpoint import load
-from gpquad.sweep import grid, run_dir
+from gpquad.sweep_folders import grid, run_dir
 
 #: Long enough per run (about 1 s) that the kill lands inside the grid.
 KILL_TOML = """

@@ -10,7 +10,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from gpquad.config import build_dataclass
+from gpquad.config_tables import build_dataclass
 from gpquad.errors import GpquadError
 
 if sys.version_info >= (3, 11):

@@ -30,7 +30,8 @@ import pandas as pd
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight, flip_body
 from gpquad.data.levels import paper_names, resolve_inputs
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample, runs
+from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.plausibility import runs
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import body_accelerations, integrate
 from gpquad.kernels.quaternion import quat_from_euler

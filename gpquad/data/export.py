@@ -17,17 +17,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from gpquad.data.flight import Flight, _read_table, check_time, read_flight_file
+from gpquad.data.flight import Flight
+from gpquad.data.generic import SEGMENT
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import body_accelerations
 from gpquad.variables import (
-    BODY_VEL_COLUMNS,
-    QUAT_COLUMNS,
-    RATE_COLUMNS,
     TARGET_NAMES,
 )
-
-SEGMENT = "segment"
 
 
 def export_frame(flights: list[Flight]) -> pd.DataFrame:
@@ -58,58 +54,11 @@ def write_export(flights: list[Flight], path) -> Path:
     return path
 
 
-def _exact_flight(df: pd.DataFrame, path: Path, seg, input_names, columns) -> Flight:
-    """One segment of an export, values as stored (checked like any generic file)."""
-    source = f"{path} (segment {seg})"
-    missing = [c for c in ("t", *QUAT_COLUMNS, *BODY_VEL_COLUMNS, *RATE_COLUMNS, *input_names)
-               if columns.get(c, c) not in df.columns]
-    if missing:
-        raise GpquadError(f"missing column '{columns.get(missing[0], missing[0])}' in an "
-                          "exported file", source=source, field=missing[0])
-
-    def col(name):
-        values = pd.to_numeric(df[columns.get(name, name)], errors="coerce").to_numpy(float)
-        if not np.isfinite(values).all():
-            raise GpquadError("NaN or non-numeric values", source=source, field=name)
-        return values
-
-    t = col("t")
-    dt = check_time(t, source)
-    quat = np.column_stack([col(c) for c in QUAT_COLUMNS])
-    norm = np.linalg.norm(quat, axis=1)
-    if np.abs(norm - 1.0).max() > 1e-9:
-        raise GpquadError(f"quaternion norm ranges {norm.min():.6f}..{norm.max():.6f}; an "
-                          "exported file holds unit quaternions", source=source, field="qw")
-    return Flight(name=f"{path.name}#{seg}", t=t,
-                  quat=np.ascontiguousarray(quat),
-                  vel=np.ascontiguousarray(np.column_stack([col(c) for c in BODY_VEL_COLUMNS])),
-                  rates=np.ascontiguousarray(np.column_stack([col(c) for c in RATE_COLUMNS])),
-                  inputs=np.ascontiguousarray(np.column_stack([col(c) for c in input_names])),
-                  input_names=tuple(input_names), meta={"source": str(path), "dt": dt})
-
-
-def read_generic(path, data) -> list[Flight]:
-    """Reader for format "generic": one flight per file, or one per `segment` of an export."""
-    path = Path(path)
-    df = _read_table(path)
-    if SEGMENT not in df.columns:
-        return [read_flight_file(path, data.inputs, data.frame, data.columns)]
-    if data.frame != "NED/FRD":
-        raise GpquadError("an exported file is NED/FRD", source=str(path), field="data.frame")
-    seg = pd.to_numeric(df[SEGMENT], errors="coerce").to_numpy(float)
-    if not np.isfinite(seg).all():
-        raise GpquadError("NaN or non-numeric segment ids", source=str(path), field=SEGMENT)
-    order = list(dict.fromkeys(seg.tolist()))
-    return [_exact_flight(df[seg == s].reset_index(drop=True), path, int(s), data.inputs,
-                          data.columns) for s in order]
-
-
 def export_flights(path, fmt: str | None, config=None) -> tuple[list[Flight], list[str]]:
     """Flights of a log after the pipeline and the per-segment integration check."""
     from gpquad.config import Config, load_config, validate
-    from gpquad.data.cli import guess_format
     from gpquad.data.integration_check import screen_segments
-    from gpquad.data.io import READERS
+    from gpquad.data.io import READERS, guess_format
 
     path = Path(path)
     if not path.exists():

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.plausibility import (
+    MAX_PLAUSIBLE_RATE,
     check_excitation,
     check_rates_follow_quaternion,
     check_sample_rate,
@@ -29,8 +30,6 @@ from gpquad.variables import (
     WORLD_VEL_COLUMNS,
 )
 
-#: Body rates above this (rad/s) are taken as a sign that the file is in deg/s.
-MAX_PLAUSIBLE_RATE = 40.0
 #: Allowed relative jitter of the sample period.
 DT_TOLERANCE = 0.01
 

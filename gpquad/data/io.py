@@ -19,7 +19,7 @@ from gpquad.errors import GpquadError
 
 def _read_generic(path: Path, data: DataConfig) -> list[Flight]:
     """One flight per file; an export of `gpquad data export` gives one per segment."""
-    from gpquad.data.export import read_generic
+    from gpquad.data.generic import read_generic
 
     return read_generic(path, data)
 
@@ -47,6 +47,48 @@ def _register_log_readers() -> None:
 
 
 _register_log_readers()
+
+
+def _is_generic_file(path: Path) -> bool:
+    """True for a CSV/Parquet already in gpquad's generic format (what `gpquad run` reads)."""
+    import numpy as np
+    import pandas as pd
+
+    from gpquad.data.flight import DT_TOLERANCE
+    from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
+
+    try:
+        if path.suffix.lower() == ".csv":
+            frame = pd.read_csv(path, nrows=2000)
+        else:
+            frame = pd.read_parquet(path)
+    except Exception:  # unreadable here: let the table reader report it properly
+        return False
+    if not {"t", *QUAT_COLUMNS, *RATE_COLUMNS} <= set(frame.columns) or len(frame) < 3:
+        return False
+    steps = np.diff(pd.to_numeric(frame["t"], errors="coerce").to_numpy(dtype=float))
+    dt = np.median(steps)
+    return bool(dt > 0 and np.all(np.abs(steps - dt) <= DT_TOLERANCE * dt))
+
+
+def guess_format(path: Path, allow_generic: bool = True) -> str:
+    """Format name from a path: folder -> px4-csv, .ulg, .bbl/.bfl; .csv/.parquet -> generic
+    when already uniform with the generic columns (as `gpquad run` reads it; only if
+    allow_generic), else table."""
+    if path.is_dir():
+        return "px4-csv"
+    suffix = path.suffix.lower()
+    if suffix == ".ulg":
+        return "ulog"
+    if suffix in (".bbl", ".bfl", ".txt"):
+        return "betaflight"
+    if suffix == ".bin":
+        return "ardupilot"
+    if suffix in (".csv", ".parquet", ".pq"):
+        return "generic" if allow_generic and _is_generic_file(path) else "table"
+    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, "
+                      "ulog, betaflight, ardupilot, table, generic)", source=str(path),
+                      field="--format")
 
 
 def _read_file(cfg: Config, reader, path: Path) -> list[Flight]:

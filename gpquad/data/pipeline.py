@@ -38,6 +38,7 @@ from scipy.ndimage import uniform_filter1d
 from scipy.signal import firwin
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
+from gpquad.data.plausibility import check_stream_time, runs
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import rates_from_quaternions, world_to_body
 from gpquad.kernels.quaternion import euler_array
@@ -118,22 +119,6 @@ class LogTable:
 def is_measured(description: str) -> bool:
     """Whether a `LogTable.measured` description says the signal is real."""
     return description.startswith("measured")
-
-
-def check_stream_time(t: np.ndarray, source: str, field: str) -> None:
-    """Timestamps must be finite and strictly increasing (no duplicates, no steps back)."""
-    if len(t) < 2:
-        raise GpquadError(f"only {len(t)} samples", source=source, field=field)
-    if not np.isfinite(t).all():
-        raise GpquadError("non-numeric or NaN timestamps", source=source, field=field)
-    steps = np.diff(t)
-    bad = np.flatnonzero(steps <= 0)
-    if bad.size:
-        i = int(bad[0])
-        kind = "duplicate" if steps[i] == 0 else "backwards"
-        raise GpquadError(f"{bad.size} {kind} timestamps (first at row {i + 1}: {t[i]:.6f} then "
-                          f"{t[i + 1]:.6f} s); the log is damaged or unsorted", source=source,
-                          field=field)
 
 
 def _continuous_quat(q: np.ndarray) -> np.ndarray:
@@ -224,63 +209,6 @@ def resample(streams: list[Stream], rate_hz: float, max_gap_s: float
     for row, (_, t, _, gap) in zip(info, clean, strict=False):
         row["gaps"] = int((np.diff(t) > gap).sum())
     return pd.DataFrame(cols), valid, info
-
-
-def check_rate_peak(values: np.ndarray, source: str, fields: tuple[str, ...]) -> None:
-    """Rates (M, 3) beyond MAX_PLAUSIBLE_RATE rad/s are a one-line error naming the axis."""
-    values = np.asarray(values, dtype=float).reshape(-1, len(fields))
-    finite = np.where(np.isfinite(values), np.abs(values), 0.0)
-    peaks = finite.max(axis=0) if len(values) else np.zeros(len(fields))
-    j = int(np.argmax(peaks))
-    if peaks[j] > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"body rates reach {peaks[j]:.1f}, implausible in rad/s: degrees "
-                          "where radians are expected? convert deg/s to rad/s", source=source,
-                          field=fields[j])
-
-
-#: Axes rotating less than this (RMS, rad/s) are not used to check the gyro's units.
-UNIT_CHECK_MIN_RATE = 0.05
-
-
-def check_rate_units(table: pd.DataFrame, valid: np.ndarray, source: str,
-                     fields: tuple[str, str, str]) -> None:
-    """Compare the logged body rates with those implied by the quaternion, axis by axis.
-
-    On the longest gap-free run, the least-squares scale s of log rate = s * quaternion rate
-    is about 1 for consistent data, about 57 for deg/s logged as rad/s, and about -1 for an
-    axis whose sign follows another frame (FLU vs FRD). The two last are one-line errors
-    naming `fields[axis]`. Axes that hardly rotate are not judged.
-    """
-    if not all(c in table.columns for c in RATE_COLS) or not valid.any():
-        return
-    a, b = max(runs(valid), key=lambda r: r[1] - r[0])
-    if b - a < 3:
-        return
-    t = table["t"].to_numpy()
-    quat = np.ascontiguousarray(table[list(QUAT_COLS)].to_numpy()[a:b])
-    implied = rates_from_quaternions(quat, float(t[a + 1] - t[a]))
-    logged = table[list(RATE_COLS)].to_numpy()[a: b - 1]
-    for j in range(3):
-        power = float(np.mean(implied[:, j] ** 2))
-        if power < UNIT_CHECK_MIN_RATE ** 2:
-            continue
-        scale = float(np.mean(logged[:, j] * implied[:, j])) / power
-        if 20.0 < scale < 200.0:
-            raise GpquadError(f"body rates are {scale:.0f} times those the attitude quaternion "
-                              "implies: degrees where radians are expected? convert deg/s to "
-                              "rad/s", source=source, field=fields[j])
-        if scale < -0.5:
-            raise GpquadError(f"body rate {RATE_COLS[j]} has the opposite sign of the rate the "
-                              f"attitude quaternion implies (scale {scale:.2f}): rates and "
-                              "attitude in different frames? declare data.frame or flip the "
-                              "column", source=source, field=fields[j])
-
-
-def runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) index ranges of the True runs of a boolean array."""
-    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
-    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=False)]
 
 
 def lowpass_taps(taps: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:

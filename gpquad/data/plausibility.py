@@ -17,10 +17,14 @@ is, so the same questions are asked of it here, each as a one-line error naming 
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
 from gpquad.errors import GpquadError
 from gpquad.kernels.integrator import rates_from_quaternions
+from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
 
+#: Body rates above this (rad/s) are implausible for a multirotor: degrees logged as radians.
+MAX_PLAUSIBLE_RATE = 40.0
 #: Plausible sample rates of a flight log (Hz).
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 2000.0
 #: Axes rotating less than this (RMS about zero, rad/s) are not judged against the quaternion.
@@ -95,3 +99,76 @@ def check_excitation(rates: np.ndarray, vel: np.ndarray, inputs: np.ndarray, inp
         raise GpquadError(f"the inputs {list(input_names)} never change: nothing to identify "
                           "their effect from; check the input columns", source=source,
                           field=input_names[0])
+
+
+def check_stream_time(t: np.ndarray, source: str, field: str) -> None:
+    """Timestamps must be finite and strictly increasing (no duplicates, no steps back)."""
+    if len(t) < 2:
+        raise GpquadError(f"only {len(t)} samples", source=source, field=field)
+    if not np.isfinite(t).all():
+        raise GpquadError("non-numeric or NaN timestamps", source=source, field=field)
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        i = int(bad[0])
+        kind = "duplicate" if steps[i] == 0 else "backwards"
+        raise GpquadError(f"{bad.size} {kind} timestamps (first at row {i + 1}: {t[i]:.6f} then "
+                          f"{t[i + 1]:.6f} s); the log is damaged or unsorted", source=source,
+                          field=field)
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index ranges of the True runs of a boolean array."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=False)]
+
+
+def check_rate_peak(values: np.ndarray, source: str, fields: tuple[str, ...]) -> None:
+    """Rates (M, 3) beyond MAX_PLAUSIBLE_RATE rad/s are a one-line error naming the axis."""
+    values = np.asarray(values, dtype=float).reshape(-1, len(fields))
+    finite = np.where(np.isfinite(values), np.abs(values), 0.0)
+    peaks = finite.max(axis=0) if len(values) else np.zeros(len(fields))
+    j = int(np.argmax(peaks))
+    if peaks[j] > MAX_PLAUSIBLE_RATE:
+        raise GpquadError(f"body rates reach {peaks[j]:.1f}, implausible in rad/s: degrees "
+                          "where radians are expected? convert deg/s to rad/s", source=source,
+                          field=fields[j])
+
+
+#: Axes rotating less than this (RMS, rad/s) are not used to check the gyro's units.
+UNIT_CHECK_MIN_RATE = 0.05
+
+
+def check_rate_units(table: pd.DataFrame, valid: np.ndarray, source: str,
+                     fields: tuple[str, str, str]) -> None:
+    """Compare the logged body rates with those implied by the quaternion, axis by axis.
+
+    On the longest gap-free run, the least-squares scale s of log rate = s * quaternion rate
+    is about 1 for consistent data, about 57 for deg/s logged as rad/s, and about -1 for an
+    axis whose sign follows another frame (FLU vs FRD). The two last are one-line errors
+    naming `fields[axis]`. Axes that hardly rotate are not judged.
+    """
+    if not all(c in table.columns for c in RATE_COLUMNS) or not valid.any():
+        return
+    a, b = max(runs(valid), key=lambda r: r[1] - r[0])
+    if b - a < 3:
+        return
+    t = table["t"].to_numpy()
+    quat = np.ascontiguousarray(table[list(QUAT_COLUMNS)].to_numpy()[a:b])
+    implied = rates_from_quaternions(quat, float(t[a + 1] - t[a]))
+    logged = table[list(RATE_COLUMNS)].to_numpy()[a: b - 1]
+    for j in range(3):
+        power = float(np.mean(implied[:, j] ** 2))
+        if power < UNIT_CHECK_MIN_RATE ** 2:
+            continue
+        scale = float(np.mean(logged[:, j] * implied[:, j])) / power
+        if 20.0 < scale < 200.0:
+            raise GpquadError(f"body rates are {scale:.0f} times those the attitude quaternion "
+                              "implies: degrees where radians are expected? convert deg/s to "
+                              "rad/s", source=source, field=fields[j])
+        if scale < -0.5:
+            raise GpquadError(f"body rate {RATE_COLUMNS[j]} has the opposite sign of the rate the "
+                              f"attitude quaternion implies (scale {scale:.2f}): rates and "
+                              "attitude in different frames? declare data.frame or flip the "
+                              "column", source=source, field=fields[j])

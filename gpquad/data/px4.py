@@ -27,15 +27,8 @@ import pandas as pd
 
 from gpquad.data.flight import Flight
 from gpquad.data.levels import check_input_rates, resolve_inputs
-from gpquad.data.pipeline import (
-    LogTable,
-    Stream,
-    check_rate_peak,
-    check_rate_units,
-    flights_from_log,
-    in_flight_mask,
-    resample,
-)
+from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.plausibility import check_rate_peak, check_rate_units
 from gpquad.data.px4_signals import UNITS, counter_labels, optional_streams, torque_stream
 from gpquad.data.px4_signals import levels as px4_levels
 from gpquad.data.resets import reset_mask

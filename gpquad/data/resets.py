@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from gpquad.data.flight import MAX_PLAUSIBLE_RATE
+from gpquad.data.plausibility import MAX_PLAUSIBLE_RATE
 from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
 
 #: Samples this close (s) to a reset are dropped on both sides.

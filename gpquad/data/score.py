@@ -10,7 +10,6 @@ prediction is non-finite or leaves 10 x the data's largest |state|.
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +42,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
               part: str = "auto") -> dict:
     """RSE per state, window counts and what was scored (see the module docstring)."""
     from gpquad.config import load_folder_config
-    from gpquad.data.cli import guess_format
     from gpquad.data.dataset import build_dataset
     from gpquad.data.integration_check import screen_segments
-    from gpquad.data.io import READERS
+    from gpquad.data.io import READERS, guess_format
     from gpquad.scoring import (
         SCORED_INDEX,
         SCORED_STATES,
@@ -112,46 +110,3 @@ def format_score(result: dict) -> str:
              head, vals]
     lines.extend(f"warning: {d}" for d in result["dropped"])
     return "\n".join(lines)
-
-
-def _cmd_score(args) -> int:
-    result = score_log(args.run, args.data, args.horizon_s, args.format, args.part)
-    print(json.dumps(result) if args.json else format_score(result))
-    return 0
-
-
-def register(subparsers) -> None:
-    """Add `gpquad score`."""
-    p = subparsers.add_parser("score", help="RSE of a run's equations flown over a flight log")
-    p.add_argument("run", help="run folder")
-    p.add_argument("--data", required=True, help="log: ulog2csv folder, .ulg, .bbl, .bin, "
-                                                 ".csv/.parquet (an export or generic file)")
-    p.add_argument("--format", help="log format (default: from the path)")
-    p.add_argument("--horizon-s", type=float, default=7.0, help="window length, s (default 7)")
-    p.add_argument("--part", default="auto", choices=PARTS,
-                   help="all windows, or the held-out part (auto: the held-out part of a log "
-                        "the run trained on, else all)")
-    p.add_argument("--json", action="store_true", help="one JSON object")
-    p.set_defaults(func=_cmd_score)
-
-
-def _cmd_export(args) -> int:
-    from gpquad.data.export import export_flights, write_export
-
-    flights, dropped = export_flights(args.path, args.format, args.config)
-    for d in dropped:
-        print(f"warning: {d}")
-    out = write_export(flights, args.out)
-    print(f"wrote {len(flights)} segment(s), {sum(len(f) for f in flights)} samples, inputs "
-          f"{', '.join(flights[0].input_names)}, to {out}")
-    return 0
-
-
-def register_export(sub) -> None:
-    """Add `gpquad data export` to the `data` sub-commands."""
-    p = sub.add_parser("export", help="engine-ready data after the pipeline, as CSV/Parquet")
-    p.add_argument("path", help="log: ulog2csv folder, .ulg, .bbl/.BFL, .bin, .csv/.parquet")
-    p.add_argument("--out", required=True, help="output .csv or .parquet")
-    p.add_argument("--format", help="log format (default: from the path)")
-    p.add_argument("--config", help="experiment TOML whose [data] settings to use")
-    p.set_defaults(func=_cmd_export)

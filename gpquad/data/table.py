@@ -21,15 +21,8 @@ from gpquad.data.flight import (
     flip_body,
     flip_world,
 )
-from gpquad.data.pipeline import (
-    LogTable,
-    Stream,
-    check_rate_peak,
-    check_rate_units,
-    flights_from_log,
-    in_flight_mask,
-    resample,
-)
+from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.plausibility import check_rate_peak, check_rate_units
 from gpquad.errors import GpquadError
 from gpquad.variables import (
     BODY_VEL_COLUMNS,

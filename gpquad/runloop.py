@@ -1,0 +1,47 @@
+"""The one run loop, shared by `gpquad run` (gpquad.experiments) and `gpquad sweep`.
+
+`evolve` iterates a coevolution state to its last iteration. After every iteration it
+appends the iteration's history rows (written and fsynced by HistoryWriter), then replaces
+the checkpoint atomically, recording the history's length, so that a run killed at any
+moment resumes from its last iteration with no duplicated history rows. `final_equation`
+picks the reported equation and its Pareto front the same way for both commands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from gpquad import checkpoint
+from gpquad.data.dataset import Dataset
+from gpquad.evolve.coevolution import Coevolution, RunState
+from gpquad.model import Equation
+from gpquad.results import HistoryWriter
+
+
+def evolve(co: Coevolution, state: RunState, iterations: int,
+           history: HistoryWriter | None = None, checkpoint_path: Path | None = None,
+           meta: dict | None = None,
+           on_iteration: Callable[[RunState], None] | None = None) -> RunState:
+    """Iterate `state` until `iterations`; history, checkpoint, then `on_iteration(state)`."""
+    while state.iteration < iterations:
+        co.iterate(state)
+        if history is not None:
+            history.write(state.history)
+        state.history.clear()
+        if checkpoint_path is not None:
+            checkpoint.save(checkpoint_path, state,
+                            {**(meta or {}), "history_bytes": history.size() if history else 0})
+        if on_iteration is not None:
+            on_iteration(state)
+    return state
+
+
+def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str
+                   ) -> Equation:
+    """The reported equation (best training error of the final climbers) with its front."""
+    train_errors = co.training_errors(state)
+    tree, train, val = co.best(state, train_errors)
+    front = [Equation(target, t, dataset.input_names, err, float("nan"), dataset.trim).summary()
+             for t, err in co.front(state, train_errors)]
+    return Equation(target, tree, dataset.input_names, train, val, dataset.trim, front)
