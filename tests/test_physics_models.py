@@ -164,3 +164,25 @@ def test_cli_config_error_is_one_line(tmp_path, capsys):
     assert main(["physics", "thrust", str(bad), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "truth.vehicle" in err[0]
+
+
+def test_drag_fit_warns_when_an_axis_is_not_excited(monkeypatch):
+    from gpquad.physics import identify
+    from gpquad.physics.config import DragConfig, PhysicsConfig
+
+    rng = np.random.default_rng(8)
+    n = 400
+    vel = np.column_stack([np.linspace(0, 4, n), rng.normal(0, 0.01, n), np.zeros(n)])
+    rotor = np.full((n, 4), 470.0) + rng.normal(0, 5, (n, 4))
+    # y is barely excited and its noise happens to point the wrong way: the bad case
+    force = np.column_stack([-9.5e-4 * vel[:, 0] * rotor.mean(1),
+                             1e-3 * vel[:, 1] * rotor.mean(1), np.full(n, 9.81)])
+    flight = {"rotor": rotor, "vel_body": vel, "force": force, "name": "forward"}
+    monkeypatch.setattr(identify, "load_flight", lambda cfg, name, yaw=False: flight)
+    monkeypatch.setattr(identify, "vehicle_params", lambda name: {
+        "num_rotors": 4, "mass": 0.5, "k_eta": 5.57e-6, "k_d": 1.19e-4})
+    res = identify.identify_drag(PhysicsConfig(drag=DragConfig(flights=("forward",))))
+    assert res["fits"]["x"]["relative_error"]["k_dx"] == pytest.approx(0.0, abs=0.02)
+    warnings = res.get("warnings", [])
+    assert any(w.startswith("y: k_dy") for w in warnings)
+    assert not any(w.startswith("x") for w in warnings)

@@ -53,7 +53,8 @@ def drag_markdown(res: dict, cfg: PhysicsConfig) -> str:
         f"method {cfg.regression.method}, seed {cfg.seed})", "",
         "Target f_x, f_y (m/s^2); eq. (18): k_d v w_s, optionally + c |V| v (parasitic). "
         "Truth: -4 k_d / m and -c_D / m from rotorpy's parameters.", ""]
-        + _fits_table(res["fits"], res["truth"]) + [""])
+        + _fits_table(res["fits"], res["truth"]) + [""]
+        + [f"Warning: {w}" for w in res.get("warnings", [])] + [""])
 
 
 def _ordered(rmse: dict, models=THESIS_ORDER) -> bool:

@@ -112,6 +112,11 @@ def identify_drag(cfg: PhysicsConfig) -> dict:
             res["relative_error"] = {n: _rel(c, truth[n]) for n, c in zip(names, res["coef"])}
             key = f"{'xy'[axis]}{'_parasitic' if parasitic else ''}"
             out["fits"][key] = res
+            if res["coef"][0] >= 0:
+                out.setdefault("warnings", []).append(
+                    f"{key}: {names[0]} = {res['coef'][0]:.3g} is not negative (drag must "
+                    f"oppose the velocity); the flights {out['flights']} barely move along "
+                    f"{'xy'[axis]}")
     out["_series"] = {"flights": flights}
     return out
 

@@ -28,6 +28,7 @@ from gpquad.errors import GpquadError
 G = 9.81
 PARAM_SETS = ("hummingbird", "crazyflie")
 MANOEUVRES = ("hover", "forward", "lateral", "L", "U", "square")
+FLIGHT_VERSION = 2  # part of the cache key: bump when the paths or the logging change
 
 
 def vehicle_params(name: str) -> dict:
@@ -56,8 +57,7 @@ def waypoints(manoeuvre: str, side: float, altitude: float = 1.0,
     the vehicle faces its direction of travel), plus identification flights."""
     s, h = side, altitude
     paths = {
-        "hover": [[0, 0, h], [0, 0, h + 0.1 * s], [0, 0, h - 0.1 * s], [0, 0, h + 0.05 * s],
-                  [0, 0, h]],
+        "hover": [[0, 0, h], [0, 0, h + 0.4], [0, 0, h - 0.4], [0, 0, h + 0.2], [0, 0, h]],
         "forward": [[0, 0, h], [1.5 * s, 0, h + 0.4 * s], [3 * s, 0, h], [4.5 * s, 0, h + 0.4 * s],
                     [6 * s, 0, h]],
         "lateral": [[0, 0, h], [0, 1.5 * s, h + 0.4 * s], [0, 3 * s, h],
@@ -136,7 +136,8 @@ def cached_flight(spec: dict, cache_dir: Path | None) -> dict:
     import rotorpy
 
     spec = dict(spec)
-    key_spec = {**spec, "rotorpy": getattr(rotorpy, "__version__", "3")}
+    key_spec = {**spec, "rotorpy": getattr(rotorpy, "__version__", "3"),
+                "version": FLIGHT_VERSION}
     if cache_dir is not None:
         path = Path(cache_dir) / f"{spec['manoeuvre']}-{flight_key(key_spec)}.npz"
         if path.is_file():
