@@ -26,7 +26,9 @@ def _fits_table(fits: dict, truth: dict) -> list[str]:
              "|---|---|---|---|---|---|---|---|---|"]
     for key, res in fits.items():
         for name, c, se in zip(res["names"], res["coef"], res["se"]):
-            lines.append(f"| {key} | {name} | {c:.4g} | {se:.2g} | {truth.get(name, 0):.4g} | "
+            true = truth.get(name)
+            true_text = "-" if true is None else f"{true:.4g}"
+            lines.append(f"| {key} | {name} | {c:.4g} | {se:.2g} | {true_text} | "
                          f"{_pct(res['relative_error'].get(name))} | {res['r2']:.4f} | "
                          f"{res.get('r2_val', float('nan')):.4f} | "
                          f"{res.get('rmse_val', float('nan')):.4f} |")

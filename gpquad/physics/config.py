@@ -31,6 +31,7 @@ class RegressionConfig:
     smoothing_window: int = 1        # causal moving average on the accelerometer, samples
     validation_fraction: float = 0.3  # last part of each identification flight
     parasitic_drag: bool = True
+    drag_intercept: bool = False     # also fit a constant per axis (residual accelerometer bias)
     wls_window: int = 25
 
 

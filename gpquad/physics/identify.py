@@ -100,6 +100,9 @@ def identify_drag(cfg: PhysicsConfig) -> dict:
             Xs, ys, Xv, yv = [], [], [], []
             for f in flights:
                 X, names = drag_regressors(axis, f["rotor"], f["vel_body"], parasitic)
+                if cfg.regression.drag_intercept:
+                    X = np.column_stack([X, np.ones(len(X))])
+                    names = names + [f"bias_{'xy'[axis]}"]
                 y = f["force"][:, axis]
                 tr, va = split(len(y), cfg.regression.validation_fraction)
                 Xs.append(X[tr])
@@ -109,7 +112,8 @@ def identify_drag(cfg: PhysicsConfig) -> dict:
             res = fit(np.vstack(Xs), np.concatenate(ys), names, cfg.regression.method,
                       X_val=np.vstack(Xv), y_val=np.concatenate(yv),
                       window=cfg.regression.wls_window)
-            res["relative_error"] = {n: _rel(c, truth[n]) for n, c in zip(names, res["coef"])}
+            res["relative_error"] = {n: _rel(c, truth[n]) for n, c in zip(names, res["coef"])
+                                     if n in truth}
             key = f"{'xy'[axis]}{'_parasitic' if parasitic else ''}"
             out["fits"][key] = res
             if res["coef"][0] >= 0:

@@ -58,10 +58,12 @@ def waypoints(manoeuvre: str, side: float, altitude: float = 1.0,
     s, h = side, altitude
     paths = {
         "hover": [[0, 0, h], [0, 0, h + 0.4], [0, 0, h - 0.4], [0, 0, h + 0.2], [0, 0, h]],
-        "forward": [[0, 0, h], [1.5 * s, 0, h + 0.4 * s], [3 * s, 0, h], [4.5 * s, 0, h + 0.4 * s],
-                    [6 * s, 0, h]],
+        # out and back (forward then backward flight): the sign change of the body velocity
+        # separates drag from a constant accelerometer bias
+        "forward": [[0, 0, h], [1.5 * s, 0, h + 0.4 * s], [3 * s, 0, h], [1.5 * s, 0, h - 0.2 * s],
+                    [0, 0, h]],
         "lateral": [[0, 0, h], [0, 1.5 * s, h + 0.4 * s], [0, 3 * s, h],
-                    [0, 4.5 * s, h + 0.4 * s], [0, 6 * s, h]],
+                    [0, 1.5 * s, h - 0.2 * s], [0, 0, h]],
         "L": [[0, 0, h], [s, 0, h], [s, s, h]],
         "U": [[0, 0, h], [s, 0, h], [s, s, h], [0, s, h]],
         "square": [[0, 0, h], [s, 0, h], [s, s, h], [0, s, h], [0, 0, h]],
@@ -136,8 +138,10 @@ def cached_flight(spec: dict, cache_dir: Path | None) -> dict:
     import rotorpy
 
     spec = dict(spec)
+    pts, yaws = waypoints(spec["manoeuvre"], spec.get("side", 4.0), yaw=spec.get("yaw", False))
     key_spec = {**spec, "rotorpy": getattr(rotorpy, "__version__", "3"),
-                "version": FLIGHT_VERSION}
+                "version": FLIGHT_VERSION, "waypoints": pts.round(9).tolist(),
+                "yaws": yaws.round(9).tolist()}
     if cache_dir is not None:
         path = Path(cache_dir) / f"{spec['manoeuvre']}-{flight_key(key_spec)}.npz"
         if path.is_file():
