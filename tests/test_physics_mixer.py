@@ -165,3 +165,15 @@ def test_missing_log_index(tmp_path):
     shutil.copy(GIMBAL, src)
     with pytest.raises(GpquadError, match="log 9 does not exist"):
         check_file(src, log_index=9)
+
+
+def test_thrust_linearization_matches_betaflight_formula():
+    from gpquad.physics.mixer import thrust_linearization
+
+    m = np.array([-0.1, 0.0, 0.25, 0.5, 1.0])
+    np.testing.assert_array_equal(thrust_linearization(m, 0), m)
+    t, b = 0.2, 0.8 / 0.4
+    out = thrust_linearization(m, 20)
+    np.testing.assert_allclose(out[2:], np.sqrt(m[2:] / t + b * b) - b)
+    assert out[0] == -0.1 and out[1] == 0.0 and out[-1] == pytest.approx(1.0)
+    assert out[3] > 0.5                     # raises mid throttle, keeps the ends

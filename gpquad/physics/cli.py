@@ -21,6 +21,7 @@ def mixer_markdown(results: list[dict], skipped: list[str], path: str) -> str:
                   f"{r['duration_s']:.1f} s)", "",
                   f"Low end {r['low']:.2f} ({r['low_from']}), high {r['high']:.0f}; "
                   f"yaw_motors_reversed = {r['yaw_reversed']} ({r['yaw_reversed_from']}); "
+                  f"thrust_linear = {r['thrust_linear']:g} % ({r['thrust_linear_from']}); "
                   f"saturated {100 * r['saturated_fraction']:.1f} % of armed frames in "
                   f"{r['saturated_stretches']} stretches.", "",
                   f"| motor | RMSE {main} | R^2 {main} | RMSE unsaturated | bias | "
@@ -42,7 +43,7 @@ def _cmd_mixer(args) -> int:
     started = time.time()
     path = Path(args.log)
     results, skipped = check_file(path, args.log_index, args.throttle, args.yaw_reversed,
-                                  args.allow_truncated)
+                                  args.allow_truncated, args.thrust_linear)
     out = Path(args.out) if args.out else default_out("mixer", path.stem)
     out.mkdir(parents=True, exist_ok=True)
     if not args.no_figures:
@@ -56,6 +57,7 @@ def _cmd_mixer(args) -> int:
     md = mixer_markdown(results, skipped, str(path))
     write_run(out, "mixer", summary, md, config={"log": str(path), "log_index": args.log_index,
               "throttle": args.throttle, "yaw_reversed": args.yaw_reversed,
+              "thrust_linear": args.thrust_linear,
               "allow_truncated": args.allow_truncated}, seed=None, started=started)
     for s in skipped:
         print(f"skipped: {s}")
@@ -88,6 +90,8 @@ def register(subparsers) -> None:
                     help="mixer throttle (setpoint[3]) or stick throttle (rcCommand[3])")
     mx.add_argument("--yaw-reversed", choices=["auto", "yes", "no"], default="auto",
                     help="yaw_motors_reversed (4.2 logs do not record it; auto fits both)")
+    mx.add_argument("--thrust-linear", default="auto",
+                    help="thrust_linear percent (4.2 logs do not record it; auto fits 0..40)")
     mx.add_argument("--allow-truncated", action="store_true",
                     help="use the frames before a truncated or corrupt tail")
     mx.add_argument("--no-figures", action="store_true")

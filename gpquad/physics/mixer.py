@@ -66,6 +66,17 @@ def motor_commands(mix: np.ndarray, throttle: np.ndarray, mixer: np.ndarray,
     return scaled + thr[:, None] * mixer[:, 0][None, :], over
 
 
+def thrust_linearization(commands: np.ndarray, percent: float) -> np.ndarray:
+    """Betaflight's `thrust_linear` (pid.c pidApplyThrustLinearization, default 0 in 4.2 and
+    not written to 4.2 headers): M -> sqrt(M / t + b^2) - b, b = (1 - t) / (2 t), for M > 0."""
+    if percent == 0:
+        return commands
+    t = percent / 100.0
+    b = (1.0 - t) / (2.0 * t)
+    pos = np.maximum(commands, 0.0)
+    return np.where(commands > 0, np.sqrt(pos / t + b * b) - b, commands)
+
+
 def dshot_output(commands: np.ndarray, low: float, high: float) -> np.ndarray:
     """DShot values, eq. (16): low + M_cmd (high - low), clipped and truncated like Betaflight."""
     out = np.clip(low + (high - low) * commands, low, high)

@@ -6,7 +6,9 @@ Saturated samples: the rate mix did not fit (range > 1, Betaflight scales it dow
 command left [0, 1] before clipping, or a logged motor sits at the top of the output range.
 
 Betaflight 4.2 does not log yaw_motors_reversed ("props out"); with `yaw_reversed="auto"` both
-yaw directions are fitted and the one with the lower RMSE is kept (and reported).
+yaw directions are fitted and the one with the lower RMSE is kept (and reported). Nor does it
+log `thrust_linear` (percent, default 0); with `thrust_linear="auto"` the integer percent in
+0..40 with the lowest RMSE is kept (and reported).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from gpquad.physics.mixer import (
     motor_commands,
     rate_mix,
     runs_of,
+    thrust_linearization,
 )
 
 DSHOT_PROTOCOLS = (5, 6, 7, 8)  # Betaflight 4.2 PWM_TYPE_DSHOT150..PROSHOT1000
@@ -59,17 +62,20 @@ def motor_metrics(pred: np.ndarray, logged: np.ndarray, keep: np.ndarray,
     return out
 
 
-def _predict(log: MixerLog, low: float, high: float, airmode: bool, yaw_reversed: bool):
+def _predict(log: MixerLog, low: float, high: float, airmode: bool, yaw_reversed: bool,
+             thrust_linear: float = 0.0):
     mixer = LAYOUTS["quadx"]
     mix = rate_mix(log.pid_sums, mixer, log.pidsum_limit, log.pidsum_limit_yaw, yaw_reversed)
     cmd, over = motor_commands(mix, log.throttle, mixer, airmode)
+    cmd = thrust_linearization(cmd, thrust_linear)
     pred = np.trunc(np.clip(low + (high - low) * cmd, low, high))
     out_of_range = np.any((cmd < -1e-9) | (cmd > 1.0 + 1e-9), axis=1)
     return pred, over | out_of_range
 
 
-def check_log(log: MixerLog, yaw_reversed: str = "auto") -> dict:
-    """Metrics of one log (see the module docstring); `yaw_reversed` is auto, yes or no."""
+def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear="auto") -> dict:
+    """Metrics of one log (see the module docstring); `yaw_reversed` is auto, yes or no;
+    `thrust_linear` is "auto" or a percent."""
     low, high, low_from = output_range(log)
     armed = np.all(log.motors >= DSHOT_MIN, axis=1)
     if armed.sum() < 2:
@@ -82,25 +88,38 @@ def check_log(log: MixerLog, yaw_reversed: str = "auto") -> dict:
     if yaw_reversed not in choices:
         raise GpquadError(f"yaw_reversed must be auto, yes or no, not '{yaw_reversed}'",
                           field="--yaw-reversed")
+    if thrust_linear == "auto":
+        linears = range(0, 41)
+    else:
+        try:
+            linears = [float(thrust_linear)]
+        except ValueError:
+            raise GpquadError(f"thrust_linear must be auto or a percent, not '{thrust_linear}'",
+                              field="--thrust-linear") from None
+        if not 0 <= linears[0] <= 150:
+            raise GpquadError("thrust_linear must be in 0..150 %", field="--thrust-linear")
     best = None
     for rev in choices[yaw_reversed]:
-        pred, flag = _predict(log, low, high, airmode, rev)
-        sse = float(np.sum((pred - log.motors)[armed] ** 2))
-        if best is None or sse < best[0]:
-            best = (sse, rev, pred, flag)
-    _, rev, pred, flag = best
+        for lin in linears:
+            pred, flag = _predict(log, low, high, airmode, rev, lin)
+            sse = float(np.sum((pred - log.motors)[armed] ** 2))
+            if best is None or sse < best[0]:
+                best = (sse, rev, pred, flag, lin)
+    _, rev, pred, flag, lin = best
     saturated = flag | at_top
     result = {"index": log.index, "source": log.source, "frames": int(len(log.t)),
               "armed_frames": int(armed.sum()),
               "duration_s": float(log.t[armed][-1] - log.t[armed][0]),
               "yaw_reversed": rev, "yaw_reversed_from": "fit" if yaw_reversed == "auto"
-              else "given", "airmode_feature": airmode, "low": low, "high": high,
+              else "given", "thrust_linear": lin,
+              "thrust_linear_from": "fit" if thrust_linear == "auto" else "given",
+              "airmode_feature": airmode, "low": low, "high": high,
               "low_from": low_from, "pidsum_limit": log.pidsum_limit,
               "pidsum_limit_yaw": log.pidsum_limit_yaw, "missing_pid_terms":
               list(log.missing_terms), "header": log.header}
     result["motors"] = motor_metrics(pred, log.motors, armed, ~saturated)
     result["saturated_fraction"] = float(saturated[armed].mean())
-    other, other_flag = _predict(log, low, high, not airmode, rev)
+    other, other_flag = _predict(log, low, high, not airmode, rev, lin)
     key = "without_airmode" if airmode else "with_airmode"
     result[key] = {"motors": motor_metrics(other, log.motors, armed,
                                            ~(other_flag | at_top)),
@@ -116,8 +135,8 @@ def check_log(log: MixerLog, yaw_reversed: str = "auto") -> dict:
 
 
 def check_file(path, log_index: int | None = None, throttle_source: str = "setpoint",
-               yaw_reversed: str = "auto", allow_truncated: bool = False
-               ) -> tuple[list[dict], list[str]]:
+               yaw_reversed: str = "auto", allow_truncated: bool = False,
+               thrust_linear="auto") -> tuple[list[dict], list[str]]:
     """Every log of a file (or only `log_index`): results and skipped-log reasons.
 
     With a log index, or a file of one log, a bad log is an error (GpquadError). In a file of
@@ -130,7 +149,7 @@ def check_file(path, log_index: int | None = None, throttle_source: str = "setpo
     for index in indices:
         try:
             log = load_mixer_log(path, index, throttle_source, allow_truncated)
-            results.append(check_log(log, yaw_reversed))
+            results.append(check_log(log, yaw_reversed, thrust_linear))
         except GpquadError as exc:
             if strict:
                 raise
