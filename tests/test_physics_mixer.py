@@ -177,3 +177,11 @@ def test_thrust_linearization_matches_betaflight_formula():
     np.testing.assert_allclose(out[2:], np.sqrt(m[2:] / t + b * b) - b)
     assert out[0] == -0.1 and out[1] == 0.0 and out[-1] == pytest.approx(1.0)
     assert out[3] > 0.5                     # raises mid throttle, keeps the ends
+
+
+def test_bad_thrust_linear_value_is_one_line(capsys):
+    if not GIMBAL.is_file():
+        pytest.skip("shared Betaflight logs absent")
+    line = _one_line_error(capsys, ["physics", "mixer", str(GIMBAL), "--log-index", "1",
+                                    "--thrust-linear", "lots", "--no-figures"])
+    assert "--thrust-linear" in line

@@ -90,8 +90,9 @@ def register(subparsers) -> None:
                     help="mixer throttle (setpoint[3]) or stick throttle (rcCommand[3])")
     mx.add_argument("--yaw-reversed", choices=["auto", "yes", "no"], default="auto",
                     help="yaw_motors_reversed (4.2 logs do not record it; auto fits both)")
-    mx.add_argument("--thrust-linear", default="auto",
-                    help="thrust_linear percent (4.2 logs do not record it; auto fits 0..40)")
+    mx.add_argument("--thrust-linear", default="0",
+                    help="thrust_linear percent (default 0, Betaflight 4.2's default; 4.2 logs "
+                    "do not record it; auto fits 0..40 per log)")
     mx.add_argument("--allow-truncated", action="store_true",
                     help="use the frames before a truncated or corrupt tail")
     mx.add_argument("--no-figures", action="store_true")

@@ -73,7 +73,7 @@ def _predict(log: MixerLog, low: float, high: float, airmode: bool, yaw_reversed
     return pred, over | out_of_range
 
 
-def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear="auto") -> dict:
+def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear=0) -> dict:
     """Metrics of one log (see the module docstring); `yaw_reversed` is auto, yes or no;
     `thrust_linear` is "auto" or a percent."""
     low, high, low_from = output_range(log)
@@ -136,7 +136,7 @@ def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear="auto") -
 
 def check_file(path, log_index: int | None = None, throttle_source: str = "setpoint",
                yaw_reversed: str = "auto", allow_truncated: bool = False,
-               thrust_linear="auto") -> tuple[list[dict], list[str]]:
+               thrust_linear=0) -> tuple[list[dict], list[str]]:
     """Every log of a file (or only `log_index`): results and skipped-log reasons.
 
     With a log index, or a file of one log, a bad log is an error (GpquadError). In a file of
