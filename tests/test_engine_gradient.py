@@ -1,6 +1,7 @@
 """Gradient constants, BIC selection and term insertion: values, determinism, resume, config."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,13 +21,14 @@ from gpquad.experiments import run_experiment
 from gpquad.simulator import simulate
 from gpquad.tree.export import from_sympy, parse_equation
 
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
 NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True}
 
 
 @pytest.fixture(scope="module")
 def rigid_dataset():
     """60 s of the rigid-body truth (experiments/rigid_body.toml): p_dot has 0.9 q r."""
-    sim = load_config("experiments/rigid_body.toml").simulator
+    sim = load_config(EXPERIMENTS / "rigid_body.toml").simulator
     sim = dataclasses.replace(sim, duration_s=80.0, seed=5)
     return build_dataset([simulate(sim, ("u_P", "u_R", "u_Y", "u_T"))],
                          validation_fraction=0.25, trim="none")
@@ -120,7 +122,7 @@ def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
 
 
 def test_paper_defaults_leave_the_new_features_off():
-    ev = load_config("experiments/paper.toml").evolution
+    ev = load_config(EXPERIMENTS / "paper.toml").evolution
     assert (ev.constant_fit, ev.final_selection, ev.term_search) == ("nelder-mead", "prune",
                                                                       False)
 
