@@ -24,6 +24,8 @@ else:  # pragma: no cover
 FRAMES = ("NED/FRD", "ENU/FLU")
 METRICS = ("mae", "mse")
 LOCAL_SEARCHES = ("none", "delays", "delays+constants")
+CONSTANT_FITS = ("nelder-mead", "gauss-newton")
+FINAL_SELECTIONS = ("prune", "bic")
 
 #: The dominant terms of the paper's median model (Table 1), used by the reference simulator.
 MEDIAN_MODEL = {
@@ -132,6 +134,19 @@ class EvolutionConfig:
     # while its training error grows by less than prune_tolerance x the error of the best
     # constant model (a parsimony threshold on the error scale); 0 = off.
     prune_tolerance: float = 0.0
+    # Not in the paper: how local search and pruning re-fit constants. "nelder-mead" (at most
+    # local_search_evals evaluations) or "gauss-newton": Levenberg-Marquardt on the integrated
+    # error with forward-mode sensitivities (at most gradient_steps evaluations).
+    constant_fit: str = "nelder-mead"
+    gradient_steps: int = 20
+    # Not in the paper: how the final equation is chosen. "prune" = the best climber, pruned
+    # by prune_tolerance if > 0; "bic" = pruned while the training BIC of the integrated
+    # state does not grow, then the lowest validation BIC among it and the front's climbers.
+    final_selection: str = "prune"
+    # Not in the paper: after the local search, try adding c*x_i or c*x_i*x_j to the best
+    # climber (constants re-fitted); keep the best if the error drops by > term_min_gain.
+    term_search: bool = False
+    term_min_gain: float = 0.01
 
 
 @dataclass(frozen=True)
@@ -212,6 +227,16 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if ev.local_search not in LOCAL_SEARCHES:
         raise GpquadError(f"choose one of {list(LOCAL_SEARCHES)}", source=source,
                           field="evolution.local_search")
+    if ev.constant_fit not in CONSTANT_FITS:
+        raise GpquadError(f"choose one of {list(CONSTANT_FITS)}", source=source,
+                          field="evolution.constant_fit")
+    if ev.final_selection not in FINAL_SELECTIONS:
+        raise GpquadError(f"choose one of {list(FINAL_SELECTIONS)}", source=source,
+                          field="evolution.final_selection")
+    if not 0.0 <= ev.term_min_gain < 1.0:
+        raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
+    if ev.gradient_steps < 0:
+        raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
     if ev.simplify_tolerance < 0 or ev.local_search_evals < 0 or ev.prune_tolerance < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
     if ev.metric not in METRICS:

@@ -16,7 +16,10 @@ import numpy as np
 from gpquad.config import EvolutionConfig
 from gpquad.data.dataset import Dataset
 from gpquad.evolve.evaluator import Evaluator
-from gpquad.evolve.local_search import improve_constants, improve_delays, prune
+from gpquad.evolve.gradient_fit import gauss_newton_constants
+from gpquad.evolve.local_search import fit_constants, improve_constants, improve_delays, prune
+from gpquad.evolve.selection import mse_of, prune_by_bic, select_by_bic
+from gpquad.evolve.term_search import best_index, improve_terms
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.kernels.tree_eval import eval_on_samples
 from gpquad.tree.encoding import Tree
@@ -164,20 +167,53 @@ class Coevolution:
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
 
+    def gradient_fitter(self, steps: int, ev: Evaluator | None = None):
+        """fit(tree, error, starts, n_steps) by Levenberg-Marquardt, or None (Nelder-Mead).
+        Errors are those of `ev` (default: the run's evaluator)."""
+        if self.cfg.constant_fit != "gauss-newton":
+            return None
+        ev = self.evaluator if ev is None else ev
+
+        def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+            def error_of(t: Tree) -> float:
+                return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
+
+            return gauss_newton_constants(ev, tree, error, starts, n_steps, error_of, steps)
+
+        return fit
+
     def local_search_phase(self, state: RunState) -> None:
         """Optional local search of delays and constants (not in the paper; see config)."""
         mode = self.cfg.local_search
         if mode == "none":
             return
         refit = self.cfg.local_search_evals // 5 if mode == "delays+constants" else 0
+        fit = self.gradient_fitter(self.cfg.gradient_steps)
+        refit_fit = (self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
+                     if mode == "delays+constants" else None)
         for i, model in enumerate(state.models):
             err = state.model_errors[i]
             if mode == "delays+constants":
                 model, err = improve_constants(self.evaluator, model, err, state.suite,
-                                               self.cfg.local_search_evals)
+                                               self.cfg.local_search_evals, fit)
             model, err = improve_delays(self.evaluator, model, err, state.suite,
-                                        self.cfg.max_delay, refit)
+                                        self.cfg.max_delay, refit, refit_fit)
             state.models[i], state.model_errors[i] = model, err
+        if self.cfg.term_search:
+            self.term_phase(state)
+
+    def term_phase(self, state: RunState) -> None:
+        """Greedy term insertion on the best climber (gpquad.evolve.term_search)."""
+        cfg = self.cfg
+        fit = self.gradient_fitter(max(cfg.gradient_steps // 4, 1))
+        if fit is None:
+            def fit(tree, err, starts, n_steps):
+                return improve_constants(self.evaluator, tree, err, starts,
+                                         cfg.local_search_evals // 5)
+        i = best_index(state.model_errors)
+        state.models[i], state.model_errors[i] = improve_terms(
+            self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
+            self.params.n_variables, cfg.max_depth, cfg.term_min_gain)
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""
@@ -212,7 +248,10 @@ class Coevolution:
         train = self.training_errors(state) if train is None else train
         i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
         model, error = state.models[i], float(train[i])
-        if self.cfg.prune_tolerance > 0:
+        if self.cfg.final_selection == "bic":
+            model = self.select_by_bic(state, model, train)
+            error = float(self.tiled_errors([model], self.dataset.train)[0])
+        elif self.cfg.prune_tolerance > 0:
             starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
             samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
             # The allowance is a fraction of the error of the best constant model.
@@ -221,10 +260,30 @@ class Coevolution:
             scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
             model, error = prune(self.evaluator, model, starts, steps,
                                  self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
-                                 lambda t, a, b: self.subtree_mean(t, a, b, samples))
+                                 lambda t, a, b: self.subtree_mean(t, a, b, samples),
+                                 self.gradient_fitter(self.cfg.gradient_steps))
         validation = self.tiled_errors([model], self.dataset.validation)[0]
         return model, error, float(validation)
 
+    def select_by_bic(self, state: RunState, model: Tree, train) -> Tree:
+        """Prune `model` while its training BIC does not grow, then pick the lowest validation
+        BIC among it and the front's climbers (gpquad.evolve.selection)."""
+        cfg = self.cfg
+        ev_mse = Evaluator(self.dataset, self.target, cfg.window_steps, "mse", cfg.max_depth)
+        starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
+        samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
+        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
+        if fit is None:
+            def fit(tree, err, starts, n_steps):
+                return fit_constants(tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps),
+                                     cfg.local_search_evals)
+        pruned = prune_by_bic(ev_mse, model, starts, steps,
+                              lambda t, a, b: self.subtree_mean(t, a, b, samples), fit)
+        candidates = [pruned] + [t for t, _ in self.front(state, train)]
+        val_starts, val_steps = tile(self.dataset.validation, cfg.window_steps, cfg.max_delay)
+        if len(val_starts) == 0:  # no validation data: the training windows decide
+            val_starts, val_steps = starts, steps
+        return select_by_bic(ev_mse, candidates, val_starts, val_steps)[0]
 
     def front(self, state: RunState, train=None) -> list[tuple[Tree, float]]:
         """The climbers on the size/error Pareto front (training data), smallest first:

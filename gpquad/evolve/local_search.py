@@ -17,11 +17,12 @@ from gpquad.tree.operators import CONST
 
 
 def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: int,
-                   refit_evals: int = 0) -> tuple[Tree, float]:
+                   refit_evals: int = 0, fit=None) -> tuple[Tree, float]:
     """Try every other delay of every used input, one at a time; keep the best if better.
 
     A wrong delay is usually compensated by wrong constants, so with refit_evals > 0
-    each candidate's constants are re-fitted (Nelder-Mead) before it is compared.
+    (or a `fit`) each candidate's constants are re-fitted before it is compared.
+    fit(tree, error, starts, n_steps) -> (tree, error) replaces Nelder-Mead when given.
     """
     candidates = []
     for j in sorted(model.used_inputs()):
@@ -33,10 +34,10 @@ def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: i
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)
-    if refit_evals > 0:
+    if refit_evals > 0 or fit is not None:
         for k, candidate in enumerate(candidates):
             candidates[k], errors[k] = improve_constants(ev, candidate, errors[k], suite,
-                                                         refit_evals)
+                                                         refit_evals, fit)
     best = int(np.argmin(errors))
     if errors[best] < error:
         return candidates[best], float(errors[best])
@@ -65,20 +66,24 @@ def fit_constants(model: Tree, error: float, error_of, max_evals: int) -> tuple[
     return model, error
 
 
-def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals: int
-                      ) -> tuple[Tree, float]:
-    """Nelder-Mead on the constants against the mean error on the suite windows."""
+def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals: int,
+                      fit=None) -> tuple[Tree, float]:
+    """Nelder-Mead (or `fit`, see improve_delays) on the constants against the mean error
+    on the suite windows."""
+    if fit is not None:
+        return fit(model, error, suite, ev.n_steps)
     return fit_constants(model, error, lambda t: ev.mean_errors([t], suite)[0], max_evals)
 
 
 def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, evals: int,
-          constant_of) -> tuple[Tree, float]:
+          constant_of, fit=None) -> tuple[Tree, float]:
     """Remove bloat from a final model: replace subtrees by constants while the error stays
     below the starting error plus `allowance` (same units as the error).
 
     Subtrees are tried largest first; each candidate's constants are re-fitted by
-    Nelder-Mead (`evals` evaluations). constant_of(tree, start, end) gives the constant
-    that replaces tree.codes[start:end]. Errors are measured on `starts` windows.
+    Nelder-Mead (`evals` evaluations) or by `fit` (see improve_delays).
+    constant_of(tree, start, end) gives the constant that replaces tree.codes[start:end].
+    Errors are measured on `starts` windows.
     """
     from gpquad.tree.encoding import subtree_end
     from gpquad.tree.variation import fold_constants
@@ -87,6 +92,8 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
         return float(ev.window_errors([tree], starts, n_steps=n_steps).mean())
 
     def refit(tree: Tree, err: float) -> tuple[Tree, float]:
+        if fit is not None:
+            return fit(tree, err, starts, n_steps)
         return fit_constants(tree, err, error_of, evals)
 
     model = fold_constants(model)

@@ -1,0 +1,140 @@
+"""Gradient constants, BIC selection and term insertion: values, determinism, resume, config."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_engine import tiny_config
+
+from gpquad import checkpoint
+from gpquad.config import load_config, override
+from gpquad.data.dataset import build_dataset
+from gpquad.data.io import load_dataset
+from gpquad.errors import GpquadError
+from gpquad.evolve.coevolution import Coevolution
+from gpquad.evolve.evaluator import Evaluator
+from gpquad.evolve.gradient_fit import gauss_newton_constants
+from gpquad.evolve.selection import bic, mse_of, prune_by_bic, select_by_bic
+from gpquad.evolve.term_search import improve_terms, term_candidates
+from gpquad.experiments import run_experiment
+from gpquad.simulator import simulate
+from gpquad.tree.export import from_sympy, parse_equation
+
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
+NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True}
+
+
+@pytest.fixture(scope="module")
+def rigid_dataset():
+    """60 s of the rigid-body truth (experiments/rigid_body.toml): p_dot has 0.9 q r."""
+    sim = load_config(EXPERIMENTS / "rigid_body.toml").simulator
+    sim = dataclasses.replace(sim, duration_s=80.0, seed=5)
+    return build_dataset([simulate(sim, ("u_P", "u_R", "u_Y", "u_T"))],
+                         validation_fraction=0.25, trim="none")
+
+
+def _tree(text, dataset):
+    expr, delays = parse_equation(text, dataset.input_names)
+    return from_sympy(expr, delays, dataset.input_names)
+
+
+def _fit(ev):
+    def fit(tree, err, starts, n_steps):
+        return gauss_newton_constants(ev, tree, err, starts, n_steps,
+                                      lambda t: mse_of(ev, t, starts, n_steps), 20)
+    return fit
+
+
+STARTS = np.array([10, 260, 510, 760, 1010, 1260], dtype=np.int64)
+
+
+def test_bic_prefers_the_exact_model_and_rejects_non_finite():
+    assert bic(1e-4, 1000, 5) < bic(1e-4, 1000, 9)  # same error, fewer symbols
+    assert bic(1e-6, 1000, 9) < bic(1e-4, 1000, 5)  # 100x smaller error beats 4 symbols
+    assert bic(np.inf, 1000, 3) == np.inf and bic(np.nan, 1000, 3) == np.inf
+
+
+def test_bic_pruning_removes_bloat_and_keeps_a_small_coupling(rigid_dataset):
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    truth = "9.0*u_R(t-2) - 4.0*p - 0.9*q*r"
+    # the truth plus a bloat term that explains nothing (its constant fits to ~0)
+    bloated = _tree(truth + " + 0.3*theta*u_Y", ds)
+
+    def const(t, a, b):
+        return 0.0
+
+    pruned = prune_by_bic(ev, bloated, STARTS, 250, const, _fit(ev))
+    assert sorted(map(str, parse_equation(truth, ds.input_names)[0].free_symbols)) == sorted(
+        str(s) for s in _sym(pruned, ds).free_symbols)
+    assert mse_of(ev, pruned, STARTS, 250) < 1e-10
+
+
+def _sym(tree, ds):
+    from gpquad.model import Equation
+
+    return Equation("p_dot", tree, ds.input_names, 0.0, 0.0, {}).sympy()
+
+
+def test_select_by_bic_picks_the_lowest_and_the_first_on_ties(rigid_dataset):
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
+    missing = _tree("9.0*u_R(t-2) - 4.0*p", ds)
+    chosen, scores = select_by_bic(ev, [missing, exact, exact], STARTS, 250)
+    assert chosen is exact and scores[1] == scores[2] < scores[0]
+
+
+def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    model = _tree("8.0*u_R(t-2) - 3.0*p", ds)
+    assert len(term_candidates(model, 13, 5)) == 13 + 91
+    assert term_candidates(model, 13, 2) == []  # no room under the depth limit
+    err = ev.mean_errors([model], STARTS)[0]
+    found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert found_err < 1e-8 * err
+    assert {"q", "r", "p", "u_R"} <= {str(s) for s in _sym(found, ds).free_symbols}
+    # A required gain it cannot reach keeps the model.
+    exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
+    kept, kept_err = improve_terms(ev, exact, 0.0, STARTS, _fit(ev), 13, 5, 0.01)
+    assert kept is exact and kept_err == 0.0
+
+
+def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
+    cfg = tiny_config(**NEW)
+    run_experiment(cfg, tmp_path / "a", progress=False)
+    run_experiment(cfg, tmp_path / "b", progress=False)
+    assert (tmp_path / "a" / "model.json").read_bytes() == \
+        (tmp_path / "b" / "model.json").read_bytes()
+    dataset = load_dataset(cfg)
+    engine = Coevolution(dataset, "p_dot", cfg.evolution)
+    state = engine.init_state(np.random.SeedSequence(3))
+    engine.iterate(state)
+    checkpoint.save(tmp_path / "c.bin", state, {"history_bytes": 0})
+    loaded, _ = checkpoint.load(tmp_path / "c.bin")
+    engine.iterate(state)
+    engine.iterate(loaded)
+    for x, y in zip(state.models, loaded.models, strict=True):
+        assert np.array_equal(x.values, y.values) and np.array_equal(x.codes, y.codes)
+    assert np.array_equal(state.model_errors, loaded.model_errors)
+
+
+def test_paper_defaults_leave_the_new_features_off():
+    ev = load_config(EXPERIMENTS / "paper.toml").evolution
+    assert (ev.constant_fit, ev.final_selection, ev.term_search) == ("nelder-mead", "prune",
+                                                                      False)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("constant_fit", "newton"), ("final_selection", "aic"), ("term_min_gain", 1.5),
+    ("gradient_steps", -1)])
+def test_bad_engine_settings_name_their_field(field, value):
+    cfg = tiny_config()
+    bad = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
+                                                                 **{field: value}))
+    with pytest.raises(GpquadError) as err:
+        override(bad)
+    assert err.value.field == f"evolution.{field}"
+

@@ -1,0 +1,149 @@
+"""Forward-mode sensitivity kernel against plain references and finite differences."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from test_kernels import as_tree, prefix_trees, smooth_trees
+
+import naive
+from gpquad.evolve.evaluator import Evaluator
+from gpquad.evolve.gradient_fit import gauss_newton_constants, residuals_and_jacobian
+from gpquad.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_tangent
+from gpquad.kernels.tree_eval import STACK_ROWS
+from gpquad.tree.encoding import Tree
+from gpquad.tree.operators import CONST, VAR_BASE
+from gpquad.variables import TARGET_NAMES
+
+STARTS = np.array([10, 400, 900], dtype=np.int64)
+
+
+def _n_const(tree):
+    return int(np.count_nonzero(tree.codes == CONST))
+
+
+def _with_constants(tree, x):
+    values = tree.values.copy()
+    values[tree.codes == CONST] = x
+    return Tree(tree.codes, values, tree.delays)
+
+
+@settings(max_examples=40, deadline=None)
+@given(prefix_trees, st.lists(st.floats(-2, 2), min_size=13, max_size=13))
+def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, leaves):
+    tree = as_tree(nodes)
+    n_c = _n_const(tree)
+    slot_of = np.where(tree.codes == CONST, np.cumsum(tree.codes == CONST) - 1, -1)
+    grad = np.empty(n_c)
+    value = eval_with_tangent(tree.codes, tree.values, tree.size, slot_of, np.array(leaves),
+                              np.zeros((13, n_c)), np.empty(STACK_ROWS),
+                              np.empty((STACK_ROWS, n_c)), grad)
+    assert value == pytest.approx(naive.eval_tree(tree.codes, tree.values, leaves), rel=1e-12,
+                                  abs=1e-12)
+    x0 = tree.values[tree.codes == CONST]
+
+    def central(j, h):
+        up, down = x0.copy(), x0.copy()
+        up[j] += h
+        down[j] -= h
+        return (naive.eval_tree(tree.codes, _with_constants(tree, up).values, leaves)
+                - naive.eval_tree(tree.codes, _with_constants(tree, down).values, leaves)) / (2 * h)
+
+    for j in range(n_c):
+        h = 1e-6 * max(1.0, abs(x0[j]))
+        fd, fd_half = central(j, h), central(j, h / 2)
+        if abs(fd - fd_half) > 1e-4 * (1 + abs(fd)):  # not smooth here (a division switch)
+            continue
+        assert grad[j] == pytest.approx(fd, rel=1e-4, abs=1e-5 * (1 + abs(value)))
+
+
+@settings(max_examples=20, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4))
+def test_residuals_match_the_plain_integration(short_dataset, nodes, target, delays):
+    """mean |residual| per window equals the plain-numpy window error (scipy rotations)."""
+    tree = as_tree(nodes, delays)
+    ev = Evaluator(short_dataset, TARGET_NAMES[target], 60)
+    res, _, _ = residuals_and_jacobian(ev, tree, STARTS, 60)
+    got = np.abs(res.reshape(3, 60)).mean(axis=1)
+    ref = np.array([naive.window_error(tree, target, short_dataset.arrays, s, 60)
+                    for s in STARTS])
+    fine = np.isfinite(ref) & (got < DIVERGED_RESIDUAL / 2)
+    np.testing.assert_allclose(got[fine], ref[fine], rtol=1e-7, atol=1e-9)
+    assert np.array_equal(np.isinf(ref), got >= DIVERGED_RESIDUAL / 2 / 60)
+
+
+# Angular targets: exact when the tree reads rates, inputs and constants only.
+RATE_LEAVES = [VAR_BASE + k for k in range(6, 13)]
+
+
+@settings(max_examples=20, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(smooth_trees, st.integers(0, 5))
+def test_jacobian_matches_finite_differences(short_dataset, nodes, target):
+    if target >= 3:  # keep only leaves that are exact for angular targets
+        nodes = [(RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v)
+                 for c, v in nodes]
+    tree = as_tree(nodes, (1, 0, 2, 3))
+    n_c = _n_const(tree)
+    ev = Evaluator(short_dataset, TARGET_NAMES[target], 40)
+    res, jac, diverged = residuals_and_jacobian(ev, tree, STARTS, 40)
+    if diverged or n_c == 0 or np.abs(res).max() > 1e3:
+        return
+    x0 = tree.values[tree.codes == CONST]
+    for j in range(n_c):
+        h = 1e-6 * max(1.0, abs(x0[j]))
+        up, down = x0.copy(), x0.copy()
+        up[j] += h
+        down[j] -= h
+        r_up = residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, 40)[0]
+        r_down = residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, 40)[0]
+        fd = (r_up - r_down) / (2 * h)
+        np.testing.assert_allclose(jac[:, j], fd, rtol=1e-4,
+                                   atol=1e-6 * (1 + np.abs(fd).max()))
+
+
+def _tree(text, dataset):
+    from gpquad.tree.export import from_sympy, parse_equation
+
+    expr, delays = parse_equation(text, dataset.input_names)
+    return from_sympy(expr, delays, dataset.input_names)
+
+
+@pytest.mark.parametrize("target, start_text, truth", [
+    ("a_z", "3.0*u_T(t-5) - w + 0.5", 28.2),
+    ("p_dot", "2.0*u_R(t-1) - 1.0*p + 0.1", 10.3),
+])
+def test_gauss_newton_reaches_far_coefficients(short_dataset, target, start_text, truth):
+    """From constants of order one, LM on the integrated error finds 28.2 and 10.3."""
+    ev = Evaluator(short_dataset, target, 250)
+    starts = np.array([20, 500, 1000], dtype=np.int64)
+    tree = _tree(start_text, short_dataset)
+    error = ev.mean_errors([tree], starts)[0]
+
+    def error_of(t):
+        return ev.mean_errors([t], starts)[0]
+
+    fitted, fitted_error = gauss_newton_constants(ev, tree, error, starts, 250, error_of, 30)
+    assert fitted_error < 1e-6 * error
+    consts = fitted.values[fitted.codes == CONST]
+    assert np.min(np.abs(np.abs(consts) - truth)) < 1e-4 * truth
+
+
+def test_gauss_newton_keeps_a_tree_it_cannot_improve(short_dataset):
+    ev = Evaluator(short_dataset, "p_dot", 100)
+    starts = np.array([20, 500], dtype=np.int64)
+    no_constants = as_tree([(1, 0.0), (VAR_BASE + 10, 0.0), (VAR_BASE + 6, 0.0)])  # u_R - p
+    err = ev.mean_errors([no_constants], starts)[0]
+    kept, kept_err = gauss_newton_constants(ev, no_constants, err, starts, 100, lambda t: 0.0, 20)
+    assert kept is no_constants and kept_err == err
+    # A claimed error that no fit can beat (0) keeps the original tree.
+    tree = _tree("2.0*u_R(t-1) - 1.0*p", short_dataset)
+    kept, kept_err = gauss_newton_constants(ev, tree, 0.0, starts, 100,
+                                            lambda t: ev.mean_errors([t], starts)[0], 20)
+    assert kept is tree and kept_err == 0.0
+    # A diverging start (positive feedback of 1e4) is left alone rather than crashing.
+    bad = _tree("10000.0*p", short_dataset)
+    kept, kept_err = gauss_newton_constants(ev, bad, np.inf, starts, 100,
+                                            lambda t: ev.mean_errors([t], starts)[0], 20)
+    assert kept is bad and kept_err == np.inf
