@@ -286,3 +286,16 @@ def test_damaged_checkpoint_restarts_that_target(tmp_path, monkeypatch, capsys):
     for name in ("model.json", "history.csv"):
         assert (tmp_path / "run" / name).read_bytes() == \
             (tmp_path / "straight" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("prune_tolerance", [0.0, 0.5])
+def test_reported_equation_is_not_beaten_by_a_candidate_of_the_run(tmp_path, prune_tolerance):
+    """A heavy prune (0.5 of a constant model's error) makes the pruned equation worse than
+    smaller climbers on the front; the run then reports the better candidate instead."""
+    cfg = tiny_config(targets=("p_dot", "a_z"), iterations=2, prune_tolerance=prune_tolerance)
+    model = run_experiment(cfg, tmp_path / "run", progress=False)
+    for eq in model.equations.values():
+        size = eq.tree.size
+        beaten = [c for c in eq.candidates
+                  if c["size"] <= size and c["error"] < eq.error * (1 - 1e-12)]
+        assert beaten == [], (eq.text(), beaten)
