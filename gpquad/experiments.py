@@ -29,7 +29,8 @@ def default_run_dir(cfg: Config) -> Path:
 
 
 class Progress:
-    """One line per iteration: target, iteration, best training error and time left."""
+    """One line per iteration: target, iteration, best error on the current test suite (the
+    windows the models compete on, not the training error of model.json) and time left."""
 
     def __init__(self, enabled: bool, total_iterations: int, stream=sys.stdout):
         self.enabled = enabled
@@ -45,7 +46,7 @@ class Progress:
         elapsed = time.perf_counter() - self.start
         left = elapsed / self.done * (self.total - self.done)
         best = float(np.min(state.model_errors))
-        print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best train error "
+        print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best suite error "
               f"{best:.5g}  elapsed {elapsed:6.1f} s  left ~{left:6.1f} s",
               file=self.stream, flush=True)
 

@@ -98,7 +98,7 @@ def read_history(path, iterations_per_gen: int | None = None, target: str | None
 
     target: keep only that equation's rows (a `gpquad run` history holds every target).
     """
-    h = pd.read_csv(path, usecols=["target", "iteration", "generation", "best_error"])
+    h = pd.read_csv(path, usecols=["target", "iteration", "generation", "best_suite_error"])
     if target is not None:
         h = h[h["target"] == target].reset_index(drop=True)
     gens = int(h["generation"].max()) + 1 if iterations_per_gen is None else iterations_per_gen
@@ -119,14 +119,15 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
         for ax, target in zip(axes.ravel()[: len(targets)], targets, strict=True):
             frames = [read_history(p, target=target) for p in histories[target]]
             for h in frames:
-                ax.plot(h["step"], h["best_error"], color="tab:gray", alpha=0.45, linewidth=0.7)
-            merged = pd.concat([h.set_index("step")["best_error"] for h in frames], axis=1)
+                ax.plot(h["step"], h["best_suite_error"], color="tab:gray", alpha=0.45,
+                        linewidth=0.7)
+            merged = pd.concat([h.set_index("step")["best_suite_error"] for h in frames], axis=1)
             ax.plot(merged.index, merged.median(axis=1), color="tab:blue", linewidth=1.6)
             state = TARGET_STATE[target]
             unit = STATE_UNITS[STATE_NAMES.index(state)]
             if metric == "mse":
                 unit = f"({unit})$^2$"
-            values = pd.concat([h["best_error"] for h in frames])
+            values = pd.concat([h["best_suite_error"] for h in frames])
             values = values[np.isfinite(values) & (values > 0)]
             if len(values) and values.max() > 10 * values.min():  # log only over decades
                 ax.set_yscale("log")

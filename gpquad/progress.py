@@ -121,7 +121,7 @@ class SweepProgress:
             if status.get("state") == "running" and status.get("time", 0) >= self.t0 - 1 \
                     and now - status.get("time", 0) < 7 * 24 * 3600:
                 running += 1
-                err = float(status.get("best_error", float("inf")))
+                err = float(status.get("best_suite_error", float("inf")))
                 if err < best_run.get(key.target, float("inf")):
                     best_run[key.target] = err
         return {"done": done, "running": running, "total": len(self.keys),

@@ -98,7 +98,8 @@ def write_json(path, obj) -> Path:
 class HistoryWriter:
     """Appends per-generation rows to a CSV as they come (bounded memory)."""
 
-    FIELDS = ("target", "iteration", "generation", "best_error", "median_error", "best_size")
+    FIELDS = ("target", "iteration", "generation", "best_suite_error", "median_suite_error",
+              "best_size")
 
     def __init__(self, path):
         self.path = Path(path)

@@ -112,12 +112,12 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
             fh.truncate(history_bytes)
     started = time.time()
     _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
-            iterations=ev.iterations, best_error=float(np.min(state.model_errors)),
+            iterations=ev.iterations, best_suite_error=float(np.min(state.model_errors)),
             started=started, state="running")
     def after_iteration(st):
         _status(status, target=key.target, repetition=key.repetition,
                 iteration=st.iteration, iterations=ev.iterations,
-                best_error=float(np.min(st.model_errors)), started=started, state="running")
+                best_suite_error=float(np.min(st.model_errors)), started=started, state="running")
         if os.getppid() != parent:  # loky worker whose sweep was killed: stop here
             raise OrphanedWorker(f"{key.name}: sweep process gone; stopped at iteration "
                                  f"{st.iteration} (checkpointed)")
@@ -138,7 +138,7 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
               "equation": eq.to_dict()}
     write_json(result_path, result)
     _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
-            iterations=ev.iterations, best_error=float(np.min(state.model_errors)),
+            iterations=ev.iterations, best_suite_error=float(np.min(state.model_errors)),
             started=started, state="done", wall_s=time.time() - started)
     return {**_summary(result), "skipped": False, "warnings": warnings}
 

@@ -77,7 +77,7 @@ def test_hill_climbers_never_get_worse(short_dataset):
     co.model_phase(state, rng)
     after = co.evaluator.mean_errors(state.models, state.suite)
     assert (after <= before + 1e-15).all()
-    best = [row["best_error"] for row in state.history]
+    best = [row["best_suite_error"] for row in state.history]
     assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))
 
 

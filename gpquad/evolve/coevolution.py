@@ -108,8 +108,8 @@ class Coevolution:
             best = int(np.argmin(state.model_errors))
             state.history.append({
                 "target": self.target, "iteration": state.iteration, "generation": gen,
-                "best_error": float(state.model_errors[best]),
-                "median_error": float(np.median(state.model_errors)),
+                "best_suite_error": float(state.model_errors[best]),
+                "median_suite_error": float(np.median(state.model_errors)),
                 "best_size": state.models[best].size,
             })
 
