@@ -122,7 +122,8 @@ class EvolutionConfig:
     max_delay: int = 5
     metric: str = "mae"
     simplify_generations: int = 50
-    simplify_tolerance: float = 0.0  # keep a simplified model if error <= (1 + tol) * before
+    simplify_tolerance: float = 0.0  # 0: keep a simplification only if better (paper 2.2);
+    # > 0 (extension): keep it if error <= (1 + tol) * before
     test_offset_max: int = 375
     # Not in the paper: a local search on every model after the model phase. "none" keeps
     # the paper's method; "delays" tries every single-input delay change; "delays+constants"

@@ -162,8 +162,13 @@ class Coevolution:
             for i in np.flatnonzero(mutant_errors < errors):
                 candidates[i] = mutants[i]
                 errors[i] = mutant_errors[i]
-        allowed = state.model_errors * (1.0 + self.cfg.simplify_tolerance)
-        for i in np.flatnonzero(errors <= allowed):
+        # The paper (2.2) discards a simplification that "performs no better": with
+        # simplify_tolerance 0 only a strictly better one is kept; a tolerance > 0 (not in the
+        # paper) keeps one within that relative error.
+        tol = self.cfg.simplify_tolerance
+        keep = errors < state.model_errors if tol == 0 else \
+            errors <= state.model_errors * (1.0 + tol)
+        for i in np.flatnonzero(keep):
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
 
