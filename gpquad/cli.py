@@ -162,7 +162,8 @@ def _extensions():
     """Sub-command groups contributed by other packages of gpquad (data, baselines, sweeps)."""
     registers = []
     for module, name in (("gpquad.data.cli", "register"), ("gpquad.baselines.cli", "register"),
-                         ("gpquad.sweep_cli", "register")):
+                         ("gpquad.sweep_cli", "register"),
+                         ("gpquad.benchmark.cli", "register")):
         try:
             mod = __import__(module, fromlist=[name])
         except ModuleNotFoundError as exc:

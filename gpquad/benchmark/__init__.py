@@ -1,0 +1,1 @@
+"""Head-to-head identification benchmark: scenarios, peers, scoring, tables."""
