@@ -31,12 +31,12 @@ from gpquad.variables import STATE_NAMES, TARGET_NAMES
 PEERS = ("zero", "ols", "sindy", "operon")
 #: The Python package each optional peer needs (pip install -e ".[peers]").
 PEER_PACKAGES = {"sindy": "pysindy", "operon": "pyoperon"}
-THRESHOLDS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
+THRESHOLDS = (0.01, 0.1, 0.3, 1.0)
 SINDY_SETTINGS = {"library": "PolynomialLibrary(degree=2)", "optimizer": "STLSQ",
                   "alpha": 0.05, "max_iter": 20, "thresholds": list(THRESHOLDS),
                   "threshold_selection": "mean RSE of u..r over 7 s validation windows"}
 OPERON_SETTINGS = {"allowed_symbols": "add,sub,mul,div,constant,variable", "max_depth": 5,
-                   "max_length": 30, "population_size": 300, "generations": 40,
+                   "max_length": 30, "population_size": 100, "generations": 25,
                    "max_evaluations": 1_000_000, "optimizer": "lm", "optimizer_iterations": 5,
                    "n_threads": 1, "model_selection_criterion": "minimum_description_length"}
 

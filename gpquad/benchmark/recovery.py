@@ -62,8 +62,9 @@ def dominant_terms(text: str, target: str, dataset) -> dict[str, float]:
         coeff, rest = term.as_coeff_Mul()
         symbols = sorted(rest.free_symbols, key=str)
         func = sp.lambdify(symbols, rest, "numpy")
-        series = np.broadcast_to(np.asarray(func(*[columns[str(s)] for s in symbols]), float),
-                                 rows.shape)
+        with np.errstate(all="ignore"):
+            series = np.broadcast_to(np.asarray(func(*[columns[str(s)] for s in symbols]),
+                                                float), rows.shape)
         rms = float(np.sqrt(np.mean((float(coeff) * series) ** 2)))
         if target_rms > 0 and rms / target_rms >= SHARE:
             found[str(rest)] = found.get(str(rest), 0.0) + float(coeff)

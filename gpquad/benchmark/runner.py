@@ -73,12 +73,15 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
     for name in names:
         t0 = time.perf_counter()
         try:
-            built[name] = scenarios.build_scenario(name, out / "flights")
+            sc = scenarios.build_scenario(name, out / "flights")
         except scenarios.Skipped as exc:
             skipped[name] = str(exc)
             log(f"gpquad benchmark: skipping scenario {exc}")
             continue
-        sc = built[name]
+        if sc.name in built:
+            raise GpquadError(f"two scenarios are named {sc.name}; rename a config file",
+                              field="scenario")
+        built[sc.name] = sc
         log(f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
             f"and {sc.test.summary()['validation_samples']} test samples "
             f"({time.perf_counter() - t0:.1f} s to build)")
