@@ -75,6 +75,7 @@ def _fit(method: str, scenario, seed: int, engine_dir: Path):
 def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
              horizons_s) -> dict:
     """Fit, fly and score one cell and save it atomically; returns the cell record."""
+    cpu0 = time.process_time()
     tracemalloc.start()
     try:
         simulate, fit_time, record = _fit(method, scenario, seed, engine_dir)
@@ -89,7 +90,7 @@ def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
             "version": peers.package_version(method) if method != "gpquad" else None,
             "metrics": metrics, **record, "figure": trace,
             "cost": {"fit_time_s": fit_time, "score_time_s": score_time,
-                     "peak_memory_mb": peak / 2 ** 20}}
+                     "cpu_time_s": time.process_time() - cpu0, "peak_memory_mb": peak / 2 ** 20}}
     write_json(cell_path(out, scenario.name, method, seed), _clean(cell))
     return cell
 

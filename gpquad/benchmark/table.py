@@ -50,6 +50,7 @@ def aggregate(cells: list[dict]) -> dict:
                 "seeds": [c["seed"] for c in group], "version": group[0].get("version"),
                 "horizons": horizons, "recovery": recovery,
                 "cost": {"fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
+                         "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
                          "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group])}}
     return result
 
