@@ -59,6 +59,9 @@ def test_sindy_picks_a_threshold_and_flies(median_scenario):
     pytest.importorskip("pysindy")
     peer, _ = peers.fit_peer("sindy", median_scenario.fit, 0)
     assert peer.settings["threshold"] in peers.THRESHOLDS
-    assert peer.settings["validation_rse_7s"] < 1e-6  # exact data: the fit is exact
+    # exact data: only terms below the smallest threshold (0.01: the intercepts, such as
+    # 10.3 x trim of u_R, about 1 % of the RMS) are lost: small error, not round-off
+    assert peer.settings["validation_rse_7s"] < 0.01
     x, y = peers.regression_data(median_scenario.test, median_scenario.test.validation)
-    np.testing.assert_allclose(peer.predict(x, None), y, atol=1e-6)
+    err = np.sqrt(np.mean((peer.predict(x, None) - y) ** 2, axis=0))
+    assert np.all(err < 0.02 * np.sqrt(np.mean(y ** 2, axis=0)))
