@@ -186,7 +186,8 @@ def _extensions():
     registers = []
     for module, name in (("gpquad.data.cli", "register"), ("gpquad.baselines.cli", "register"),
                          ("gpquad.sweep_cli", "register"), ("gpquad.score_cli", "register"),
-                         ("gpquad.control.cli", "register"), ("gpquad.physics.cli", "register")):
+                         ("gpquad.control.cli", "register"), ("gpquad.physics.cli", "register"),
+                         ("gpquad.benchmark.cli", "register")):
         try:
             mod = __import__(module, fromlist=[name])
         except ModuleNotFoundError as exc:

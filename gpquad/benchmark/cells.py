@@ -1,0 +1,140 @@
+"""One benchmark cell: fit a method on a scenario with a seed, fly and score it, save it.
+
+A cell's result is written atomically to `cells/<scenario>/<method>/seed<k>.json` when
+it is done; a cell whose file exists is finished and is never recomputed (resume).
+Timings and memory are kept under "cost" so that the compared content excludes them.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.benchmark import evaluate, peers
+from gpquad.benchmark.rollout import fly
+from gpquad.results import write_json
+from gpquad.variables import TARGET_NAMES
+
+METHODS = ("gpquad",) + peers.PEERS
+
+
+def cell_path(out: Path, scenario: str, method: str, seed: int) -> Path:
+    return Path(out) / "cells" / scenario / method / f"seed{seed}.json"
+
+
+def load_cell(path: Path) -> dict | None:
+    """A finished cell, or None (missing or damaged: it is recomputed)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _recovery_gpquad(model, scenario) -> dict | None:
+    if not scenario.truth:
+        return None
+    from gpquad.analysis import compare_to_truth
+
+    out = {}
+    for target in TARGET_NAMES:
+        if target in scenario.truth and target in model.equations:
+            with np.errstate(all="ignore"):  # protected division evaluated by numpy
+                found = compare_to_truth(model.equations[target], scenario.truth[target],
+                                         scenario.fit)
+            out[target] = bool(found["passed"])
+    return out
+
+
+def _fit(method: str, scenario, seed: int, engine_dir: Path):
+    """(simulate(starts, steps) on the test data, record) of a fitted method."""
+    test = scenario.test
+    if method == "gpquad":
+        from gpquad.benchmark.engine import engine_config, fit_gpquad
+
+        cfg, source = engine_config(engine_dir, seed)
+        t0 = time.perf_counter()
+        model = fit_gpquad(scenario.fit, cfg)
+        fit_time = time.perf_counter() - t0
+        record = {"equations": {t: e.text() for t, e in model.equations.items()},
+                  "equations_raw_inputs": {t: e.text(raw=True)
+                                           for t, e in model.equations.items()},
+                  "settings": {"engine_config": source, "evolution": cfg.to_dict()["evolution"]},
+                  "recovery": _recovery_gpquad(model, scenario)}
+        return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
+    peer, fit_time = peers.fit_peer(method, scenario.fit, seed)
+    record = {"equations": peer.equations, "settings": peer.settings,
+              "n_parameters": peer.n_parameters,
+              "recovery": peers.recovery(peer, scenario) if scenario.truth else None}
+    return (lambda starts, steps: fly(peer.predict, test.arrays, starts, steps)), fit_time, record
+
+
+def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
+             horizons_s) -> dict:
+    """Fit, fly and score one cell and save it atomically; returns the cell record."""
+    cpu0 = time.process_time()
+    with PeakRss() as memory:
+        simulate, fit_time, record = _fit(method, scenario, seed, engine_dir)
+        t0 = time.perf_counter()
+        metrics = evaluate.score(simulate, scenario.test, scenario.measured, horizons_s)
+        trace = evaluate.figure_trace(simulate, scenario.test)
+        score_time = time.perf_counter() - t0
+    cell = {"scenario": scenario.name, "method": method, "seed": int(seed),
+            "version": peers.package_version(method) if method != "gpquad" else None,
+            "metrics": metrics, **record, "figure": trace,
+            "cost": {"fit_time_s": fit_time, "score_time_s": score_time,
+                     "cpu_time_s": time.process_time() - cpu0, "peak_memory_mb": memory.peak_mb}}
+    write_json(cell_path(out, scenario.name, method, seed), _clean(cell))
+    return cell
+
+
+class PeakRss:
+    """Peak resident memory of this process (MB, interpreter included) while in the block,
+    sampled every 50 ms from /proc/self/status (Linux; elsewhere the process's lifetime
+    peak from getrusage). Unlike tracemalloc it costs nothing and sees native allocations
+    (numba, operon's C++)."""
+
+    def __enter__(self):
+        self.peak_mb = self._read()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+        return self
+
+    def _watch(self):
+        while not self._stop.wait(0.05):
+            self.peak_mb = max(self.peak_mb, self._read())
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak_mb = max(self.peak_mb, self._read())
+
+    @staticmethod
+    def _read() -> float:
+        try:
+            with open("/proc/self/status") as fh:
+                for line in fh:
+                    if line.startswith("VmRSS:"):
+                        return int(line.split()[1]) / 1024
+        except OSError:
+            pass
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _clean(obj):
+    """JSON-safe: NaN and inf become null."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj

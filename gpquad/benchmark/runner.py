@@ -1,0 +1,137 @@
+"""Run the benchmark grid: scenarios x methods x seeds, resumable, in parallel (joblib).
+
+gpquad and operon are fitted with seeds 1..N; zero, OLS and SINDy are deterministic and
+are fitted once (seed 0). Each cell is saved when done (`gpquad.benchmark.cells`); a
+rerun with the same --out skips finished cells. Cells do not depend on each other or on
+the order they finish, so --jobs 2 gives the same table as --jobs 1.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+
+from gpquad.benchmark import cells, peers, scenarios
+from gpquad.benchmark.engine import engine_source
+from gpquad.errors import GpquadError
+from gpquad.results import provenance, write_json
+
+
+def available_peers(requested) -> tuple[list[str], dict[str, str]]:
+    """Requested peers that are installed, and {peer: why skipped} for the others."""
+    ok, skipped = [], {}
+    for name in requested:
+        if peers.package_version(name) is None:
+            skipped[name] = (f"{peers.PEER_PACKAGES[name]} is not installed "
+                             '(pip install -e ".[peers]")')
+        else:
+            ok.append(name)
+    return ok, skipped
+
+
+def seeds_of(method: str, n_seeds: int) -> list[int]:
+    return [0] if method in peers.DETERMINISTIC else list(range(1, n_seeds + 1))
+
+
+def settings_fingerprint(settings: dict) -> str:
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def check_folder(out: Path, settings: dict) -> None:
+    """Refuse a folder that holds a benchmark with other settings (resume needs the same)."""
+    path = out / "benchmark.json"
+    if path.is_file():
+        saved = json.loads(path.read_text()).get("fingerprint")
+        if saved != settings_fingerprint(settings):
+            raise GpquadError("the folder holds a benchmark with other settings (engine config, "
+                              "horizons or peer settings); give another --out", source=str(out),
+                              field="--out")
+
+
+def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_s=(1, 7, 30),
+                  log=print, engine_dir=None) -> dict:
+    """Run every missing cell; returns the summary (also written to benchmark.json).
+
+    engine_dir: folder holding recommended.toml or quickstart.toml (default the
+    repository's experiments/).
+    """
+    out = Path(out)
+    engine_dir = Path(engine_dir) if engine_dir else scenarios.repo_root() / "experiments"
+    engine_file = engine_source(engine_dir)
+    settings = {"horizons_s": list(horizons_s), "engine_config": engine_file.name,
+                "engine_text": engine_file.read_text(), "sindy": peers.SINDY_SETTINGS,
+                "operon": peers.OPERON_SETTINGS, "max_lag": 5}
+    check_folder(out, settings)
+    use_peers, skipped_peers = available_peers(peer_names)
+    for p, why in skipped_peers.items():
+        log(f"gpquad benchmark: skipping peer {p}: {why}")
+    methods = ["gpquad"] + use_peers
+    built, skipped = {}, {}
+    for name in names:
+        t0 = time.perf_counter()
+        try:
+            sc = scenarios.build_scenario(name, out / "flights")
+        except scenarios.Skipped as exc:
+            skipped[name] = str(exc)
+            log(f"gpquad benchmark: skipping scenario {exc}")
+            continue
+        if sc.name in built:
+            raise GpquadError(f"two scenarios are named {sc.name}; rename a config file",
+                              field="scenario")
+        built[sc.name] = sc
+        log(f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
+            f"and {sc.test.summary()['validation_samples']} test samples "
+            f"({time.perf_counter() - t0:.1f} s to build)")
+    todo = [(sc, m, s) for sc in built.values() for m in methods for s in seeds_of(m, n_seeds)]
+    missing = [(sc, m, s) for sc, m, s in todo
+               if cells.load_cell(cells.cell_path(out, sc.name, m, s)) is None]
+    from gpquad.benchmark.evaluate import figure_data
+
+    info = {"fingerprint": settings_fingerprint(settings), "settings": settings,
+            "scenarios": {n: sc.source for n, sc in built.items()},
+            "skipped_scenarios": skipped, "skipped_peers": skipped_peers, "methods": methods,
+            "seeds": {m: seeds_of(m, n_seeds) for m in methods},
+            "peer_versions": {p: peers.package_version(p) for p in use_peers},
+            "engine_config": str(engine_file),
+            "figures": {n: figure_data(sc.test) for n, sc in built.items()}, **provenance()}
+    write_json(out / "benchmark.json", info)
+    log(f"gpquad benchmark: {len(todo) - len(missing)} of {len(todo)} cells done earlier; "
+        f"running {len(missing)} with {jobs} job(s); results in {out}")
+    t0 = time.perf_counter()
+    if missing:
+        from joblib import Parallel, delayed
+
+        # the longest cells first, so that the last ones running in parallel are short
+        order = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
+        missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
+        parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
+        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_dir, horizons_s)
+                             for sc, m, s in missing):
+            h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")
+                      is not None), None)
+            shown = f"mean RSE {h} {cell['metrics'][h]['mean']:.4g}" if h else "no score"
+            log(f"  done {cell['scenario']:<20} {cell['method']:<7} seed {cell['seed']}: "
+                f"{shown}, fit {cell['cost']['fit_time_s']:.1f} s "
+                f"({time.perf_counter() - t0:.0f} s elapsed)")
+    info.update(wall_time_s=time.perf_counter() - t0, jobs=jobs,
+                finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    write_json(out / "benchmark.json", info)
+    return info
+
+
+def collect(out, info: dict) -> list[dict]:
+    """Every finished cell of the benchmark in `out`, in a fixed order."""
+    found = []
+    for name in info["scenarios"]:
+        for m in info["methods"]:
+            for s in info["seeds"][m]:
+                cell = cells.load_cell(cells.cell_path(Path(out), name, m, s))
+                if cell is not None:
+                    found.append(cell)
+                else:
+                    print(f"gpquad benchmark: warning: cell {name}/{m}/seed{s} missing",
+                          file=sys.stderr)
+    return found

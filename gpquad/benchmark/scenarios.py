@@ -1,0 +1,222 @@
+"""Benchmark scenarios: training flights, held-out test flights, and the truth where known.
+
+Each scenario is a `Scenario`: `fit` is a Dataset of the training flights (its `train`
+ranges are fitted, its `validation` ranges serve model selection: SINDy's threshold,
+gpquad's reported validation error), `test` a Dataset whose `validation` ranges are the
+held-out flights that every method is scored on (same trim as `fit`).
+
+- median, median-noisy: the bundled reference simulator (paper's median model), training
+  flight of simulator seed 0, test flights of seeds 1001 and 1002 (180 s each);
+- rigid-body, rigid-body-noisy: the same with `experiments/rigid_body.toml`'s [simulator];
+  noisy: simulator.measurement_noise = NOISE on every flight (training and test);
+- rotorpy-angle, rotorpy-angle-noisy, rotorpy-rate: flights made by
+  `gpquad.benchmark.rotorpy_flights.ensure_flights` (cached), skipped when it or rotorpy
+  is missing;
+- px4-s250, px4-aquaquad: the real logs of `experiments/px4_*.toml`, first 70 % of the
+  flight time trains, the last 30 % tests; only measured states are scored;
+- a user's TOML: its training part trains, its held-out part (data.validation_fraction of
+  each flight) tests.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.config import Config, load_config
+from gpquad.data.dataset import Dataset, build_dataset
+from gpquad.data.flight import Flight
+from gpquad.errors import GpquadError
+from gpquad.scoring import SCORED_STATES
+
+NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
+TEST_SEEDS = (1001, 1002)
+TEST_DURATION_S = 180.0
+TRAIN_FRACTION = 0.7
+SCENARIOS = ("median", "median-noisy", "rigid-body", "rigid-body-noisy", "rotorpy-angle",
+             "rotorpy-angle-noisy", "rotorpy-rate", "px4-s250", "px4-aquaquad")
+ROTORPY = {"rotorpy-angle": ("angle", False), "rotorpy-angle-noisy": ("angle", True),
+           "rotorpy-rate": ("rate", False)}
+
+
+class Skipped(Exception):
+    """A scenario that cannot run here (a missing optional package); the message says why."""
+
+
+@dataclass
+class Scenario:
+    name: str
+    fit: Dataset
+    test: Dataset
+    truth: dict[str, str] | None          # known equations (raw inputs), or None
+    measured: dict[str, bool]             # u..r: scored only when measured
+    source: dict                          # what the flights are (recorded with results)
+
+
+def repo_root() -> Path:
+    return Path(__file__).resolve().parents[2]
+
+
+def _trim_values(flights: list[Flight], mode: str, given: dict) -> tuple[str, dict]:
+    """Trim from the training flights only: mode for build_dataset and its values."""
+    if mode == "mean":
+        stacked = np.vstack([f.inputs for f in flights])
+        return "given", {n: float(stacked[:, j].mean()) for j, n in
+                         enumerate(flights[0].input_names)}
+    return mode, dict(given)
+
+
+def make_scenario(name: str, train: list[Flight], test: list[Flight], *, trim: str,
+                  trim_values: dict | None = None, validation: list[Flight] | None = None,
+                  validation_fraction: float = 2000 / 13800, truth=None, source=None
+                  ) -> Scenario:
+    """Scenario from flight lists; `validation` flights (if given) replace the held-out
+    fraction of the training flights for model selection."""
+    if not train or not test:
+        raise GpquadError(f"scenario {name}: needs training and test flights", field="data.files")
+    mode, values = _trim_values(train, trim, trim_values or {})
+    if validation:
+        fit = build_dataset(train + validation, validation_fraction=0.0, trim=mode,
+                            trim_values=values)
+        n = len(train)
+        fit = dataclasses.replace(fit, train=fit.segments[:n], validation=fit.segments[n:])
+    else:
+        fit = build_dataset(train, validation_fraction=validation_fraction, trim=mode,
+                            trim_values=values)
+    test_ds = build_dataset(test, validation_fraction=1.0, trim="given", trim_values=fit.trim)
+    measured = {s: not (fit.unmeasured(s) or test_ds.unmeasured(s)) for s in SCORED_STATES}
+    return Scenario(name, fit, test_ds, truth, measured, source or {})
+
+
+def slice_flight(flight: Flight, a: int, b: int, suffix: str) -> Flight:
+    """Samples a..b-1 of a flight as a flight of its own."""
+    pos = None if flight.pos is None else flight.pos[a:b]
+    return Flight(f"{flight.name}{suffix}", flight.t[a:b], flight.quat[a:b], flight.vel[a:b],
+                  flight.rates[a:b], flight.inputs[a:b], flight.input_names, pos,
+                  dict(flight.meta))
+
+
+def time_split(flights: list[Flight], fraction: float) -> tuple[list[Flight], list[Flight]]:
+    """The first `fraction` of all samples (flights in log order) and the rest."""
+    total = sum(len(f) for f in flights)
+    cut = int(round(fraction * total))
+    train, test, seen = [], [], 0
+    for f in flights:
+        if seen + len(f) <= cut:
+            train.append(f)
+        elif seen >= cut:
+            test.append(f)
+        else:
+            k = cut - seen
+            train.append(slice_flight(f, 0, k, "[train]"))
+            test.append(slice_flight(f, k, len(f), "[test]"))
+        seen += len(f)
+    return train, test
+
+
+def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
+    from gpquad.simulator import simulate
+
+    sim = cfg.simulator
+    if noisy:
+        sim = dataclasses.replace(sim, measurement_noise=dict(NOISE))
+    train = [simulate(sim, cfg.data.inputs)]
+    duration = min(TEST_DURATION_S, sim.duration_s)
+    test = [simulate(dataclasses.replace(sim, seed=s, duration_s=duration), cfg.data.inputs)
+            for s in TEST_SEEDS]
+    return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
+                         validation_fraction=cfg.data.validation_fraction,
+                         truth=dict(sim.equations),
+                         source={"kind": "simulator", "train_seed": sim.seed,
+                                 "test_seeds": list(TEST_SEEDS), "test_duration_s":
+                                 duration, "measurement_noise": dict(sim.measurement_noise),
+                                 "equations": dict(sim.equations)})
+
+
+def _from_log(name: str, path: Path) -> Scenario:
+    from gpquad.data.io import load_flights
+
+    cfg = load_config(path)
+    train, test = time_split(load_flights(cfg), TRAIN_FRACTION)
+    return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
+                         validation_fraction=cfg.data.validation_fraction,
+                         source={"kind": "log", "config": str(path), "files": list(cfg.data.files),
+                                 "split": f"first {TRAIN_FRACTION:.0%} of the samples train"})
+
+
+def _rotorpy(name: str, cache_dir: Path) -> Scenario:
+    mode, noisy = ROTORPY[name]
+    try:
+        from gpquad.benchmark import rotorpy_flights
+    except ImportError as exc:
+        raise Skipped(f"{name}: gpquad.benchmark.rotorpy_flights unavailable ({exc})") from None
+    try:
+        made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir)
+    except ImportError as exc:
+        raise Skipped(f"{name}: rotorpy is not installed ({exc})") from None
+    from gpquad.config import config_from_dict
+    from gpquad.data.io import load_flights
+
+    def read(paths):
+        flights = []
+        for p in paths:
+            table = {"data": {**made["config"], "files": [str(Path(p).resolve())]}}
+            flights.extend(load_flights(config_from_dict(table, f"{name} flights")))
+        return flights
+
+    data = made["config"]
+    return make_scenario(name, read(made["train"]), read(made["test"]),
+                         validation=read(made.get("validation", [])),
+                         trim=data.get("trim", "none"), trim_values=data.get("trim_values"),
+                         source={"kind": "rotorpy", "mode": mode, "noisy": noisy,
+                                 "vehicles": made.get("vehicles"), "seeds": made.get("seeds"),
+                                 "config": data})
+
+
+def user_scenario(path: Path) -> Scenario:
+    """A user's experiment config: each flight's held-out part is its test data."""
+    from gpquad.data.io import load_flights
+
+    cfg = load_config(path)
+    if not cfg.data.files:
+        return _simulated(path.stem, cfg, noisy=False)
+    if cfg.data.validation_fraction <= 0:
+        raise GpquadError("the benchmark tests on the held-out part of each flight; set "
+                          "data.validation_fraction > 0", source=str(path),
+                          field="data.validation_fraction")
+    train, test = [], []
+    for f in load_flights(cfg):
+        cut = len(f) - int(round(cfg.data.validation_fraction * len(f)))
+        if cut > 0:
+            train.append(slice_flight(f, 0, cut, "[train]"))
+        if cut < len(f):
+            test.append(slice_flight(f, cut, len(f), "[test]"))
+    return make_scenario(path.stem, train, test, trim=cfg.data.trim,
+                         trim_values=cfg.data.trim_values,
+                         validation_fraction=cfg.data.validation_fraction,
+                         source={"kind": "user config", "config": str(path)})
+
+
+def build_scenario(name: str, cache_dir: Path) -> Scenario:
+    """Build a named scenario (or a user's TOML path); raises Skipped when it cannot run."""
+    root = repo_root()
+    if name.endswith(".toml"):
+        return user_scenario(Path(name))
+    if name in ("median", "median-noisy"):
+        cfg = load_config(root / "experiments" / "quickstart.toml")
+        return _simulated(name, dataclasses.replace(cfg, simulator=Config().simulator),
+                          name.endswith("noisy"))
+    if name in ("rigid-body", "rigid-body-noisy"):
+        return _simulated(name, load_config(root / "experiments" / "rigid_body.toml"),
+                          name.endswith("noisy"))
+    if name in ROTORPY:
+        return _rotorpy(name, cache_dir)
+    if name == "px4-s250":
+        return _from_log(name, root / "experiments" / "px4_s250.toml")
+    if name == "px4-aquaquad":
+        return _from_log(name, root / "experiments" / "px4_aquaquad.toml")
+    raise GpquadError(f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a "
+                      "config .toml", field="scenario")

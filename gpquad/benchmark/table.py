@@ -1,0 +1,95 @@
+"""Aggregate benchmark cells: mean and spread over seeds, Markdown table and JSON.
+
+Per scenario, method and horizon: RSE of u, v, w, p, q, r and their mean (mean over
+seeds; spread = min..max over seeds), diverged windows (summed over seeds, of the
+windows flown), fit time and peak memory (mean over seeds) and, where the truth is
+known, how many seeds recovered each equation's exact structure. The JSON without the
+"cost" entries is what `--jobs 1` and `--jobs 2` must reproduce identically.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpquad.scoring import SCORED_STATES
+from gpquad.variables import TARGET_NAMES
+
+
+def _stats(values) -> dict | None:
+    vals = [v for v in values if v is not None]
+    if not vals:
+        return None
+    arr = np.array(vals, dtype=float)
+    return {"mean": float(arr.mean()), "min": float(arr.min()), "max": float(arr.max()),
+            "n": len(vals)}
+
+
+def aggregate(cells: list[dict]) -> dict:
+    """{scenario: {method: {"seeds", "horizons": {h: {...}}, "recovery", "cost"}}}."""
+    out: dict = {}
+    for cell in cells:
+        out.setdefault(cell["scenario"], {}).setdefault(cell["method"], []).append(cell)
+    result = {}
+    for scenario, methods in out.items():
+        result[scenario] = {}
+        for method, group in methods.items():
+            group = sorted(group, key=lambda c: c["seed"])
+            horizons = {}
+            for h in group[0]["metrics"]:
+                ms = [c["metrics"][h] for c in group]
+                horizons[h] = {
+                    "windows": ms[0]["windows"], "steps": ms[0]["steps"],
+                    "diverged": int(sum(m["diverged"] for m in ms)),
+                    "rse": {s: _stats([m["rse"].get(s) for m in ms]) for s in SCORED_STATES},
+                    "mean": _stats([m["mean"] for m in ms])}
+            recovery = None
+            if group[0].get("recovery"):
+                recovery = {t: int(sum(bool(c["recovery"].get(t)) for c in group))
+                            for t in TARGET_NAMES if t in group[0]["recovery"]}
+            result[scenario][method] = {
+                "seeds": [c["seed"] for c in group], "version": group[0].get("version"),
+                "horizons": horizons, "recovery": recovery,
+                "cost": {"fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
+                         "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
+                         "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group])}}
+    return result
+
+
+def _num(stats, spread: bool = False) -> str:
+    if stats is None:
+        return "-"
+    text = f"{stats['mean']:.3g}"
+    if spread and stats["n"] > 1 and stats["max"] > stats["min"]:
+        text += f" ({stats['min']:.3g}-{stats['max']:.3g})"
+    return text
+
+
+def markdown(agg: dict) -> str:
+    """One table per scenario: rows method x horizon."""
+    head = (["method", "horizon"] + [f"RSE {s}" for s in SCORED_STATES]
+            + ["mean RSE (min-max over seeds)", "diverged", "fit s", "peak MB", "recovered"])
+    lines = []
+    for scenario, methods in agg.items():
+        lines += [f"### {scenario}", "", "| " + " | ".join(head) + " |",
+                  "|" + "---|" * len(head)]
+        for method, m in methods.items():
+            rec = "-"
+            if m["recovery"]:
+                n = len(m["seeds"])
+                rec = " ".join(f"{t}:{k}/{n}" for t, k in m["recovery"].items())
+            for h, hm in m["horizons"].items():
+                if not hm["windows"]:
+                    continue
+                cells = [method, h] + [_num(hm["rse"][s]) for s in SCORED_STATES]
+                cells += [_num(hm["mean"], spread=True),
+                          f"{hm['diverged']}/{hm['windows'] * len(m['seeds'])}",
+                          _num(m["cost"]["fit_time_s"]), _num(m["cost"]["peak_memory_mb"]), rec]
+                lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def comparable(agg: dict) -> dict:
+    """The aggregate without timings and memory (identical for any --jobs)."""
+    return {s: {m: {k: v for k, v in d.items() if k != "cost"} for m, d in ms.items()}
+            for s, ms in agg.items()}

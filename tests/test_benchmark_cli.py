@@ -1,0 +1,125 @@
+"""`gpquad benchmark`: bad input is one line and exit 2; a rerun resumes; --jobs 2 gives the
+same table as --jobs 1; the engine settings come from recommended.toml when it exists."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from gpquad.benchmark import table
+from gpquad.benchmark.cli import write_report
+from gpquad.benchmark.engine import engine_source
+from gpquad.benchmark.runner import collect, run_benchmark
+from gpquad.cli import main
+
+TINY_ENGINE = """
+[evolution]
+iterations = 1
+model_generations = 4
+test_generations = 2
+n_models = 3
+n_tests = 2
+suite_size = 2
+window_steps = 50
+test_offset_max = 10
+simplify_generations = 2
+"""
+
+USER_CONFIG = """
+name = "tiny"
+seed = 1
+[data]
+trim = "mean"
+validation_fraction = 0.3
+[simulator]
+duration_s = 40.0
+"""
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["benchmark", "no-such-scenario"], "scenario"),
+    (["benchmark", "median", "--peers", "zero,lasso"], "--peers"),
+    (["benchmark", "median", "--seeds", "0"], "--seeds"),
+    (["benchmark", "median", "--jobs", "0"], "--jobs"),
+    (["benchmark", "median", "--horizons", "1,abc"], "--horizons"),
+    (["benchmark", "median", "--horizons", "0"], "--horizons"),
+    (["benchmark", "median", "median"], "scenario"),
+    (["benchmark", "missing.toml"], None),
+])
+def test_bad_arguments_are_one_line_and_exit_2(argv, field, capsys, tmp_path):
+    assert main(argv + ["--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gpquad: error:") and "\n" not in err
+    assert (f"field '{field}'" in err) if field else "missing.toml" in err
+    assert not (tmp_path / "b").exists()  # refused before any work
+
+
+def test_bad_user_config_is_one_line(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text("[data]\ntrim = 'sometimes'\n")
+    assert main(["benchmark", str(path), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "bad.toml" in err and "data.trim" in err and "\n" not in err
+
+
+def test_engine_settings_prefer_recommended(tmp_path):
+    (tmp_path / "quickstart.toml").write_text(TINY_ENGINE)
+    assert engine_source(tmp_path).name == "quickstart.toml"
+    (tmp_path / "recommended.toml").write_text(TINY_ENGINE)
+    assert engine_source(tmp_path).name == "recommended.toml"
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    base = tmp_path_factory.mktemp("bench")
+    (base / "engine").mkdir()
+    (base / "engine" / "quickstart.toml").write_text(TINY_ENGINE)
+    (base / "tiny.toml").write_text(USER_CONFIG)
+    return base
+
+
+def _run(tiny, out, jobs=1):
+    return run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, jobs=jobs,
+                         horizons_s=(1.0, 2.0), engine_dir=tiny / "engine", log=lambda s: None)
+
+
+def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
+    out = tiny / "run1"
+    info = _run(tiny, out)
+    cells = sorted((out / "cells").rglob("*.json"))
+    # gpquad seeds 1 and 2, zero and ols once each (deterministic)
+    assert [c.relative_to(out / "cells").as_posix() for c in cells] == [
+        "tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json", "tiny/ols/seed0.json",
+        "tiny/zero/seed0.json"]
+    first = {c: c.read_bytes() for c in cells}
+    agg = table.aggregate(collect(out, info))
+    assert agg["tiny"]["gpquad"]["recovery"] is not None  # the simulator's truth is known
+    assert agg["tiny"]["zero"]["horizons"]["2s"]["mean"]["mean"] > 0.1
+    # a killed run: one cell never finished, another left a damaged file
+    cells[0].unlink()
+    cells[3].write_text('{"scenario": ')
+    info = _run(tiny, out)
+    for c in (cells[1], cells[2]):  # finished cells are not recomputed
+        assert c.read_bytes() == first[c]
+    again = table.aggregate(collect(out, info))
+    assert table.comparable(again) == table.comparable(agg)
+
+    out2 = tiny / "run2"
+    info2 = _run(tiny, out2, jobs=2)
+    assert table.comparable(table.aggregate(collect(out2, info2))) == table.comparable(agg)
+    write_report(out2, info2)
+    assert (out2 / "figures" / "tiny.png").is_file()
+    text = (out2 / "benchmark.md").read_text()
+    assert "| gpquad | 1s |" in text and "| zero | 2s |" in text
+    saved = json.loads((out2 / "results.json").read_text())
+    assert saved["benchmark"]["engine_config"].endswith("quickstart.toml")
+
+
+def test_folder_with_other_settings_is_refused(tiny, capsys):
+    out = tiny / "run3"
+    shutil.copytree(tiny / "run1", out)
+    with pytest.raises(Exception, match="other settings"):
+        run_benchmark([str(tiny / "tiny.toml")], ["zero"], 1, out, horizons_s=(1.0,),
+                      engine_dir=tiny / "engine", log=lambda s: None)
+    assert Path(out / "benchmark.json").is_file()
