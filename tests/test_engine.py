@@ -12,6 +12,7 @@ from gpquad.evolve.coevolution import Coevolution, disagreement
 from gpquad.evolve.windows import WindowSpace, tile
 from gpquad.experiments import run_experiment
 from gpquad.model import DiscoveredModel
+from gpquad.tree.operators import VAR_BASE
 from gpquad.tree.random_stream import RandomStream
 
 TINY = EvolutionConfig(targets=("p_dot",), iterations=2, model_generations=15,
@@ -299,3 +300,28 @@ def test_reported_equation_is_not_beaten_by_a_candidate_of_the_run(tmp_path, pru
         beaten = [c for c in eq.candidates
                   if c["size"] <= size and c["error"] < eq.error * (1 - 1e-12)]
         assert beaten == [], (eq.text(), beaten)
+
+
+def test_unmeasured_states_are_never_leaves(short_flight):
+    """A log that does not measure u and v (PX4 without GPS) keeps them out of every tree."""
+    from gpquad.data.dataset import build_dataset
+    from gpquad.evolve.coevolution import Coevolution
+    from gpquad.variables import STATE_NAMES, terminal_names
+
+    flight = dataclasses.replace(short_flight, meta={
+        **short_flight.meta, "measured": {"u": "not measured (test)", "v": "not measured"}})
+    dataset = build_dataset([flight], validation_fraction=0.2, trim="mean")
+    assert dataset.unmeasured("u") and not dataset.unmeasured("w")
+    co = Coevolution(dataset, "p_dot", TINY)
+    names = terminal_names(dataset.input_names)
+    allowed = {names[i] for i in co.params.variables}
+    assert allowed == set(names) - {"u", "v"} and "w" in allowed and "u_R" in allowed
+    state = co.init_state(np.random.SeedSequence(1))
+    co.iterate(state)
+    read = {names[c - VAR_BASE] for t in state.models for c in t.codes[: t.size] if c >= VAR_BASE}
+    assert read and not read & {"u", "v"}
+    # the same data with every state measured offers all of them
+    assert Coevolution(build_dataset([short_flight], validation_fraction=0.2, trim="mean"),
+                       "p_dot",
+                       TINY).params.variables is None
+    assert STATE_NAMES[3:5] == ("u", "v")

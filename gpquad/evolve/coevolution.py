@@ -33,7 +33,7 @@ from gpquad.tree.variation import (
     random_tree,
     replace_with_constant,
 )
-from gpquad.variables import N_STATE
+from gpquad.variables import N_STATE, STATE_NAMES
 
 
 @dataclass
@@ -52,9 +52,21 @@ class RunState:
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
 
 
-def variation_params(cfg: EvolutionConfig, n_inputs: int) -> VariationParams:
+def measured_variables(dataset) -> tuple[int, ...] | None:
+    """Leaf variables a model may read: every input and every state the data measures (None:
+    all). A log without, say, horizontal velocity keeps u and v out of its equations."""
+    unmeasured = [i for i, name in enumerate(STATE_NAMES)
+                  if name in ("u", "v", "w", "p", "q", "r") and dataset.unmeasured(name)]
+    if not unmeasured:
+        return None
+    n = N_STATE + len(dataset.input_names)
+    return tuple(i for i in range(n) if i not in unmeasured)
+
+
+def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
     return VariationParams(
-        n_variables=N_STATE + n_inputs, n_inputs=n_inputs, max_depth=cfg.max_depth,
+        n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
+        max_depth=cfg.max_depth,
         p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
         const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
         p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
@@ -78,7 +90,7 @@ class Coevolution:
         self.dataset = dataset
         self.target = target
         self.cfg = cfg
-        self.params = variation_params(cfg, len(dataset.input_names))
+        self.params = variation_params(cfg, len(dataset.input_names), measured_variables(dataset))
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
 
@@ -218,7 +230,8 @@ class Coevolution:
         i = best_index(state.model_errors)
         state.models[i], state.model_errors[i] = improve_terms(
             self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
-            self.params.n_variables, cfg.max_depth, cfg.term_min_gain)
+            self.params.variables if self.params.variables is not None
+            else self.params.n_variables, cfg.max_depth, cfg.term_min_gain)
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""

@@ -17,11 +17,13 @@ from gpquad.tree.encoding import Tree, tree_depth
 from gpquad.tree.operators import ADD, CONST, MUL, VAR_BASE
 
 
-def term_candidates(model: Tree, n_variables: int, max_depth: int) -> list[Tree]:
-    """model + 0 * x_i and model + 0 * x_i * x_j for every variable pair, within max_depth."""
-    terms = [[(MUL, 0.0), (CONST, 0.0), (VAR_BASE + i, 0.0)] for i in range(n_variables)]
+def term_candidates(model: Tree, variables, max_depth: int) -> list[Tree]:
+    """model + 0 * x_i and model + 0 * x_i * x_j for every allowed variable (an int n: the
+    first n) and pair, within max_depth."""
+    variables = list(range(variables)) if isinstance(variables, int) else list(variables)
+    terms = [[(MUL, 0.0), (CONST, 0.0), (VAR_BASE + i, 0.0)] for i in variables]
     terms += [[(MUL, 0.0), (CONST, 0.0), (MUL, 0.0), (VAR_BASE + i, 0.0), (VAR_BASE + j, 0.0)]
-              for i in range(n_variables) for j in range(i, n_variables)]
+              for k, i in enumerate(variables) for j in variables[k:]]
     head_codes = [ADD] + model.codes.tolist()
     head_values = [0.0] + model.values.tolist()
     out = []

@@ -20,6 +20,9 @@ class VariationParams:
 
     n_variables: int  # leaves that are variables: 9 states + inputs
     n_inputs: int
+    #: Variable indices a new leaf may take (None: all). States a log does not measure are
+    #: left out, so that no equation is fitted to a log's placeholder values.
+    variables: tuple[int, ...] | None = None
     max_depth: int = 5
     p_leaf: float = 0.7
     p_constant_leaf: float = 0.25
@@ -35,7 +38,9 @@ def random_leaf(rng: RandomStream, params: VariationParams):
     """(code, value) of a new leaf: a U(low, high) constant or a uniform variable."""
     if rng.random() < params.p_constant_leaf:
         return CONST, rng.uniform(params.const_low, params.const_high)
-    return VAR_BASE + rng.below(params.n_variables), 0.0
+    if params.variables is None:
+        return VAR_BASE + rng.below(params.n_variables), 0.0
+    return VAR_BASE + params.variables[rng.below(len(params.variables))], 0.0
 
 
 def random_subtree(rng, params: VariationParams, max_depth: int):
