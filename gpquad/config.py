@@ -147,6 +147,9 @@ class EvolutionConfig:
     # Not in the paper: after the local search, try adding c*x_i or c*x_i*x_j to the best
     # climber (constants re-fitted); keep the best if the error drops by > term_min_gain.
     term_search: bool = False
+    # Not in the paper: state or input names no equation may read (for example "psi": the
+    # heading, which the body-frame dynamics do not depend on and a model can overfit to).
+    exclude_leaves: tuple[str, ...] = ()
     term_min_gain: float = 0.01
 
 
@@ -234,6 +237,13 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if ev.final_selection not in FINAL_SELECTIONS:
         raise GpquadError(f"choose one of {list(FINAL_SELECTIONS)}", source=source,
                           field="evolution.final_selection")
+    known = set(STATE_NAMES) | set(cfg.data.inputs if not isinstance(cfg.data.inputs, str)
+                                   else DEFAULT_INPUTS)
+    for i, name in enumerate(ev.exclude_leaves):
+        if name not in known:
+            raise GpquadError(f"unknown variable '{name}'; choose from the states "
+                              f"{list(STATE_NAMES)} or the inputs", source=source,
+                              field=f"evolution.exclude_leaves[{i}]")
     if not 0.0 <= ev.term_min_gain < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
     if ev.gradient_steps < 0:

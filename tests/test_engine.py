@@ -325,3 +325,19 @@ def test_unmeasured_states_are_never_leaves(short_flight):
                        "p_dot",
                        TINY).params.variables is None
     assert STATE_NAMES[3:5] == ("u", "v")
+
+
+def test_excluded_leaves_are_never_read_and_unknown_names_are_refused(short_dataset):
+    from gpquad.config import config_from_dict
+    from gpquad.errors import GpquadError
+    from gpquad.evolve.coevolution import Coevolution
+    from gpquad.variables import terminal_names
+
+    co = Coevolution(short_dataset, "r_dot", dataclasses.replace(TINY, exclude_leaves=("psi",)))
+    names = terminal_names(short_dataset.input_names)
+    assert "psi" not in {names[i] for i in co.params.variables}
+    state = co.init_state(np.random.SeedSequence(2))
+    co.iterate(state)
+    assert all(names.index("psi") + VAR_BASE not in t.codes[: t.size] for t in state.models)
+    with pytest.raises(GpquadError, match=r"exclude_leaves\[0\]"):
+        config_from_dict({"evolution": {"exclude_leaves": ["heading"]}})

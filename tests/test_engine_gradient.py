@@ -90,7 +90,7 @@ def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):
     ds = rigid_dataset
     ev = Evaluator(ds, "p_dot", 250, "mse")
     model = _tree("8.0*u_R(t-2) - 3.0*p", ds)
-    assert len(term_candidates(model, 13, 5)) == 13 + 91
+    assert len(term_candidates(model, 13, 5)) == 1 + 13 + 91 + 78
     assert term_candidates(model, 13, 2) == []  # no room under the depth limit
     err = ev.mean_errors([model], STARTS)[0]
     found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)

@@ -52,15 +52,17 @@ class RunState:
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
 
 
-def measured_variables(dataset) -> tuple[int, ...] | None:
-    """Leaf variables a model may read: every input and every state the data measures (None:
-    all). A log without, say, horizontal velocity keeps u and v out of its equations."""
-    unmeasured = [i for i, name in enumerate(STATE_NAMES)
-                  if name in ("u", "v", "w", "p", "q", "r") and dataset.unmeasured(name)]
-    if not unmeasured:
+def measured_variables(dataset, exclude=()) -> tuple[int, ...] | None:
+    """Leaf variables a model may read: every input and every state the data measures, less
+    the names in `exclude` (None: all). A log without, say, horizontal velocity keeps u and v
+    out of its equations."""
+    names = list(STATE_NAMES) + list(dataset.input_names)
+    left_out = [i for i, name in enumerate(names)
+                if name in exclude or (name in ("u", "v", "w", "p", "q", "r")
+                                       and dataset.unmeasured(name))]
+    if not left_out:
         return None
-    n = N_STATE + len(dataset.input_names)
-    return tuple(i for i in range(n) if i not in unmeasured)
+    return tuple(i for i in range(len(names)) if i not in left_out)
 
 
 def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
@@ -90,7 +92,8 @@ class Coevolution:
         self.dataset = dataset
         self.target = target
         self.cfg = cfg
-        self.params = variation_params(cfg, len(dataset.input_names), measured_variables(dataset))
+        self.params = variation_params(cfg, len(dataset.input_names),
+                                       measured_variables(dataset, cfg.exclude_leaves))
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
 

@@ -18,15 +18,25 @@ from gpquad.tree.operators import ADD, CONST, MUL, VAR_BASE
 
 
 def term_candidates(model: Tree, variables, max_depth: int) -> list[Tree]:
-    """model + 0 * x_i and model + 0 * x_i * x_j for every allowed variable (an int n: the
-    first n) and pair, within max_depth."""
+    """1 * model, and model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every
+    allowed variable (an int n: the first n) and pair, within max_depth."""
     variables = list(range(variables)) if isinstance(variables, int) else list(variables)
     terms = [[(MUL, 0.0), (CONST, 0.0), (VAR_BASE + i, 0.0)] for i in variables]
     terms += [[(MUL, 0.0), (CONST, 0.0), (MUL, 0.0), (VAR_BASE + i, 0.0), (VAR_BASE + j, 0.0)]
               for k, i in enumerate(variables) for j in variables[k:]]
+    # Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error only
+    # with both of its terms, so one-term insertion alone never finds it.
+    terms += [[(ADD, 0.0), (MUL, 0.0), (CONST, 0.0), (VAR_BASE + i, 0.0), (MUL, 0.0),
+               (CONST, 0.0), (VAR_BASE + j, 0.0)]
+              for k, i in enumerate(variables) for j in variables[k + 1:]]
     head_codes = [ADD] + model.codes.tolist()
     head_values = [0.0] + model.values.tolist()
     out = []
+    # The whole model scaled, c * model (c starts at 1): a structure found without its gain,
+    # such as u_Y - r for a rate loop 16 (u_Y - r), gets one.
+    scaled = [MUL, CONST] + model.codes.tolist()
+    if tree_depth(scaled) <= max_depth:
+        out.append(Tree.from_lists(scaled, [0.0, 1.0] + model.values.tolist(), model.delays))
     for term in terms:
         codes = head_codes + [c for c, _ in term]
         if tree_depth(codes) <= max_depth:
