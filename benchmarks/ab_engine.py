@@ -7,10 +7,10 @@ A variant is NAME:FIELD=VALUE,FIELD=VALUE (EvolutionConfig fields; values parsed
 For every scenario, seed and variant all six equations are identified (same seeds for
 every variant) and scored:
 
-- exact: gpquad.analysis.compare_to_truth with terms >= 1 % of the target's RMS, the truth's
+- exact: gpquad.models.analysis.compare_to_truth with terms >= 1 % of the target's RMS, the truth's
   delays and every coefficient within 2 % (simulated scenarios only);
 - RSE of u, v, w, p, q, r of the full six-equation model flown from recorded states at
-  1, 7 and 30 s (gpquad.scoring) on HELD-OUT data: a second simulator flight (simulator
+  1, 7 and 30 s (gpquad.models.scoring) on HELD-OUT data: a second simulator flight (simulator
   seed + 1000, never seen in training) for simulated scenarios, the last 30 % of the log
   for px4-s250 (only p, q, r, w are measured there; the mean is over those);
 - diverged windows (non-finite RSE) and wall time.
@@ -28,13 +28,13 @@ import time
 import numpy as np
 import tomllib
 
-from gpquad.analysis import compare_to_truth
-from gpquad.config import Config, load_config, validate
 from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
-from gpquad.experiments import identify
-from gpquad.model import DiscoveredModel
-from gpquad.scoring import SCORED_STATES, score_model
+from gpquad.models.analysis import compare_to_truth
+from gpquad.models.equations import DiscoveredModel
+from gpquad.models.scoring import SCORED_STATES, score_model
+from gpquad.study.config import Config, load_config, validate
+from gpquad.study.runner import identify
 
 NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
 SCENARIOS = {

@@ -10,10 +10,10 @@ import argparse
 import json
 import time
 
-from gpquad.analysis import compare_to_truth
-from gpquad.config import load_config, override
 from gpquad.data.io import load_dataset
-from gpquad.experiments import identify
+from gpquad.models.analysis import compare_to_truth
+from gpquad.study.config import load_config, override
+from gpquad.study.runner import identify
 
 
 def main() -> None:

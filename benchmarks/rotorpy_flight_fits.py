@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from gpquad.benchmark.rotorpy_flights import VEHICLES, ensure_flights
-from gpquad.config import config_from_dict
 from gpquad.data.dataset import build_dataset
 from gpquad.data.io import load_flights
-from gpquad.kernels.quaternion import euler_array
+from gpquad.engine.kernels.quaternion import euler_array
+from gpquad.study.config import config_from_dict
 
 STATE = {"phi": 0, "theta": 1, "psi": 2, "u": 3, "v": 4, "w": 5, "p": 6, "q": 7, "r": 8}
 TARGET = {"a_x": 0, "a_y": 1, "a_z": 2, "p_dot": 3, "q_dot": 4, "r_dot": 5}

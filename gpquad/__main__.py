@@ -1,5 +1,5 @@
 import sys
 
-from gpquad.cli import main
+from gpquad.cli.commands import main
 
 sys.exit(main())

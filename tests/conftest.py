@@ -6,9 +6,9 @@ import os
 import pytest
 from hypothesis import settings
 
-from gpquad.config import Config, DataConfig, SimulatorConfig
 from gpquad.data.dataset import build_dataset
-from gpquad.simulator import simulate
+from gpquad.data.simulator import simulate
+from gpquad.study.config import Config, DataConfig, SimulatorConfig
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 

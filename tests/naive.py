@@ -1,13 +1,13 @@
 """Slow, obviously correct references for every kernel (STUMPY's tests/naive.py habit).
 
-Written independently of gpquad.kernels: rotations come from scipy, trees are
+Written independently of gpquad.engine.kernels: rotations come from scipy, trees are
 evaluated recursively, and every window integrates the whole state.
 """
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gpquad.tree.operators import CONST, DIV_EPS, VAR_BASE
+from gpquad.engine.tree.operators import CONST, DIV_EPS, VAR_BASE
 
 
 def rotation(quat_wxyz) -> Rotation:

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from gpquad.cli import main
+from gpquad.cli.commands import main
 
 
 @pytest.mark.bench

@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 
 from gpquad.benchmark import table
-from gpquad.benchmark.cli import write_report
 from gpquad.benchmark.engine import engine_source
 from gpquad.benchmark.runner import collect, run_benchmark
-from gpquad.cli import main
+from gpquad.cli.benchmark import write_report
+from gpquad.cli.commands import main
 
 TINY_ENGINE = """
 [evolution]

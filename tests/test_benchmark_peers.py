@@ -6,8 +6,8 @@ import pytest
 from gpquad.benchmark import peers
 from gpquad.benchmark.recovery import recovered, truth_terms
 from gpquad.benchmark.scenarios import make_scenario, time_split
-from gpquad.config import MEDIAN_MODEL, SimulatorConfig
-from gpquad.simulator import simulate
+from gpquad.data.simulator import simulate
+from gpquad.study.config import MEDIAN_MODEL, SimulatorConfig
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 

@@ -8,13 +8,13 @@ import pytest
 
 from gpquad.benchmark import evaluate
 from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_inputs
-from gpquad.config import MEDIAN_MODEL, SimulatorConfig
 from gpquad.data.dataset import build_dataset
-from gpquad.kernels.flight_arrays import FlightArrays
-from gpquad.model import DiscoveredModel, Equation
-from gpquad.simulator import simulate
-from gpquad.tree.export import from_sympy, parse_equation
-from gpquad.variables import TARGET_NAMES
+from gpquad.data.simulator import simulate
+from gpquad.engine.kernels.flight_arrays import FlightArrays
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.engine.variables import TARGET_NAMES
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.study.config import MEDIAN_MODEL, SimulatorConfig
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 ALL_MEASURED = dict.fromkeys("uvwpqr", True)

@@ -7,9 +7,9 @@ import types
 import pytest
 
 from gpquad.benchmark import scenarios
-from gpquad.config import SimulatorConfig
 from gpquad.data.flight import write_flight_file
-from gpquad.simulator import simulate
+from gpquad.data.simulator import simulate
+from gpquad.study.config import SimulatorConfig
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from test_sweep import result_files, tiny_config
 
-from gpquad import checkpoint
 from gpquad.data.io import load_dataset
-from gpquad.evolve.coevolution import Coevolution, RunState
-from gpquad.progress import SweepProgress
-from gpquad.sweep import run_sweep
-from gpquad.sweep_folders import RunKey, run_dir
+from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.study import checkpoint
+from gpquad.study.progress import SweepProgress
+from gpquad.study.sweep import run_sweep
+from gpquad.study.sweep_folders import RunKey, run_dir
 
 
 @pytest.fixture(scope="module")

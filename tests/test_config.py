@@ -2,8 +2,8 @@
 
 import pytest
 
-from gpquad.config import Config, config_from_dict, load_config, override
 from gpquad.errors import GpquadError
+from gpquad.study.config import Config, config_from_dict, load_config, override
 
 
 def test_defaults_are_the_papers():

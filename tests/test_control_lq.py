@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 
 from gpquad.baselines.pem_config import PARAMS, TRUE_PARAMS
-from gpquad.cli import main
+from gpquad.cli.commands import main
 from gpquad.control.config import ControlConfig, LqConfig, load_control_config
 from gpquad.control.lq import TABLE_A1, discretise, hover_speed, linearise, lq_tracker
 from gpquad.control.lq_kernel import fly_tracker

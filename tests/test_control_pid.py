@@ -8,8 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from gpquad.cli import main
-from gpquad.config import MEDIAN_MODEL, Config, SimulatorConfig, folder_config_dict
+from gpquad.cli.commands import main
 from gpquad.control.config import ControlConfig, CourseConfig, PidConfig, load_control_config
 from gpquad.control.courses import deviation, progress, score_path
 from gpquad.control.evolve import evolve_gains
@@ -17,7 +16,8 @@ from gpquad.control.pid import fly, make_controller
 from gpquad.control.pid_kernel import pid_command
 from gpquad.control.plant import design_point, truth_plant
 from gpquad.errors import GpquadError
-from gpquad.results import write_json
+from gpquad.study.config import MEDIAN_MODEL, Config, SimulatorConfig, folder_config_dict
+from gpquad.study.store import write_json
 
 NAMES = ("u_P", "u_R", "u_Y", "u_T")
 DT = 0.04
@@ -159,10 +159,10 @@ def test_es_is_deterministic_for_a_seed():
 
 def _run_folder(tmp_path):
     """A run folder whose model is the simulator's truth (a short simulated flight)."""
-    from gpquad.experiments import write_model
-    from gpquad.model import DiscoveredModel, Equation
-    from gpquad.simulator import TruthModel
-    from gpquad.tree.export import from_sympy
+    from gpquad.data.simulator import TruthModel
+    from gpquad.engine.tree.export import from_sympy
+    from gpquad.models.equations import DiscoveredModel, Equation
+    from gpquad.study.runner import write_model
 
     cfg = Config(simulator=SimulatorConfig(duration_s=40.0))
     truth = TruthModel(cfg.simulator.equations, NAMES)
@@ -246,9 +246,9 @@ def test_model_forms_differ_where_protected_division_fires():
     """q_dot = -100 / (34 / u_P): the tree gives -100 at u_P = trim (protected division),
     the simplified equation -100 u_P / 34 gives 0."""
     from gpquad.control.plant import model_plant
-    from gpquad.model import DiscoveredModel, Equation
-    from gpquad.tree.encoding import Tree
-    from gpquad.tree.operators import CONST, DIV, VAR_BASE
+    from gpquad.engine.tree.encoding import Tree
+    from gpquad.engine.tree.operators import CONST, DIV, VAR_BASE
+    from gpquad.models.equations import DiscoveredModel, Equation
 
     u_p = VAR_BASE + 9 + NAMES.index("u_P")
     tree = Tree.from_lists([DIV, CONST, DIV, CONST, u_p], [0, -100.0, 0, 34.0, 0], [0] * 4)

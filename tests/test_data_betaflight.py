@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gpquad.config import DataConfig
 from gpquad.data.betaflight import read_betaflight, read_betaflight_logs, read_frames
 from gpquad.data.integration_check import integration_check
 from gpquad.errors import GpquadError
+from gpquad.study.config import DataConfig
 
 FIXTURE = Path(__file__).parent / "fixtures" / "btfl_001_cut.bbl"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "betaflight"

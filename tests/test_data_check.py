@@ -9,16 +9,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gpquad.cli import main
-from gpquad.config import Config, DataConfig, SimulatorConfig, config_from_dict
+from gpquad.cli.commands import main
 from gpquad.data.align import estimate_offset
 from gpquad.data.flight import enu_flu_quat, flip_body
 from gpquad.data.integration_check import integration_check
 from gpquad.data.io import READERS, load_dataset
+from gpquad.data.simulator import simulate
 from gpquad.data.table import read_table_log
+from gpquad.engine.kernels.quaternion import euler_array
 from gpquad.errors import GpquadError
-from gpquad.kernels.quaternion import euler_array
-from gpquad.simulator import simulate
+from gpquad.study.config import Config, DataConfig, SimulatorConfig, config_from_dict
 
 FIXTURES = Path(__file__).parent / "fixtures"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -218,7 +218,7 @@ def test_gpquad_run_on_s250aq_gives_six_equations(tmp_path, capsys):
                               simplify_generations=2)
     table["output"] = {"progress": False}
     cfg = config_from_dict(table, "px4_s250.toml")
-    from gpquad.experiments import run_experiment
+    from gpquad.study.runner import run_experiment
 
     model = run_experiment(cfg, tmp_path / "run", progress=False)
     assert sorted(model.equations) == sorted(["a_x", "a_y", "a_z", "p_dot", "q_dot", "r_dot"])
@@ -257,8 +257,8 @@ def test_velocity_from_position_only(sim_flight, tmp_path):
     """A motion-capture-like table (pose only): body velocity from position differences."""
     df = sim_flight.to_frame()
     if "x" not in df:
-        from gpquad.kernels.integrator import body_accelerations
-        from gpquad.kernels.integrator import integrate as _integrate
+        from gpquad.engine.kernels.integrator import body_accelerations
+        from gpquad.engine.kernels.integrator import integrate as _integrate
 
         acc = body_accelerations(sim_flight.vel, sim_flight.rates, sim_flight.dt)
         _, _, _, pos = _integrate(sim_flight.quat[0].copy(), sim_flight.vel[0].copy(),

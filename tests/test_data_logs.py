@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from px4_reset_edit import SHARED_S250, make_yaw_reset_log
 
-from gpquad.cli import main
-from gpquad.config import DataConfig, config_from_dict
+from gpquad.cli.commands import main
 from gpquad.data.ardupilot import ardupilot_log_table, read_ardupilot
 from gpquad.data.dataflash import DataFlashLog
 from gpquad.data.generic import read_generic
@@ -22,6 +21,7 @@ from gpquad.data.io import load_dataset
 from gpquad.data.px4 import read_px4_csv, read_px4_folder_log
 from gpquad.data.ulog import read_ulog_log
 from gpquad.errors import GpquadError
+from gpquad.study.config import DataConfig, config_from_dict
 
 FIXTURES = Path(__file__).parent / "fixtures"
 V114 = FIXTURES / "px4_v114_sitl.ulg"
@@ -207,8 +207,8 @@ def test_export_round_trip_gives_identical_data(tmp_path):
 
 
 def test_export_then_run_gives_the_same_model(tmp_path):
-    from gpquad.config import Config
-    from gpquad.experiments import run_experiment
+    from gpquad.study.config import Config
+    from gpquad.study.runner import run_experiment
 
     out = tmp_path / "e.parquet"
     assert main(["data", "export", str(reset_log()), "--out", str(out)]) == 0
@@ -238,7 +238,7 @@ def test_validation_by_whole_files(tmp_path):
 
 
 def test_score_command(tmp_path, capsys):
-    from gpquad.experiments import run_experiment
+    from gpquad.study.runner import run_experiment
 
     evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
            "test_generations": 2, "window_steps": 100, "test_offset_max": 20}

@@ -6,7 +6,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gpquad.config import DataConfig
 from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
 from gpquad.data.pipeline import (
     LogTable,
@@ -20,6 +19,7 @@ from gpquad.data.pipeline import (
     zero_phase_fir,
 )
 from gpquad.errors import GpquadError
+from gpquad.study.config import DataConfig
 
 
 @pytest.mark.parametrize("taps", [200, 201, 51])

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gpquad.cli import main
+from gpquad.cli.commands import main
 from gpquad.data.flight import read_flight_file, write_flight_file
 from gpquad.data.integration_check import integration_check
 from gpquad.errors import GpquadError

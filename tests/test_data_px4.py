@@ -10,13 +10,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from gpquad.config import DataConfig, config_from_dict
 from gpquad.data.integration_check import integration_check
 from gpquad.data.io import READERS, load_flights
 from gpquad.data.px4 import read_px4_csv, read_px4_folder_log
 from gpquad.data.ulog import read_ulog, read_ulog_log
+from gpquad.engine.kernels.integrator import body_accelerations, integrate
 from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import body_accelerations, integrate
+from gpquad.study.config import DataConfig, config_from_dict
 
 FIXTURES = Path(__file__).parent / "fixtures"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -6,14 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from gpquad.cli import main
-from gpquad.config import Config, DataConfig, EvolutionConfig, SimulatorConfig
-from gpquad.evolve.coevolution import Coevolution, disagreement
-from gpquad.evolve.windows import WindowSpace, tile
-from gpquad.experiments import run_experiment
-from gpquad.model import DiscoveredModel
-from gpquad.tree.operators import VAR_BASE
-from gpquad.tree.random_stream import RandomStream
+from gpquad.cli.commands import main
+from gpquad.engine.evolve.coevolution import Coevolution, disagreement
+from gpquad.engine.evolve.windows import WindowSpace, tile
+from gpquad.engine.tree.operators import VAR_BASE
+from gpquad.engine.tree.random_stream import RandomStream
+from gpquad.models.equations import DiscoveredModel
+from gpquad.study.config import Config, DataConfig, EvolutionConfig, SimulatorConfig
+from gpquad.study.runner import run_experiment
 
 TINY = EvolutionConfig(targets=("p_dot",), iterations=2, model_generations=15,
                        test_generations=5, window_steps=60, test_offset_max=30,
@@ -120,9 +120,9 @@ def test_run_folder_contents(tmp_path):
 
 def test_model_simulate_reproduces_the_data_with_the_true_equations(short_dataset):
     """A DiscoveredModel holding the simulator's equations flies the data back exactly."""
-    from gpquad.config import MEDIAN_MODEL
-    from gpquad.model import Equation
-    from gpquad.tree.export import from_sympy, parse_equation
+    from gpquad.engine.tree.export import from_sympy, parse_equation
+    from gpquad.models.equations import Equation
+    from gpquad.study.config import MEDIAN_MODEL
 
     trim = short_dataset.trim
     eqs = {}
@@ -161,7 +161,7 @@ def test_cli_run_and_errors(tmp_path, capsys):
 
 
 def test_interrupt_writes_partial_results_and_the_same_command_resumes(tmp_path, monkeypatch):
-    from gpquad.evolve import coevolution
+    from gpquad.engine.evolve import coevolution
 
     cfg = tiny_config(targets=("p_dot", "a_y", "r_dot"))
     reference = run_experiment(cfg, tmp_path / "straight", progress=False)
@@ -212,11 +212,11 @@ def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
 
 def test_fly_reproduces_the_simulator_with_the_true_equations(short_flight, tmp_path):
     """DiscoveredModel.fly with the simulator's own equations and inputs gives its flight."""
-    from gpquad.config import MEDIAN_MODEL
     from gpquad.data.flight import write_flight_file
-    from gpquad.model import Equation
-    from gpquad.results import write_json
-    from gpquad.tree.export import from_sympy, parse_equation
+    from gpquad.engine.tree.export import from_sympy, parse_equation
+    from gpquad.models.equations import Equation
+    from gpquad.study.config import MEDIAN_MODEL
+    from gpquad.study.store import write_json
 
     names = short_flight.input_names
     eqs = {}
@@ -243,7 +243,7 @@ def test_fly_reproduces_the_simulator_with_the_true_equations(short_flight, tmp_
 
 
 def test_report_of_a_run_folder(tmp_path):
-    from gpquad.report import make_report
+    from gpquad.report.builder import make_report
 
     run_experiment(tiny_config(targets=("p_dot", "a_y")), tmp_path / "run", progress=False)
     written = make_report(tmp_path / "run", formats=("png",))
@@ -263,7 +263,7 @@ def test_no_validation_data_gives_null_not_nan(tmp_path):
 
 
 def test_damaged_checkpoint_restarts_that_target(tmp_path, monkeypatch, capsys):
-    from gpquad.evolve import coevolution
+    from gpquad.engine.evolve import coevolution
 
     cfg = tiny_config(targets=("p_dot", "a_y"))
     run_experiment(cfg, tmp_path / "straight", progress=False)
@@ -305,8 +305,8 @@ def test_reported_equation_is_not_beaten_by_a_candidate_of_the_run(tmp_path, pru
 def test_unmeasured_states_are_never_leaves(short_flight):
     """A log that does not measure u and v (PX4 without GPS) keeps them out of every tree."""
     from gpquad.data.dataset import build_dataset
-    from gpquad.evolve.coevolution import Coevolution
-    from gpquad.variables import STATE_NAMES, terminal_names
+    from gpquad.engine.evolve.coevolution import Coevolution
+    from gpquad.engine.variables import STATE_NAMES, terminal_names
 
     flight = dataclasses.replace(short_flight, meta={
         **short_flight.meta, "measured": {"u": "not measured (test)", "v": "not measured"}})
@@ -328,10 +328,10 @@ def test_unmeasured_states_are_never_leaves(short_flight):
 
 
 def test_excluded_leaves_are_never_read_and_unknown_names_are_refused(short_dataset):
-    from gpquad.config import config_from_dict
+    from gpquad.engine.evolve.coevolution import Coevolution
+    from gpquad.engine.variables import terminal_names
     from gpquad.errors import GpquadError
-    from gpquad.evolve.coevolution import Coevolution
-    from gpquad.variables import terminal_names
+    from gpquad.study.config import config_from_dict
 
     co = Coevolution(short_dataset, "r_dot", dataclasses.replace(TINY, exclude_leaves=("psi",)))
     names = terminal_names(short_dataset.input_names)

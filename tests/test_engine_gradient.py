@@ -7,19 +7,19 @@ import numpy as np
 import pytest
 from test_engine import tiny_config
 
-from gpquad import checkpoint
-from gpquad.config import load_config, override
 from gpquad.data.dataset import build_dataset
 from gpquad.data.io import load_dataset
+from gpquad.data.simulator import simulate
+from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.evolve.selection import bic, mse_of, prune_by_bic, select_by_bic
+from gpquad.engine.evolve.term_search import improve_terms, term_candidates
+from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
-from gpquad.evolve.coevolution import Coevolution
-from gpquad.evolve.evaluator import Evaluator
-from gpquad.evolve.gradient_fit import gauss_newton_constants
-from gpquad.evolve.selection import bic, mse_of, prune_by_bic, select_by_bic
-from gpquad.evolve.term_search import improve_terms, term_candidates
-from gpquad.experiments import run_experiment
-from gpquad.simulator import simulate
-from gpquad.tree.export import from_sympy, parse_equation
+from gpquad.study import checkpoint
+from gpquad.study.config import load_config, override
+from gpquad.study.runner import run_experiment
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
 NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True}
@@ -72,7 +72,7 @@ def test_bic_pruning_removes_bloat_and_keeps_a_small_coupling(rigid_dataset):
 
 
 def _sym(tree, ds):
-    from gpquad.model import Equation
+    from gpquad.models.equations import Equation
 
     return Equation("p_dot", tree, ds.input_names, 0.0, 0.0, {}).sympy()
 

@@ -14,9 +14,9 @@ from gpquad.data.flight import (
     read_flight_file,
     write_flight_file,
 )
+from gpquad.engine.kernels.integrator import world_to_body
+from gpquad.engine.kernels.quaternion import rotation_matrix
 from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import world_to_body
-from gpquad.kernels.quaternion import rotation_matrix
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from gpquad.cli import main
-from gpquad.config import MEDIAN_MODEL
-from gpquad.model import DiscoveredModel, Equation
-from gpquad.results import write_json
-from gpquad.tree.export import from_sympy, parse_equation
+from gpquad.cli.commands import main
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.study.config import MEDIAN_MODEL
+from gpquad.study.store import write_json
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 QUICK = ('[evolution]\ntargets = ["p_dot"]\niterations = 1\nmodel_generations = 2\n'

@@ -6,19 +6,19 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import naive
-from gpquad.evolve.evaluator import Evaluator
-from gpquad.kernels import quaternion as kq
-from gpquad.kernels.fitness import rollout, tree_window_errors
-from gpquad.kernels.integrator import (
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.kernels import quaternion as kq
+from gpquad.engine.kernels.fitness import rollout, tree_window_errors
+from gpquad.engine.kernels.integrator import (
     body_accelerations,
     integrate,
     rates_from_quaternions,
     world_to_body,
 )
-from gpquad.kernels.tree_eval import STACK_ROWS, eval_lanes
-from gpquad.tree.encoding import Tree
-from gpquad.tree.operators import CONST, VAR_BASE
-from gpquad.variables import TARGET_NAMES
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.operators import CONST, VAR_BASE
+from gpquad.engine.variables import TARGET_NAMES
 
 N_VARS = 13
 finite = st.floats(-3, 3, allow_nan=False)
@@ -29,7 +29,7 @@ def unit_quaternions():
         lambda v: np.linalg.norm(v) > 0.1).map(lambda v: np.array(v) / np.linalg.norm(v))
 
 
-# Random prefix trees built by hypothesis itself, independent of gpquad.tree.variation.
+# Random prefix trees built by hypothesis itself, independent of gpquad.engine.tree.variation.
 _leaf = st.one_of(
     st.tuples(st.just(CONST), st.floats(-5, 5, allow_nan=False)).map(lambda t: [t]),
     st.integers(0, N_VARS - 1).map(lambda k: [(VAR_BASE + k, 0.0)]),
@@ -161,8 +161,8 @@ def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, d
 
 def test_true_model_has_zero_error(short_dataset):
     """The simulator's own equations score ~0 on every target (noise-free data)."""
-    from gpquad.config import MEDIAN_MODEL
-    from gpquad.tree.export import from_sympy, parse_equation
+    from gpquad.engine.tree.export import from_sympy, parse_equation
+    from gpquad.study.config import MEDIAN_MODEL
 
     trim = short_dataset.trim
     for name, text in MEDIAN_MODEL.items():
@@ -179,7 +179,7 @@ def test_rollout_equals_fast_path(short_dataset):
     rng = np.random.default_rng(4)
     arrays = short_dataset.arrays
     starts = np.array([30, 700], dtype=np.int64)
-    from gpquad.tree.variation import VariationParams, random_tree
+    from gpquad.engine.tree.variation import VariationParams, random_tree
 
     params = VariationParams(n_variables=13, n_inputs=4, max_depth=3)
     for target in range(6):

@@ -7,13 +7,13 @@ from hypothesis import strategies as st
 from test_kernels import as_tree, prefix_trees, smooth_trees
 
 import naive
-from gpquad.evolve.evaluator import Evaluator
-from gpquad.evolve.gradient_fit import gauss_newton_constants, residuals_and_jacobian
-from gpquad.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_tangent
-from gpquad.kernels.tree_eval import STACK_ROWS
-from gpquad.tree.encoding import Tree
-from gpquad.tree.operators import CONST, VAR_BASE
-from gpquad.variables import TARGET_NAMES
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_constants, residuals_and_jacobian
+from gpquad.engine.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_tangent
+from gpquad.engine.kernels.tree_eval import STACK_ROWS
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.operators import CONST, VAR_BASE
+from gpquad.engine.variables import TARGET_NAMES
 
 STARTS = np.array([10, 400, 900], dtype=np.int64)
 
@@ -104,7 +104,7 @@ def test_jacobian_matches_finite_differences(short_dataset, nodes, target):
 
 
 def _tree(text, dataset):
-    from gpquad.tree.export import from_sympy, parse_equation
+    from gpquad.engine.tree.export import from_sympy, parse_equation
 
     expr, delays = parse_equation(text, dataset.input_names)
     return from_sympy(expr, delays, dataset.input_names)

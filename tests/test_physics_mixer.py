@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpquad.cli import main
+from gpquad.cli.commands import main
 from gpquad.errors import GpquadError
 from gpquad.physics.mixer import (
     LAYOUTS,

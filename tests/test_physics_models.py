@@ -157,7 +157,7 @@ def test_config_errors_name_the_field(tmp_path):
 
 
 def test_cli_config_error_is_one_line(tmp_path, capsys):
-    from gpquad.cli import main
+    from gpquad.cli.commands import main
 
     bad = tmp_path / "bad.toml"
     bad.write_text('[truth]\nvehicle = "blimp"\n')

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from gpquad.analysis import compare_to_truth
-from gpquad.config import MEDIAN_MODEL, load_config, override
-from gpquad.experiments import identify
+from gpquad.models.analysis import compare_to_truth
+from gpquad.study.config import MEDIAN_MODEL, load_config, override
+from gpquad.study.runner import identify
 
 QUICKSTART = Path(__file__).resolve().parents[1] / "experiments" / "quickstart.toml"
 

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from test_sweep import tiny_config
 
-from gpquad.assemble import SCORED, diverged, rse
-from gpquad.cli import main
-from gpquad.model import Equation
-from gpquad.report import median_tables, structure_shares, terms
-from gpquad.sweep import run_sweep
-from gpquad.tree.export import from_sympy, parse_equation
-from gpquad.variables import STATE_NAMES, TARGET_NAMES, TARGET_STATE
+from gpquad.cli.commands import main
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, TARGET_STATE
+from gpquad.models.equations import Equation
+from gpquad.report.builder import median_tables, structure_shares, terms
+from gpquad.study.assemble import SCORED, diverged, rse
+from gpquad.study.sweep import run_sweep
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
@@ -37,7 +37,7 @@ def test_terms_key_on_structure_and_delay():
 
 
 def test_median_table_marks_shared_terms_only():
-    from gpquad.model import DiscoveredModel
+    from gpquad.models.equations import DiscoveredModel
 
     median = eq("10.3*u_R(t-1) - 4.15*p + 2*q")
     runs = {"p_dot": [median, eq("9*u_R(t-1) - 4*p"), eq("8*u_R(t-2) - 4*p")]}

@@ -16,11 +16,11 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 
 from gpquad.benchmark import rotorpy_flights as rf  # noqa: E402
 from gpquad.benchmark import rotorpy_model as model  # noqa: E402
-from gpquad.config import config_from_dict  # noqa: E402
 from gpquad.data.dataset import build_dataset  # noqa: E402
 from gpquad.data.integration_check import integration_check  # noqa: E402
 from gpquad.data.table import read_table_log  # noqa: E402
 from gpquad.errors import GpquadError  # noqa: E402
+from gpquad.study.config import config_from_dict  # noqa: E402
 
 VEHICLES = list(rf.VEHICLES)
 

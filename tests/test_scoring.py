@@ -13,15 +13,15 @@ from gpquad.baselines.ga_config import GAConfig, Quad12SimConfig, theta_of
 from gpquad.baselines.ga_identify import simulate as simulate_quad12
 from gpquad.baselines.pem_config import TRUE_PARAMS, PemConfig, PemSimConfig
 from gpquad.baselines.runfolder import write_flights, write_run
-from gpquad.cli import main
-from gpquad.config import MEDIAN_MODEL, Config, SimulatorConfig
+from gpquad.cli.commands import main
 from gpquad.data.dataset import build_dataset
+from gpquad.engine.tree.export import from_sympy, parse_equation, symbols_for
 from gpquad.errors import GpquadError
-from gpquad.experiments import write_model
-from gpquad.model import DiscoveredModel, Equation
-from gpquad.results import write_json
-from gpquad.scoring import compare, format_table, load_run, rse, run_dataset, score_model
-from gpquad.tree.export import from_sympy, parse_equation, symbols_for
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.scoring import compare, format_table, load_run, rse, run_dataset, score_model
+from gpquad.study.config import MEDIAN_MODEL, Config, SimulatorConfig
+from gpquad.study.runner import write_model
+from gpquad.study.store import write_json
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 

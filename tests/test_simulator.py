@@ -5,9 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gpquad.config import SimulatorConfig
+from gpquad.data.simulator import simulate
 from gpquad.errors import GpquadError
-from gpquad.simulator import simulate
+from gpquad.study.config import SimulatorConfig
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 SHORT = dataclasses.replace(SimulatorConfig(), duration_s=40.0)

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpquad.config import config_from_dict
+from gpquad.engine.variables import TARGET_NAMES
 from gpquad.errors import GpquadError
-from gpquad.progress import SweepProgress
-from gpquad.seeding import assembly_seed, run_seed
-from gpquad.sweep import run_sweep
-from gpquad.sweep_folders import RunKey, fingerprint, grid, run_dir
-from gpquad.variables import TARGET_NAMES
+from gpquad.study.config import config_from_dict
+from gpquad.study.progress import SweepProgress
+from gpquad.study.seeding import assembly_seed, run_seed
+from gpquad.study.sweep import run_sweep
+from gpquad.study.sweep_folders import RunKey, fingerprint, grid, run_dir
 
 #: A tiny study: 2 equations x 2 repetitions on a 60 s simulated flight.
 TINY = {
@@ -183,7 +183,7 @@ EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
 
 
 def test_paper_config_has_the_papers_numbers_each_line_documented():
-    from gpquad.config import load_config
+    from gpquad.study.config import load_config
 
     cfg = load_config(EXPERIMENTS / "paper.toml")
     ev, sw = cfg.evolution, cfg.sweep
@@ -200,7 +200,7 @@ def test_paper_config_has_the_papers_numbers_each_line_documented():
 
 
 def test_smoke_and_px4_sweep_configs_load():
-    from gpquad.config import load_config
+    from gpquad.study.config import load_config
 
     assert load_config(EXPERIMENTS / "smoke.toml").sweep.runs >= 2
     px4 = load_config(EXPERIMENTS / "px4_s250_sweep.toml")

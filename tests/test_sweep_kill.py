@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from test_sweep import result_files
 
-from gpquad.checkpoint import load
-from gpquad.sweep_folders import grid, run_dir
+from gpquad.study.checkpoint import load
+from gpquad.study.sweep_folders import grid, run_dir
 
 #: Long enough per run (about 1 s) that the kill lands inside the grid.
 KILL_TOML = """
@@ -76,7 +76,7 @@ def test_sigkill_then_resume_equals_uninterrupted(reference, tmp_path, victim):
     try:
         while time.time() < deadline:  # kill once some run has checkpointed an iteration
             if keys is None and (out / "config.json").exists():
-                from gpquad.assemble import load_sweep_config
+                from gpquad.study.assemble import load_sweep_config
 
                 keys = grid(load_sweep_config(out))
             if keys and any((run_dir(out, k) / "checkpoint.bin").exists() for k in keys):

@@ -7,11 +7,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import naive
-from gpquad.errors import GpquadError
-from gpquad.tree.encoding import Tree, is_valid, node_depths, subtree_end, tree_depth
-from gpquad.tree.export import from_sympy, parse_equation, to_latex, to_sympy
-from gpquad.tree.operators import ADD, CONST, DIV, MUL, SUB, VAR_BASE
-from gpquad.tree.variation import (
+from gpquad.engine.tree.encoding import Tree, is_valid, node_depths, subtree_end, tree_depth
+from gpquad.engine.tree.export import from_sympy, parse_equation, to_latex, to_sympy
+from gpquad.engine.tree.operators import ADD, CONST, DIV, MUL, SUB, VAR_BASE
+from gpquad.engine.tree.variation import (
     VariationParams,
     constant_mutation,
     fold_constants,
@@ -21,6 +20,7 @@ from gpquad.tree.variation import (
     random_tree,
     replace_with_constant,
 )
+from gpquad.errors import GpquadError
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 PARAMS = VariationParams(n_variables=13, n_inputs=4)
@@ -61,7 +61,7 @@ def test_macro_and_micro_change_one_place(seed):
 def test_random_trees_use_p_leaf():
     """With p_leaf = 0.7 grown subtrees are mostly single leaves: check the leaf rate."""
     rng = np.random.default_rng(0)
-    from gpquad.tree.variation import random_subtree
+    from gpquad.engine.tree.variation import random_subtree
 
     sizes = [len(random_subtree(rng, PARAMS, 5)[0]) for _ in range(4000)]
     # P(root is a leaf) = 0.7

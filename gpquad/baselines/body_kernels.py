@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
-from gpquad.kernels.integrator import integrate_step
-from gpquad.kernels.quaternion import euler_from_quat
-from gpquad.numba_config import njit
+from gpquad.engine.kernels.integrator import integrate_step
+from gpquad.engine.kernels.quaternion import euler_from_quat
+from gpquad.engine.numba_config import njit
 
 
 @njit

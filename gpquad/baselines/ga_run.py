@@ -14,7 +14,7 @@ from gpquad.baselines.ga_config import GAConfig
 from gpquad.baselines.plots import convergence_png
 from gpquad.baselines.runfolder import write_flights, write_run
 from gpquad.baselines.schema import to_dict
-from gpquad.results import atomic_write_bytes, write_json
+from gpquad.study.store import atomic_write_bytes, write_json
 
 
 def recovery(cfg: GAConfig, params: dict[str, float]) -> dict[str, float]:

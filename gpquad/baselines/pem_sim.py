@@ -10,7 +10,7 @@ from gpquad.baselines.body_kernels import fly
 from gpquad.baselines.pem_config import PARAMS, PemConfig
 from gpquad.baselines.quad12 import ou_signal
 from gpquad.data.flight import Flight
-from gpquad.kernels.quaternion import quat_from_euler
+from gpquad.engine.kernels.quaternion import quat_from_euler
 
 REF_NAMES = ("phi_r", "theta_r", "psi_r", "Omega_T")
 OUTPUT_NAMES = ("phi", "theta", "psi", "p", "q", "r", "a_x", "a_y", "a_z")

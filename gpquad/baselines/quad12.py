@@ -21,7 +21,7 @@ import sympy as sp
 from gpquad.baselines.quad12_kernels import replay, simulate_closed_loop
 from gpquad.baselines.symbolic import ParametricModel
 from gpquad.data.flight import Flight
-from gpquad.kernels.quaternion import quat_from_euler
+from gpquad.engine.kernels.quaternion import quat_from_euler
 
 STATES = ("x", "x_dot", "y", "y_dot", "z", "z_dot", "phi", "phi_dot", "theta", "theta_dot",
           "psi", "psi_dot")

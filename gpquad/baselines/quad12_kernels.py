@@ -7,7 +7,7 @@ theta = [a_1 .. a_11, b_1, b_2, b_3]. RK4 with the input held over each sample.
 
 import numpy as np
 
-from gpquad.numba_config import njit
+from gpquad.engine.numba_config import njit
 
 
 @njit

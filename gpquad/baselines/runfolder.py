@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from gpquad.data.flight import Flight, write_flight_file
-from gpquad.results import provenance, write_json
+from gpquad.study.store import provenance, write_json
 
 
 def write_flights(run_dir: Path, flights: list[Flight], validation_fraction: float) -> dict:

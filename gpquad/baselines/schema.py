@@ -1,4 +1,4 @@
-"""Baseline configs: frozen dataclasses read from TOML as strictly as gpquad.config.
+"""Baseline configs: frozen dataclasses read from TOML as strictly as gpquad.study.config.
 
 Unknown keys and wrong types are one-line GpquadErrors naming the file and the field.
 Sections are fields whose type is itself a dataclass.
@@ -10,8 +10,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from gpquad.config_tables import build_dataclass
 from gpquad.errors import GpquadError
+from gpquad.study.config_tables import build_dataclass
 
 if sys.version_info >= (3, 11):
     import tomllib

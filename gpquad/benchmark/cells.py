@@ -16,8 +16,8 @@ import numpy as np
 
 from gpquad.benchmark import evaluate, peers
 from gpquad.benchmark.rollout import fly
-from gpquad.results import write_json
-from gpquad.variables import TARGET_NAMES
+from gpquad.engine.variables import TARGET_NAMES
+from gpquad.study.store import write_json
 
 METHODS = ("gpquad",) + peers.PEERS
 
@@ -37,7 +37,7 @@ def load_cell(path: Path) -> dict | None:
 def _recovery_gpquad(model, scenario) -> dict | None:
     if not scenario.truth:
         return None
-    from gpquad.analysis import compare_to_truth
+    from gpquad.models.analysis import compare_to_truth
 
     out = {}
     for target in TARGET_NAMES:

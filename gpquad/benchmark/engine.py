@@ -15,8 +15,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from gpquad.config import Config, config_from_dict
 from gpquad.errors import GpquadError
+from gpquad.study.config import Config, config_from_dict
 
 ENGINE_FILES = ("recommended.toml", "quickstart.toml")
 
@@ -47,9 +47,9 @@ def engine_config(experiments_dir: Path, seed: int) -> tuple[Config, str]:
 
 def fit_gpquad(dataset, cfg: Config):
     """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel."""
-    from gpquad.experiments import identify
-    from gpquad.model import DiscoveredModel
-    from gpquad.variables import TARGET_NAMES
+    from gpquad.engine.variables import TARGET_NAMES
+    from gpquad.models.equations import DiscoveredModel
+    from gpquad.study.runner import identify
 
     equations = {t: identify(dataset, t, cfg)[0] for t in TARGET_NAMES}
     return DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,

@@ -1,12 +1,12 @@
 """Score a flown model on a scenario's test flights, the same way for every method.
 
 For each horizon (s), the test ranges are tiled with non-overlapping windows of
-round(h / dt) steps (`gpquad.scoring.validation_windows`, which tiles with
-`gpquad.evolve.windows.tile`) after MAX_LAG samples of input history, so that every
+round(h / dt) steps (`gpquad.models.scoring.validation_windows`, which tiles with
+`gpquad.engine.evolve.windows.tile`) after MAX_LAG samples of input history, so that every
 method flies the same windows; a horizon that no test range fits is skipped. A window
 is diverged when a scored state is non-finite or beyond 10 x max(|data|, 1)
-(`gpquad.assemble.diverged`, as `gpquad sweep` counts them); the RSE of each of u, v, w,
-p, q, r (`gpquad.scoring.rse`) is taken over the windows that did not diverge, and is
+(`gpquad.study.assemble.diverged`, as `gpquad sweep` counts them); the RSE of each of u, v, w,
+p, q, r (`gpquad.models.scoring.rse`) is taken over the windows that did not diverge, and is
 NaN for a state the log does not measure. `mean` averages the measured states.
 """
 
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpquad.assemble import diverged
 from gpquad.benchmark.rollout import MAX_LAG
 from gpquad.errors import GpquadError
-from gpquad.scoring import SCORED_INDEX, SCORED_STATES, rse, validation_windows
+from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse, validation_windows
+from gpquad.study.assemble import diverged
 
 DIVERGENCE_FACTOR = 10.0
 FIGURE_HORIZON_S = 7.0

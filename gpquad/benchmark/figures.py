@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.scoring import SCORED_STATES
+from gpquad.models.scoring import SCORED_STATES
 
 UNITS = ("m/s",) * 3 + ("rad/s",) * 3
 

@@ -1,7 +1,7 @@
 """Peer identification methods, each fitted as its users fit it.
 
 Every peer is a one-step regression of the data's forward-difference accelerations
-(`gpquad.kernels.integrator.body_accelerations`, the integrator's exact inverse) on the
+(`gpquad.engine.kernels.integrator.body_accelerations`, the integrator's exact inverse) on the
 recorded state [phi, theta, psi, u, v, w, p, q, r] and on every input lagged 0..MAX_LAG
 samples; none of them can evolve delays. A fitted peer is a `FittedPeer` whose `predict`
 flies through `gpquad.benchmark.rollout.fly`.
@@ -25,8 +25,8 @@ from importlib import metadata
 import numpy as np
 
 from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_inputs, lagged_names
-from gpquad.evolve.windows import tile
-from gpquad.variables import STATE_NAMES, TARGET_NAMES
+from gpquad.engine.evolve.windows import tile
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 
 PEERS = ("zero", "ols", "sindy", "operon")
 #: The Python package each optional peer needs (pip install -e ".[peers]").
@@ -108,7 +108,7 @@ def _sindy_parts(features: np.ndarray) -> np.ndarray:
 def _validation_rse(predict, dataset, horizon_steps: int) -> float:
     """Mean RSE of u..r over non-overlapping windows of the validation ranges (inf if any
     window diverges); the training ranges if there is no validation part."""
-    from gpquad.scoring import rse
+    from gpquad.models.scoring import rse
 
     ranges = dataset.validation or dataset.train
     starts, steps = tile(ranges, horizon_steps, MAX_LAG)

@@ -1,6 +1,6 @@
-"""Exact-structure recovery of a peer's equations (gpquad's own use gpquad.analysis).
+"""Exact-structure recovery of a peer's equations (gpquad's own use gpquad.models.analysis).
 
-The rule is `gpquad.analysis.compare_to_truth`'s: the equation, written in the log's raw
+The rule is `gpquad.models.analysis.compare_to_truth`'s: the equation, written in the log's raw
 inputs and expanded, keeps its terms whose RMS on the training samples is at least 2 % of
 the target's RMS (its dominant structure); it recovers the truth when those terms are
 exactly the truth's terms, with the truth's input delays (u_R(t-1) is the lag-1 feature
@@ -13,8 +13,8 @@ import numpy as np
 import sympy as sp
 
 from gpquad.benchmark.rollout import MAX_LAG, lagged_inputs, lagged_names
-from gpquad.tree.export import parse_equation
-from gpquad.variables import STATE_NAMES, target_index
+from gpquad.engine.tree.export import parse_equation
+from gpquad.engine.variables import STATE_NAMES, target_index
 
 SHARE = 0.02
 REL_TOL = 0.05

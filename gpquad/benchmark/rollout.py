@@ -1,11 +1,11 @@
 """Fly "acceleration = f(state, lagged inputs)" models through gpquad's integrator.
 
-gpquad's own trees fly through `gpquad.kernels.fitness.rollout`; peer models (linear,
+gpquad's own trees fly through `gpquad.engine.kernels.fitness.rollout`; peer models (linear,
 polynomial, operon expressions) read several lags of one input, which a gpquad tree
 cannot express, so they fly here. Every window is advanced one step at a time, all
 windows at once: at step k the model sees the integrated state x_k = [phi, theta, psi,
 u, v, w, p, q, r] of each window and the recorded inputs at k - 0 .. k - max_lag, returns
-the six accelerations, and `gpquad.kernels.integrator.integrate_step` (the same step as
+the six accelerations, and `gpquad.engine.kernels.integrator.integrate_step` (the same step as
 `rollout`) advances every window. A window whose state leaves [-STATE_LIMIT, STATE_LIMIT]
 or turns NaN is frozen at NaN (diverged, scored as such), never an error.
 """
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpquad.kernels.fitness import STATE_LIMIT
-from gpquad.kernels.integrator import integrate_step
-from gpquad.kernels.quaternion import euler_from_quat
-from gpquad.numba_config import njit
+from gpquad.engine.kernels.fitness import STATE_LIMIT
+from gpquad.engine.kernels.integrator import integrate_step
+from gpquad.engine.kernels.quaternion import euler_from_quat
+from gpquad.engine.numba_config import njit
 
 #: Input lags every peer sees (samples): 0 .. MAX_LAG.
 MAX_LAG = 5

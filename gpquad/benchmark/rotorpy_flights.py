@@ -33,10 +33,10 @@ import pandas as pd
 from scipy.signal import butter, sosfilt
 
 from gpquad.benchmark import rotorpy_model as model
+from gpquad.data.simulator import add_measurement_noise
+from gpquad.engine.kernels.quaternion import euler_array
 from gpquad.errors import GpquadError
-from gpquad.kernels.quaternion import euler_array
-from gpquad.results import atomic_write_bytes, atomic_write_text, provenance
-from gpquad.simulator import add_measurement_noise
+from gpquad.study.store import atomic_write_bytes, atomic_write_text, provenance
 
 #: Bump when the generator's output changes: cached flights of another version are remade.
 GENERATOR_VERSION = 1

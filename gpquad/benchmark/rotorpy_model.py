@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from gpquad.numba_config import njit
+from gpquad.engine.numba_config import njit
 
 #: Indices into the scalar parameter array of `vehicle_arrays`.
 MASS, GRAV, K_ETA, K_M, K_D, K_Z, K_H, K_FLAP, C_DX, C_DY, C_DZ, TAU_M, W_MIN, W_MAX, \

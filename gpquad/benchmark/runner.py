@@ -17,7 +17,7 @@ from pathlib import Path
 from gpquad.benchmark import cells, peers, scenarios
 from gpquad.benchmark.engine import engine_source
 from gpquad.errors import GpquadError
-from gpquad.results import provenance, write_json
+from gpquad.study.store import provenance, write_json
 
 
 def available_peers(requested) -> tuple[list[str], dict[str, str]]:

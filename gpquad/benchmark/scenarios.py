@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.config import Config, load_config
 from gpquad.data.dataset import Dataset, build_dataset
 from gpquad.data.flight import Flight
 from gpquad.errors import GpquadError
-from gpquad.scoring import SCORED_STATES
+from gpquad.models.scoring import SCORED_STATES
+from gpquad.study.config import Config, load_config
 
 NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
 TEST_SEEDS = (1001, 1002)
@@ -118,7 +118,7 @@ def time_split(flights: list[Flight], fraction: float) -> tuple[list[Flight], li
 
 
 def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
-    from gpquad.simulator import simulate
+    from gpquad.data.simulator import simulate
 
     sim = cfg.simulator
     if noisy:
@@ -157,8 +157,8 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
         made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir)
     except ImportError as exc:
         raise Skipped(f"{name}: rotorpy is not installed ({exc})") from None
-    from gpquad.config import config_from_dict
     from gpquad.data.io import load_flights
+    from gpquad.study.config import config_from_dict
 
     def read(paths):
         flights = []

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpquad.scoring import SCORED_STATES
-from gpquad.variables import TARGET_NAMES
+from gpquad.engine.variables import TARGET_NAMES
+from gpquad.models.scoring import SCORED_STATES
 
 
 def _stats(values) -> dict | None:

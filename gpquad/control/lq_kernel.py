@@ -8,9 +8,9 @@ gpquad.baselines.body_kernels.model_accelerations, one step of the engine's inte
 import numpy as np
 
 from gpquad.baselines.body_kernels import model_accelerations
-from gpquad.kernels.integrator import integrate_step
-from gpquad.kernels.quaternion import euler_from_quat
-from gpquad.numba_config import njit
+from gpquad.engine.kernels.integrator import integrate_step
+from gpquad.engine.kernels.quaternion import euler_from_quat
+from gpquad.engine.numba_config import njit
 
 
 @njit

@@ -15,7 +15,7 @@ from gpquad.control.config import ControlConfig, LqConfig
 from gpquad.control.lq import TABLE_A1, discretise, hover_speed, linearise, lq_tracker
 from gpquad.control.lq_kernel import fly_tracker
 from gpquad.errors import GpquadError
-from gpquad.results import write_json
+from gpquad.study.store import write_json
 
 AXES = ("a_x", "a_y", "a_z")
 

@@ -1,7 +1,7 @@
 """Numba kernels: the nested PID waypoint controller flying a plant of six prefix trees.
 
 Plant (flat arrays): codes (6, M), values (6, M), sizes (6,), delays (6, n_in) as in
-gpquad.kernels.fitness.rollout, plus trim (n_in,), subtracted from the raw input before the
+gpquad.engine.kernels.fitness.rollout, plus trim (n_in,), subtracted from the raw input before the
 trees read it (a discovered model's inputs are trim-subtracted; a truth model has trim 0).
 A tree of size 1 holding the constant 0 gives zero acceleration.
 
@@ -28,11 +28,11 @@ import math
 
 import numpy as np
 
-from gpquad.kernels.fitness import STATE_LIMIT
-from gpquad.kernels.integrator import integrate_step
-from gpquad.kernels.quaternion import euler_from_quat, quat_from_euler
-from gpquad.kernels.tree_eval import STACK_ROWS, eval_lanes
-from gpquad.numba_config import njit
+from gpquad.engine.kernels.fitness import STATE_LIMIT
+from gpquad.engine.kernels.integrator import integrate_step
+from gpquad.engine.kernels.quaternion import euler_from_quat, quat_from_euler
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.numba_config import njit
 
 N_GAINS = 13
 

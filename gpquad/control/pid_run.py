@@ -15,14 +15,14 @@ from gpquad.control.evolve import evolve_gains
 from gpquad.control.pid import fly, input_noise, make_controller
 from gpquad.control.plant import design_point, model_plant, truth_plant
 from gpquad.errors import GpquadError
-from gpquad.results import atomic_write_text, provenance, write_json
+from gpquad.study.store import atomic_write_text, provenance, write_json
 
 
 def load_run(run_dir: Path):
     """(model, folder config, dataset) of a gpquad run folder."""
-    from gpquad.config import load_folder_config
     from gpquad.data.io import load_dataset
-    from gpquad.model import DiscoveredModel
+    from gpquad.models.equations import DiscoveredModel
+    from gpquad.study.config import load_folder_config
 
     if not (run_dir / "model.json").is_file():
         raise GpquadError("not a gpquad run folder (no model.json); give the folder that "

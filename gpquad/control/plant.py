@@ -15,12 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpquad.control.pid_kernel import constant_input_accelerations
+from gpquad.data.simulator import TruthModel
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.export import from_sympy
+from gpquad.engine.tree.operators import CONST
+from gpquad.engine.variables import TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
-from gpquad.simulator import TruthModel
-from gpquad.tree.encoding import Tree
-from gpquad.tree.export import from_sympy
-from gpquad.tree.operators import CONST
-from gpquad.variables import TARGET_NAMES, target_index
 
 AXES = ("roll", "pitch", "yaw", "thrust")
 AXIS_TARGET = {"roll": "p_dot", "pitch": "q_dot", "yaw": "r_dot", "thrust": "a_z"}

@@ -27,8 +27,8 @@ from gpquad.data.levels import check_input_rates, paper_names, resolve_inputs
 from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
 from gpquad.data.plausibility import check_rate_peak, check_rate_units
 from gpquad.data.resets import reset_mask
+from gpquad.engine.kernels.quaternion import quat_from_euler
 from gpquad.errors import GpquadError
-from gpquad.kernels.quaternion import quat_from_euler
 
 ARMED, DISARMED = 10, 11
 UNITS = {"p_sp": " (rad/s)", "q_sp": " (rad/s)", "r_sp": " (rad/s)"}

@@ -32,9 +32,9 @@ from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight, flip_body
 from gpquad.data.levels import paper_names, resolve_inputs
 from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
 from gpquad.data.plausibility import runs
+from gpquad.engine.kernels.integrator import body_accelerations, integrate
+from gpquad.engine.kernels.quaternion import quat_from_euler
 from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import body_accelerations, integrate
-from gpquad.kernels.quaternion import quat_from_euler
 
 G = 9.80665
 HEADER_KEYS = ("Firmware revision", "Craft name", "looptime", "P interval", "motorOutput",

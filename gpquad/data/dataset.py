@@ -1,6 +1,6 @@
 """The dataset the engine identifies from: flights concatenated into FlightArrays.
 
-Accelerations are the integrator's discrete inverse (gpquad.kernels.integrator),
+Accelerations are the integrator's discrete inverse (gpquad.engine.kernels.integrator),
 computed per flight so that no difference spans two flights. Each flight is
 split by time: the first part trains, the last `validation_fraction` validates.
 Test windows never span two flights or the train/validation boundary.
@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gpquad.data.flight import Flight
+from gpquad.engine.kernels.flight_arrays import FlightArrays
+from gpquad.engine.kernels.integrator import body_accelerations
+from gpquad.engine.kernels.quaternion import body_rotations, euler_array
 from gpquad.errors import GpquadError
-from gpquad.kernels.flight_arrays import FlightArrays
-from gpquad.kernels.integrator import body_accelerations
-from gpquad.kernels.quaternion import body_rotations, euler_array
 
 #: Relative tolerance on the sample period shared by all flights.
 DT_MATCH = 1e-3

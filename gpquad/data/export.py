@@ -19,11 +19,11 @@ import pandas as pd
 
 from gpquad.data.flight import Flight
 from gpquad.data.generic import SEGMENT
-from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import body_accelerations
-from gpquad.variables import (
+from gpquad.engine.kernels.integrator import body_accelerations
+from gpquad.engine.variables import (
     TARGET_NAMES,
 )
+from gpquad.errors import GpquadError
 
 
 def export_frame(flights: list[Flight]) -> pd.DataFrame:
@@ -56,9 +56,9 @@ def write_export(flights: list[Flight], path) -> Path:
 
 def export_flights(path, fmt: str | None, config=None) -> tuple[list[Flight], list[str]]:
     """Flights of a log after the pipeline and the per-segment integration check."""
-    from gpquad.config import Config, load_config, validate
     from gpquad.data.integration_check import screen_segments
     from gpquad.data.io import READERS, guess_format
+    from gpquad.study.config import Config, load_config, validate
 
     path = Path(path)
     if not path.exists():

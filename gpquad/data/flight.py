@@ -20,15 +20,15 @@ from gpquad.data.plausibility import (
     check_rates_follow_quaternion,
     check_sample_rate,
 )
-from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import world_to_body
-from gpquad.variables import (
+from gpquad.engine.kernels.integrator import world_to_body
+from gpquad.engine.variables import (
     BODY_VEL_COLUMNS,
     POSITION_COLUMNS,
     QUAT_COLUMNS,
     RATE_COLUMNS,
     WORLD_VEL_COLUMNS,
 )
+from gpquad.errors import GpquadError
 
 #: Allowed relative jitter of the sample period.
 DT_TOLERANCE = 0.01

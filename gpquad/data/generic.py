@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.flight import Flight, _read_table, check_time, read_flight_file
+from gpquad.engine.variables import BODY_VEL_COLUMNS, QUAT_COLUMNS, RATE_COLUMNS
 from gpquad.errors import GpquadError
-from gpquad.variables import BODY_VEL_COLUMNS, QUAT_COLUMNS, RATE_COLUMNS
 
 SEGMENT = "segment"
 

@@ -35,10 +35,10 @@ import numpy as np
 
 from gpquad.data.flight import Flight
 from gpquad.data.pipeline import is_measured
+from gpquad.engine.kernels.integrator import body_accelerations, integrate
+from gpquad.engine.kernels.quaternion import euler_array
+from gpquad.engine.variables import STATE_NAMES
 from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import body_accelerations, integrate
-from gpquad.kernels.quaternion import euler_array
-from gpquad.variables import STATE_NAMES
 
 #: The states the paper's check is about (the integrated ones).
 CHECKED = ("u", "v", "w", "p", "q", "r")

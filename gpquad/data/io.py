@@ -11,10 +11,10 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
-from gpquad.config import Config, DataConfig
 from gpquad.data.dataset import Dataset, build_dataset
 from gpquad.data.flight import Flight
 from gpquad.errors import GpquadError
+from gpquad.study.config import Config, DataConfig
 
 
 def _read_generic(path: Path, data: DataConfig) -> list[Flight]:
@@ -55,7 +55,7 @@ def _is_generic_file(path: Path) -> bool:
     import pandas as pd
 
     from gpquad.data.flight import DT_TOLERANCE
-    from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
+    from gpquad.engine.variables import QUAT_COLUMNS, RATE_COLUMNS
 
     try:
         if path.suffix.lower() == ".csv":
@@ -109,7 +109,7 @@ def load_flights(cfg: Config) -> list[Flight]:
     """Every in-flight segment of every configured file (or the simulator's flight), then
     those of the files held out for validation that `data.files` does not list."""
     if not cfg.data.files:
-        from gpquad.simulator import simulate
+        from gpquad.data.simulator import simulate
 
         return [simulate(cfg.simulator, cfg.data.inputs)]
     reader = READERS.get(cfg.data.format)

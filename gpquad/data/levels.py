@@ -19,8 +19,8 @@ names otherwise takes the default level's signal.
 
 from __future__ import annotations
 
+from gpquad.engine.variables import DEFAULT_INPUTS
 from gpquad.errors import GpquadError
-from gpquad.variables import DEFAULT_INPUTS
 
 LEVELS = ("rates", "torque", "sticks", "motors")
 #: Levels tried, in order, when `data.inputs` is left at the paper's default names.

@@ -39,16 +39,16 @@ from scipy.signal import firwin
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
 from gpquad.data.plausibility import check_stream_time, runs
-from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import rates_from_quaternions, world_to_body
-from gpquad.kernels.quaternion import euler_array
-from gpquad.variables import (
+from gpquad.engine.kernels.integrator import rates_from_quaternions, world_to_body
+from gpquad.engine.kernels.quaternion import euler_array
+from gpquad.engine.variables import (
     BODY_VEL_COLUMNS,
     POSITION_COLUMNS,
     QUAT_COLUMNS,
     RATE_COLUMNS,
     WORLD_VEL_COLUMNS,
 )
+from gpquad.errors import GpquadError
 
 #: Stream kinds: interpolated states, interpolated quaternion, held inputs/flags.
 KINDS = ("state", "quat", "hold")

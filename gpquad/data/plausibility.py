@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from gpquad.engine.kernels.integrator import rates_from_quaternions
+from gpquad.engine.variables import QUAT_COLUMNS, RATE_COLUMNS
 from gpquad.errors import GpquadError
-from gpquad.kernels.integrator import rates_from_quaternions
-from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
 
 #: Body rates above this (rad/s) are implausible for a multirotor: degrees logged as radians.
 MAX_PLAUSIBLE_RATE = 40.0

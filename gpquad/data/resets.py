@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.plausibility import MAX_PLAUSIBLE_RATE
-from gpquad.variables import QUAT_COLUMNS, RATE_COLUMNS
+from gpquad.engine.variables import QUAT_COLUMNS, RATE_COLUMNS
 
 #: Samples this close (s) to a reset are dropped on both sides.
 MARGIN_S = 0.1

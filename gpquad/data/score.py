@@ -1,7 +1,7 @@
 """`gpquad score RUN_DIR --data LOG` and `gpquad data export LOG --out FILE`.
 
 Scoring flies a run's equations over the windows of another flight (or the held-out part of
-one it trained on) with `gpquad.scoring`'s definition: RSE of the integrated states u, v, w,
+one it trained on) with `gpquad.models.scoring`'s definition: RSE of the integrated states u, v, w,
 p, q, r over non-overlapping windows of `--horizon-s`, each from the recorded state with the
 recorded inputs. A state the log does not measure is NaN; a window is diverged when the
 prediction is non-finite or leaves 10 x the data's largest |state|.
@@ -41,11 +41,10 @@ def _part(cfg, path: Path, part: str) -> str:
 def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
               part: str = "auto") -> dict:
     """RSE per state, window counts and what was scored (see the module docstring)."""
-    from gpquad.config import load_folder_config
     from gpquad.data.dataset import build_dataset
     from gpquad.data.integration_check import screen_segments
     from gpquad.data.io import READERS, guess_format
-    from gpquad.scoring import (
+    from gpquad.models.scoring import (
         SCORED_INDEX,
         SCORED_STATES,
         load_run,
@@ -53,6 +52,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         rse,
         validation_windows,
     )
+    from gpquad.study.config import load_folder_config
 
     if part not in PARTS:
         raise GpquadError(f"choose one of {list(PARTS)}", field="--part")

@@ -23,14 +23,14 @@ from gpquad.data.flight import (
 )
 from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
 from gpquad.data.plausibility import check_rate_peak, check_rate_units
-from gpquad.errors import GpquadError
-from gpquad.variables import (
+from gpquad.engine.variables import (
     BODY_VEL_COLUMNS,
     POSITION_COLUMNS,
     QUAT_COLUMNS,
     RATE_COLUMNS,
     WORLD_VEL_COLUMNS,
 )
+from gpquad.errors import GpquadError
 
 
 def table_log(path, data) -> LogTable:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.results import atomic_write_text, package_versions, provenance, write_json
+from gpquad.study.store import atomic_write_text, package_versions, provenance, write_json
 
 EXTRA_PACKAGES = ("orangebox", "statsmodels", "rotorpy")
 

@@ -1,0 +1,233 @@
+"""gpquad command line: run, simulate, export, fly, bench; data, baseline, compare, sweep..."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from gpquad.errors import GpquadError
+
+
+def _cmd_run(args) -> int:
+    from gpquad.study.config import load_config, override
+    from gpquad.study.runner import default_run_dir, run_experiment
+
+    cfg = override(load_config(args.config), files=args.data, targets=args.target,
+                   iterations=args.iterations, seed=args.seed,
+                   out=None)
+    run_dir = Path(args.out) if args.out else default_run_dir(cfg)
+    try:
+        model = run_experiment(cfg, run_dir, progress=not args.quiet)
+    except KeyboardInterrupt:
+        return 130
+    print("\nDiscovered equations (inputs minus trim):" if any(model.trim.values())
+          else "\nDiscovered equations:")
+    print(model)
+    if any(model.trim.values()):
+        print("\nThe same in the log's raw inputs:")
+        print(model.text(raw=True))
+    print(f"\nRun folder: {run_dir}")
+    return 0
+
+
+def _cmd_simulate(args) -> int:
+    from gpquad.data.flight import write_flight_file
+    from gpquad.data.simulator import simulate
+    from gpquad.study.config import load_config
+
+    cfg = load_config(args.config) if args.config else None
+    if cfg is None:
+        from gpquad.study.config import Config
+
+        cfg = Config()
+    flight = simulate(cfg.simulator, cfg.data.inputs)
+    path = write_flight_file(flight, args.out)
+    print(f"wrote {len(flight)} samples at {1 / flight.dt:.4g} Hz to {path}")
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from gpquad.models.equations import DiscoveredModel
+
+    model = DiscoveredModel.load(args.run)
+    if args.format == "latex":
+        print(model.latex(raw=args.raw_inputs), end="")
+    elif args.format == "markdown":
+        print(model.markdown(), end="")
+    elif args.format == "sympy":
+        for target, eq in model.equations.items():
+            expr = eq.sympy_raw() if args.raw_inputs else eq.sympy()
+            print(f"{target} = {expr}    delays {eq.used_delays()}")
+    elif args.format == "text":
+        print(model.text(raw=args.raw_inputs))
+    else:
+        print(json.dumps(model.to_dict(), indent=2))
+    return 0
+
+
+def _cmd_fly(args) -> int:
+    import numpy as np
+    import pandas as pd
+
+    from gpquad.data.flight import write_flight_file
+    from gpquad.engine.variables import TARGET_NAMES
+    from gpquad.models.equations import DiscoveredModel
+
+    model = DiscoveredModel.load(args.run)
+    path = Path(args.inputs)
+    if not path.is_file():
+        raise GpquadError("file not found", source=str(path))
+    table = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else \
+        pd.read_csv(path)
+    missing = [n for n in model.input_names if n not in table.columns]
+    if missing:
+        raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
+    absent = [t for t in TARGET_NAMES if t not in model.equations]
+    if absent and not args.zero_missing:
+        raise GpquadError(f"the run has no equation for {absent}; identify all six targets, or "
+                          "give --zero-missing to fly them as zero acceleration",
+                          source=str(args.run), field="targets")
+    if "t" in table.columns:
+        _check_input_clock(table["t"].to_numpy(dtype=float), model.dt, str(path))
+    inputs = table[list(model.input_names)].to_numpy(dtype=float)
+    if not np.all(np.isfinite(inputs)):
+        raise GpquadError("inputs contain NaN", source=str(path), field=model.input_names[0])
+    initial = None
+    if args.initial:
+        try:
+            initial = [float(x) for x in args.initial.split(",")]
+        except ValueError:
+            raise GpquadError("--initial takes 9 numbers: phi,theta,psi,u,v,w,p,q,r",
+                              field="--initial") from None
+    flight = model.fly(inputs, initial, raw_inputs=not args.trimmed)
+    out = write_flight_file(flight, args.out)
+    print(f"flew {len(flight)} samples ({len(flight) * model.dt:.1f} s) with the equations of "
+          f"{args.run}; wrote {out}")
+    return 0
+
+
+def _check_input_clock(t, dt: float, source: str) -> None:
+    """The inputs' time column must tick at the model's sample time (inputs are not resampled)."""
+    import numpy as np
+
+    steps = np.diff(t)
+    if len(steps) and (not np.all(np.isfinite(steps))
+                       or np.max(np.abs(steps - dt)) > 1e-6 * max(dt, 1.0) + 1e-9 * abs(t).max()):
+        raise GpquadError(f"the inputs are not sampled every {dt:g} s, the model's sample time "
+                          f"(steps {np.min(steps):.6g} to {np.max(steps):.6g} s); resample them "
+                          "to the model's rate", source=source, field="t")
+
+
+def _cmd_bench(args) -> int:
+    from gpquad.engine.bench import format_report, run_benchmark
+
+    result = run_benchmark(full=args.full)
+    print(json.dumps(result) if args.json else format_report(result))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gpquad", description="Discover multirotor acceleration equations from flight logs "
+        "by coevolutionary genetic programming.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="identify equations from a config")
+    run.add_argument("config", help="experiment TOML file")
+    run.add_argument("--data", action="append",
+                     help="flight file (repeatable); replaces data.files")
+    run.add_argument("--target", action="append",
+                     help="target equation (repeatable; default all six)")
+    run.add_argument("--iterations", type=int, help="coevolution iterations per target")
+    run.add_argument("--seed", type=int, help="master seed")
+    run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
+    run.add_argument("--quiet", action="store_true", help="no progress lines")
+    run.set_defaults(func=_cmd_run)
+
+    sim = sub.add_parser("simulate", help="write the reference simulator's flight to a file")
+    sim.add_argument("config", nargs="?", help="experiment TOML ([simulator] section)")
+    sim.add_argument("--out", required=True, help="output .csv or .parquet")
+    sim.set_defaults(func=_cmd_simulate)
+
+    exp = sub.add_parser("export", help="print a run's equations")
+    exp.add_argument("run", help="run folder or model.json")
+    exp.add_argument("--format", choices=["text", "latex", "markdown", "sympy", "json"],
+                     default="text")
+    exp.add_argument("--raw-inputs", action="store_true",
+                     help="write equations in untrimmed inputs")
+    exp.set_defaults(func=_cmd_export)
+
+    fly = sub.add_parser("fly", help="fly a run's equations with given inputs")
+    fly.add_argument("run", help="run folder or model.json")
+    fly.add_argument("--inputs", required=True, help="CSV/Parquet with the input columns")
+    fly.add_argument("--out", required=True, help="flight file to write (.csv or .parquet)")
+    fly.add_argument("--initial", help="initial state phi,theta,psi,u,v,w,p,q,r (default 0)")
+    fly.add_argument("--trimmed", action="store_true",
+                     help="the inputs are already trim-subtracted")
+    fly.add_argument("--zero-missing", action="store_true",
+                     help="fly targets the run has no equation for as zero acceleration")
+    fly.set_defaults(func=_cmd_fly)
+
+    bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")
+    bench.add_argument("--json", action="store_true", help="one JSON object")
+    bench.add_argument("--full", action="store_true", help="measure a whole 30-iteration run")
+    bench.set_defaults(func=_cmd_bench)
+
+    for register in _extensions():
+        register(sub)
+    return parser
+
+
+def _extensions():
+    """Sub-command groups contributed by other packages of gpquad (data, baselines, sweeps)."""
+    registers = []
+    for module, name in (("gpquad.cli.data", "register"), ("gpquad.cli.baselines", "register"),
+                         ("gpquad.cli.sweep", "register"), ("gpquad.cli.score", "register"),
+                         ("gpquad.cli.control", "register"), ("gpquad.cli.physics", "register"),
+                         ("gpquad.cli.benchmark", "register")):
+        try:
+            mod = __import__(module, fromlist=[name])
+        except ModuleNotFoundError as exc:
+            if exc.name and module.startswith(exc.name):
+                continue
+            raise
+        registers.append(getattr(mod, name))
+    return registers
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except GpquadError as exc:
+        return _fail(str(exc))
+    except KeyboardInterrupt:
+        print("\ngpquad: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader of our output went away (`gpquad ... | head`): stop quietly, as Unix
+        # tools do, and keep Python from complaining when it flushes stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except OSError as exc:
+        if exc.filename is None:
+            raise
+        return _fail(f"{exc.filename}: {exc.strerror or exc}; check the path and that it is a "
+                     "writable folder (or a readable file)")
+
+
+def _fail(message: str) -> int:
+    """The one top-level error path: one line on stderr, exit code 2."""
+    try:
+        print(f"gpquad: error: {message}", file=sys.stderr)
+    except BrokenPipeError:
+        pass
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,50 @@
+"""Command line: `gpquad score` and `gpquad data export` (picked up by gpquad.cli.commands)."""
+
+from __future__ import annotations
+
+import json
+
+from gpquad.data.score import PARTS, format_score, score_log
+
+
+def _cmd_score(args) -> int:
+    result = score_log(args.run, args.data, args.horizon_s, args.format, args.part)
+    print(json.dumps(result) if args.json else format_score(result))
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add `gpquad score`."""
+    p = subparsers.add_parser("score", help="RSE of a run's equations flown over a flight log")
+    p.add_argument("run", help="run folder")
+    p.add_argument("--data", required=True, help="log: ulog2csv folder, .ulg, .bbl, .bin, "
+                                                 ".csv/.parquet (an export or generic file)")
+    p.add_argument("--format", help="log format (default: from the path)")
+    p.add_argument("--horizon-s", type=float, default=7.0, help="window length, s (default 7)")
+    p.add_argument("--part", default="auto", choices=PARTS,
+                   help="all windows, or the held-out part (auto: the held-out part of a log "
+                        "the run trained on, else all)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=_cmd_score)
+
+
+def _cmd_export(args) -> int:
+    from gpquad.data.export import export_flights, write_export
+
+    flights, dropped = export_flights(args.path, args.format, args.config)
+    for d in dropped:
+        print(f"warning: {d}")
+    out = write_export(flights, args.out)
+    print(f"wrote {len(flights)} segment(s), {sum(len(f) for f in flights)} samples, inputs "
+          f"{', '.join(flights[0].input_names)}, to {out}")
+    return 0
+
+
+def register_export(sub) -> None:
+    """Add `gpquad data export` to the `data` sub-commands."""
+    p = sub.add_parser("export", help="engine-ready data after the pipeline, as CSV/Parquet")
+    p.add_argument("path", help="log: ulog2csv folder, .ulg, .bbl/.BFL, .bin, .csv/.parquet")
+    p.add_argument("--out", required=True, help="output .csv or .parquet")
+    p.add_argument("--format", help="log format (default: from the path)")
+    p.add_argument("--config", help="experiment TOML whose [data] settings to use")
+    p.set_defaults(func=_cmd_export)

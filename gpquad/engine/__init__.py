@@ -1,0 +1,1 @@
+"""The identification engine: variables, numba kernels, expression trees, coevolution."""

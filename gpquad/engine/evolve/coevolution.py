@@ -1,0 +1,333 @@
+"""The coevolution loop of the paper (section 2.2), with explicit, checkpointable state.
+
+One iteration = `model_generations` generations of the model hill climbers on
+the test suite, `test_generations` generations of the test hill climbers
+(fitness: variance of the models' errors), insertion of the best test into the
+suite, and one bloat simplification of every model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gpquad.data.dataset import Dataset
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.evolve.local_search import (
+    fit_constants,
+    improve_constants,
+    improve_delays,
+    prune,
+)
+from gpquad.engine.evolve.selection import mse_of, prune_by_bic, select_by_bic
+from gpquad.engine.evolve.term_search import best_index, improve_terms
+from gpquad.engine.evolve.windows import WindowSpace, tile
+from gpquad.engine.kernels.tree_eval import eval_on_samples
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.operators import CONST
+from gpquad.engine.tree.random_stream import RandomStream
+from gpquad.engine.tree.variation import (
+    VariationParams,
+    constant_mutation,
+    fold_constants,
+    mutate,
+    random_tree,
+    replace_with_constant,
+)
+from gpquad.engine.variables import N_STATE, STATE_NAMES
+from gpquad.study.config import EvolutionConfig
+
+
+@dataclass
+class RunState:
+    """Everything needed to continue a run: climbers, tests, suite and the RNG state."""
+
+    target: str
+    iteration: int
+    models: list[Tree]
+    model_errors: np.ndarray
+    tests: np.ndarray  # virtual positions of the test hill climbers
+    suite: np.ndarray  # data start indices
+    suite_age: np.ndarray  # insertion order; the smallest is the oldest
+    inserted: int
+    rng_state: dict
+    history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
+
+
+def measured_variables(dataset, exclude=()) -> tuple[int, ...] | None:
+    """Leaf variables a model may read: every input and every state the data measures, less
+    the names in `exclude` (None: all). A log without, say, horizontal velocity keeps u and v
+    out of its equations."""
+    names = list(STATE_NAMES) + list(dataset.input_names)
+    left_out = [i for i, name in enumerate(names)
+                if name in exclude or (name in ("u", "v", "w", "p", "q", "r")
+                                       and dataset.unmeasured(name))]
+    if not left_out:
+        return None
+    return tuple(i for i in range(len(names)) if i not in left_out)
+
+
+def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
+    return VariationParams(
+        n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
+        max_depth=cfg.max_depth,
+        p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
+        const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
+        p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
+
+
+def disagreement(errors: np.ndarray) -> np.ndarray:
+    """Fitness of each test (column): variance of the models' errors (rows).
+
+    A diverged model (inf) counts as twice the worst finite error in the matrix, so
+    that a window on which some models blow up is a strongly discriminating test.
+    """
+    finite = np.isfinite(errors)
+    cap = 2.0 * errors[finite].max() if finite.any() else 1.0
+    return np.where(finite, errors, cap).var(axis=0)
+
+
+class Coevolution:
+    """Coevolutionary identification of one target's equation."""
+
+    def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
+        self.dataset = dataset
+        self.target = target
+        self.cfg = cfg
+        self.params = variation_params(cfg, len(dataset.input_names),
+                                       measured_variables(dataset, cfg.exclude_leaves))
+        self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
+        self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
+
+    # ----------------------------------------------------------------- state
+    def init_state(self, seed) -> RunState:
+        rng = np.random.default_rng(seed)
+        cfg = self.cfg
+        models = [random_tree(rng, self.params) for _ in range(cfg.n_models)]
+        tests = self.space.random(rng, cfg.n_tests)
+        suite = self.space.starts(self.space.random(rng, cfg.suite_size))
+        errors = self.evaluator.mean_errors(models, suite)
+        return RunState(target=self.target, iteration=0, models=models, model_errors=errors,
+                        tests=tests, suite=suite, suite_age=np.arange(cfg.suite_size),
+                        inserted=cfg.suite_size, rng_state=rng.bit_generator.state)
+
+    # ---------------------------------------------------------------- phases
+    def model_phase(self, state: RunState, rng: RandomStream) -> None:
+        """Hill climbers: each parent makes one mutant, kept if strictly better."""
+        ev = self.evaluator
+        state.model_errors = ev.mean_errors(state.models, state.suite)
+        for gen in range(self.cfg.model_generations):
+            mutants = [mutate(rng, m, self.params) for m in state.models]
+            errors = ev.mean_errors(mutants, state.suite, bounds=state.model_errors)
+            for i in np.flatnonzero(errors < state.model_errors):
+                state.models[i] = mutants[i]
+                state.model_errors[i] = errors[i]
+            best = int(np.argmin(state.model_errors))
+            state.history.append({
+                "target": self.target, "iteration": state.iteration, "generation": gen,
+                "best_suite_error": float(state.model_errors[best]),
+                "median_suite_error": float(np.median(state.model_errors)),
+                "best_size": state.models[best].size,
+            })
+
+    def test_phase(self, state: RunState, rng: np.random.Generator) -> None:
+        """Test hill climbers maximise disagreement; the best joins the suite."""
+        ev = self.evaluator
+        fitness = disagreement(ev.window_errors(state.models, self.space.starts(state.tests)))
+        for _ in range(self.cfg.test_generations):
+            mutants = self.space.mutate(rng, state.tests, self.cfg.test_offset_max)
+            f = disagreement(ev.window_errors(state.models, self.space.starts(mutants)))
+            better = f > fitness
+            state.tests[better] = mutants[better]
+            fitness[better] = f[better]
+        best_start = int(self.space.starts(state.tests[int(np.argmax(fitness))]))
+        self.insert_test(state, best_start)
+
+    def insert_test(self, state: RunState, start: int) -> None:
+        """Replace the suite test the new one overlaps, else the oldest."""
+        overlap = np.abs(state.suite - start) < self.cfg.window_steps
+        slot = int(np.argmax(overlap)) if overlap.any() else int(np.argmin(state.suite_age))
+        state.suite[slot] = start
+        state.suite_age[slot] = state.inserted
+        state.inserted += 1
+
+    def subtree_mean(self, tree: Tree, start: int, end: int, samples) -> float:
+        """Mean one-step value of tree.codes[start:end] on data samples (finite values only)."""
+        arrays = self.dataset.arrays
+        sub = np.ascontiguousarray(tree.codes[start:end])
+        vals = np.ascontiguousarray(tree.values[start:end])
+        out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs,
+                              samples)
+        out = out[np.isfinite(out)]
+        return float(out.mean()) if out.size else 0.0
+
+    def simplify_phase(self, state: RunState, rng: RandomStream) -> None:
+        """Replace a random subtree of each model by a constant, re-converge constants only,
+        and keep the result when it is no worse."""
+        ev = self.evaluator
+        state.model_errors = ev.mean_errors(state.models, state.suite)
+        samples = (state.suite[:, None] + np.arange(self.cfg.window_steps)[None, :]).ravel()
+
+        def constant_for(tree: Tree):
+            return lambda start, end: self.subtree_mean(tree, start, end, samples)
+
+        candidates = [replace_with_constant(rng, m, constant_for(m)) for m in state.models]
+        errors = ev.mean_errors(candidates, state.suite)
+        for _ in range(self.cfg.simplify_generations):
+            mutants = [constant_mutation(rng, c, self.params) for c in candidates]
+            mutant_errors = ev.mean_errors(mutants, state.suite, bounds=errors)
+            for i in np.flatnonzero(mutant_errors < errors):
+                candidates[i] = mutants[i]
+                errors[i] = mutant_errors[i]
+        # The paper (2.2) discards a simplification that "performs no better": with
+        # simplify_tolerance 0 only a strictly better one is kept; a tolerance > 0 (not in the
+        # paper) keeps one within that relative error.
+        tol = self.cfg.simplify_tolerance
+        keep = errors < state.model_errors if tol == 0 else \
+            errors <= state.model_errors * (1.0 + tol)
+        for i in np.flatnonzero(keep):
+            state.models[i] = fold_constants(candidates[i])
+            state.model_errors[i] = errors[i]
+
+    def gradient_fitter(self, steps: int, ev: Evaluator | None = None):
+        """fit(tree, error, starts, n_steps) by Levenberg-Marquardt, or None (Nelder-Mead).
+        Errors are those of `ev` (default: the run's evaluator)."""
+        if self.cfg.constant_fit != "gauss-newton":
+            return None
+        ev = self.evaluator if ev is None else ev
+
+        def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+            def error_of(t: Tree) -> float:
+                return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
+
+            return gauss_newton_constants(ev, tree, error, starts, n_steps, error_of, steps)
+
+        return fit
+
+    def local_search_phase(self, state: RunState) -> None:
+        """Optional local search of delays and constants (not in the paper; see config)."""
+        mode = self.cfg.local_search
+        if mode == "none":
+            return
+        refit = self.cfg.local_search_evals // 5 if mode == "delays+constants" else 0
+        fit = self.gradient_fitter(self.cfg.gradient_steps)
+        refit_fit = (self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
+                     if mode == "delays+constants" else None)
+        for i, model in enumerate(state.models):
+            err = state.model_errors[i]
+            if mode == "delays+constants":
+                model, err = improve_constants(self.evaluator, model, err, state.suite,
+                                               self.cfg.local_search_evals, fit)
+            model, err = improve_delays(self.evaluator, model, err, state.suite,
+                                        self.cfg.max_delay, refit, refit_fit)
+            state.models[i], state.model_errors[i] = model, err
+        if self.cfg.term_search:
+            self.term_phase(state)
+
+    def term_phase(self, state: RunState) -> None:
+        """Greedy term insertion on the best climber (gpquad.engine.evolve.term_search)."""
+        cfg = self.cfg
+        fit = self.gradient_fitter(max(cfg.gradient_steps // 4, 1))
+        if fit is None:
+            def fit(tree, err, starts, n_steps):
+                return improve_constants(self.evaluator, tree, err, starts,
+                                         cfg.local_search_evals // 5)
+        i = best_index(state.model_errors)
+        state.models[i], state.model_errors[i] = improve_terms(
+            self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
+            self.params.variables if self.params.variables is not None
+            else self.params.n_variables, cfg.max_depth, cfg.term_min_gain)
+
+    def iterate(self, state: RunState) -> RunState:
+        """One full iteration; returns the same state object, advanced."""
+        rng = np.random.default_rng()
+        rng.bit_generator.state = state.rng_state
+        stream = RandomStream(rng)  # scalar draws for the variation operators
+        self.model_phase(state, stream)
+        self.local_search_phase(state)
+        self.test_phase(state, rng)
+        self.simplify_phase(state, stream)
+        state.iteration += 1
+        state.rng_state = rng.bit_generator.state
+        return state
+
+    # ------------------------------------------------------------- selection
+    def tiled_errors(self, trees: list[Tree], ranges) -> np.ndarray:
+        """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none)."""
+        starts, steps = tile(ranges, self.cfg.window_steps, self.cfg.max_delay)
+        if len(starts) == 0:
+            return np.full(len(trees), np.nan)
+        return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
+
+    def training_errors(self, state: RunState) -> np.ndarray:
+        """Each climber's error over the whole training data (NaN: no window fits)."""
+        return self.tiled_errors(state.models, self.dataset.train)
+
+    def best(self, state: RunState, train=None) -> tuple[Tree, float, float]:
+        """The climber with the lowest error over the whole training data, with its training
+        and validation errors. With prune_tolerance > 0 it is pruned first: subtrees become
+        constants while the error grows by less than prune_tolerance times the error of the
+        best constant model. `train` may pass training_errors(state) computed already."""
+        train = self.training_errors(state) if train is None else train
+        i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
+        model, error = state.models[i], float(train[i])
+        if self.cfg.final_selection == "bic":
+            model = self.select_by_bic(state, model, train)
+            error = float(self.tiled_errors([model], self.dataset.train)[0])
+        elif self.cfg.prune_tolerance > 0:
+            starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
+            samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
+            # The allowance is a fraction of the error of the best constant model.
+            mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
+            trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
+            scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
+            model, error = prune(self.evaluator, model, starts, steps,
+                                 self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
+                                 lambda t, a, b: self.subtree_mean(t, a, b, samples),
+                                 self.gradient_fitter(self.cfg.gradient_steps))
+        validation = self.tiled_errors([model], self.dataset.validation)[0]
+        return model, error, float(validation)
+
+    def select_by_bic(self, state: RunState, model: Tree, train) -> Tree:
+        """Prune `model` while its training BIC does not grow, then pick the lowest validation
+        BIC among it and the front's climbers (gpquad.engine.evolve.selection)."""
+        cfg = self.cfg
+        ev_mse = Evaluator(self.dataset, self.target, cfg.window_steps, "mse", cfg.max_depth)
+        starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
+        samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
+        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
+        if fit is None:
+            def fit(tree, err, starts, n_steps):
+                return fit_constants(tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps),
+                                     cfg.local_search_evals)
+        pruned = prune_by_bic(ev_mse, model, starts, steps,
+                              lambda t, a, b: self.subtree_mean(t, a, b, samples), fit)
+        candidates = [pruned] + [t for t, _ in self.front(state, train)]
+        val_starts, val_steps = tile(self.dataset.validation, cfg.window_steps, cfg.max_delay)
+        if len(val_starts) == 0:  # no validation data: the training windows decide
+            val_starts, val_steps = starts, steps
+        return select_by_bic(ev_mse, candidates, val_starts, val_steps)[0]
+
+    def front(self, state: RunState, train=None) -> list[tuple[Tree, float]]:
+        """The climbers on the size/error Pareto front (training data), smallest first:
+        each is more accurate than every smaller one (alternatives to the best equation)."""
+        train = self.training_errors(state) if train is None else train
+        order = sorted(range(len(state.models)),
+                       key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)))
+        front, best = [], np.inf
+        for i in order:
+            if train[i] < best:
+                front.append((state.models[i], float(train[i])))
+                best = train[i]
+        return front
+
+
+def clone_state(state: RunState) -> RunState:
+    """A deep copy (trees are immutable)."""
+    return dataclasses.replace(
+        state, models=list(state.models), model_errors=state.model_errors.copy(),
+        tests=state.tests.copy(), suite=state.suite.copy(), suite_age=state.suite_age.copy(),
+        rng_state=dict(state.rng_state), history=list(state.history))

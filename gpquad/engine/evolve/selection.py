@@ -1,0 +1,79 @@
+"""Choosing the final equation by an information criterion (not in the paper).
+
+A fixed prune tolerance on the error scale removes terms whose share is small but real
+(a gyroscopic q*r in p_dot). Here every decision compares the Bayesian information
+criterion of the integrated target state,
+
+    BIC = n log(MSE) + k log(n),
+
+with n the number of window-steps scored and k the tree's size (one symbol per node, so
+a term costs its nodes). Terms are removed while BIC does not grow (training windows,
+constants re-fitted by least squares, which is exactly what minimises MSE), and the final
+equation is the candidate (pruned best, then every climber of the size/error front) with
+the lowest BIC on the validation windows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.tree.encoding import Tree, subtree_end
+from gpquad.engine.tree.operators import CONST
+from gpquad.engine.tree.variation import fold_constants
+
+#: MSE floor of the criterion (an exact model on noise-free data scores ~1e-20).
+MSE_FLOOR = 1e-18
+
+
+def bic(mse: float, n: int, k: int) -> float:
+    """n log(MSE) + k log(n); inf for a non-finite MSE."""
+    if not np.isfinite(mse) or n < 1:
+        return math.inf
+    return n * math.log(max(mse, MSE_FLOOR)) + k * math.log(n)
+
+
+def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
+    """Mean squared integrated-state error of `tree` on the windows (ev_mse.squared)."""
+    if len(starts) == 0:
+        return math.nan
+    return float(ev_mse.window_errors([tree], starts, n_steps=n_steps).mean())
+
+
+def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit
+                 ) -> Tree:
+    """Replace subtrees by constants (largest first, constants re-fitted by
+    fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow."""
+    n = len(starts) * n_steps
+    model = fold_constants(model)
+    model, err = fit(model, mse_of(ev_mse, model, starts, n_steps), starts, n_steps)
+    score = bic(err, n, model.size)
+    changed = True
+    while changed and model.size > 1:
+        changed = False
+        codes = model.codes.tolist()
+        spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
+                        if codes[i] != CONST), reverse=True)
+        for _, i in spans:
+            end = subtree_end(codes, i)
+            candidate = fold_constants(Tree.from_lists(
+                codes[:i] + [CONST] + codes[end:],
+                model.values.tolist()[:i] + [constant_of(model, i, end)]
+                + model.values.tolist()[end:], model.delays))
+            candidate, cand_err = fit(candidate, mse_of(ev_mse, candidate, starts, n_steps),
+                                      starts, n_steps)
+            cand_score = bic(cand_err, n, candidate.size)
+            if cand_score <= score:
+                model, score, changed = candidate, cand_score, True
+                break
+    return model
+
+
+def select_by_bic(ev_mse: Evaluator, candidates: list[Tree], starts, n_steps: int
+                  ) -> tuple[Tree, list[float]]:
+    """The candidate with the lowest BIC on the windows (first one on ties), and all BICs."""
+    n = len(starts) * n_steps
+    scores = [bic(mse_of(ev_mse, t, starts, n_steps), n, t.size) for t in candidates]
+    return candidates[int(np.argmin(scores))], scores

@@ -1,0 +1,259 @@
+"""Integrated-state fitness: fly a tree over data windows and measure the state error.
+
+For a tree that models target k (0..5 = a_x .. r_dot), each window starts from
+the data's state at `start`, integrates n_steps with the tree's acceleration
+for k and the data's accelerations for the other five (paper section 3.2), and
+scores |x_k(pred) - x_k(data)| (or its square) averaged over the steps.
+
+Only the states that can influence the score are integrated, which is exact,
+not an approximation:
+- linear targets: rates and attitude are the data's (they are driven by data
+  accelerations only), so the rotation R_{b_t}^{b_{t+1}} is read from
+  FlightArrays.rot and Euler angles from the data;
+- angular targets: the attitude is integrated only when the tree reads Euler
+  angles, and the velocity only when it reads u, v or w.
+`rollout` integrates everything and is the reference these paths are tested on.
+"""
+
+import numpy as np
+
+from gpquad.engine.kernels.quaternion import (
+    euler_from_quat,
+    euler_phi,
+    euler_psi,
+    euler_theta,
+    quat_mul,
+    rate_increment,
+    renormalize,
+    rotate_back,
+)
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import VAR_BASE
+
+DIVERGED = np.inf
+#: A state whose magnitude exceeds this (or is NaN) marks the window as diverged.
+STATE_LIMIT = 1e6
+
+
+@njit
+def _uses(codes, size, first, last):
+    for i in range(size):
+        c = codes[i] - VAR_BASE
+        if first <= c <= last:
+            return True
+    return False
+
+
+@njit
+def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
+                       bound, out):
+    """Mean per-step error of one tree on each window; fills out (n_windows,).
+
+    bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
+    evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
+    and every entry is set to inf. Pass np.inf to evaluate fully.
+    A window whose state diverges (NaN or beyond STATE_LIMIT) scores inf and stops.
+    Returns True when the evaluation stopped early.
+    """
+    quat_d, states, acc, inputs, rot, dt = flight
+    n = starts.shape[0]
+    n_in = inputs.shape[1]
+    linear = target < 3
+    uses_phi = _uses(codes, size, 0, 0)
+    uses_theta = _uses(codes, size, 1, 1)
+    uses_psi = _uses(codes, size, 2, 2)
+    uses_euler = uses_phi or uses_theta or uses_psi
+    uses_vel = _uses(codes, size, 3, 5)
+    need_vel = linear or uses_vel
+    need_att = (not linear) and uses_euler
+    budget = bound * n * n_steps
+
+    features = np.zeros((9 + n_in, n))
+    stack = np.empty((STACK_ROWS, n))
+    pred = np.empty(n)
+    quat = np.empty((4, n))
+    vel = np.empty((3, n))
+    rates = np.empty((3, n))
+    err = np.zeros(n)
+    alive = np.ones(n, dtype=np.bool_)
+    n_alive = n
+    for lane in range(n):
+        s = starts[lane]
+        for i in range(4):
+            quat[i, lane] = quat_d[s, i]
+        for i in range(3):
+            vel[i, lane] = states[s, 3 + i]
+            rates[i, lane] = states[s, 6 + i]
+
+    # Only the leaves the tree reads are filled.
+    used = np.zeros(9 + n_in, dtype=np.bool_)
+    for i in range(size):
+        if codes[i] >= VAR_BASE:
+            used[codes[i] - VAR_BASE] = True
+    data_cols = np.empty(6, dtype=np.int64)  # states read straight from the data
+    n_data = 0
+    if linear:
+        for i in (0, 1, 2, 6, 7, 8):
+            if used[i]:
+                data_cols[n_data] = i
+                n_data += 1
+    rate_cols = np.empty(3, dtype=np.int64)  # integrated rates (angular targets)
+    n_rate = 0
+    if not linear:
+        for i in range(3):
+            if used[6 + i]:
+                rate_cols[n_rate] = i
+                n_rate += 1
+    input_cols = np.empty(n_in, dtype=np.int64)
+    n_used_in = 0
+    for j in range(n_in):
+        if used[9 + j]:
+            input_cols[n_used_in] = j
+            n_used_in += 1
+
+    for k in range(n_steps):
+        for lane in range(n):
+            if not alive[lane]:
+                continue
+            idx = starts[lane] + k
+            for c in range(n_data):
+                features[data_cols[c], lane] = states[idx, data_cols[c]]
+            if need_att:
+                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+                if uses_phi:
+                    features[0, lane] = euler_phi(q0, q1, q2, q3)
+                if uses_theta:
+                    features[1, lane] = euler_theta(q0, q1, q2, q3)
+                if uses_psi:
+                    features[2, lane] = euler_psi(q0, q1, q2, q3)
+            for c in range(n_rate):
+                features[6 + rate_cols[c], lane] = rates[rate_cols[c], lane]
+            if uses_vel:
+                for i in range(3):
+                    features[3 + i, lane] = vel[i, lane]
+            for c in range(n_used_in):
+                j = input_cols[c]
+                features[9 + j, lane] = inputs[idx - delays[j], j]
+        eval_lanes(codes, values, size, features, stack, pred, n)
+
+        total = 0.0
+        for lane in range(n):
+            if not alive[lane]:
+                total += err[lane]
+                continue
+            idx = starts[lane] + k
+            if linear:
+                b0 = vel[0, lane] + acc[idx, 0] * dt
+                b1 = vel[1, lane] + acc[idx, 1] * dt
+                b2 = vel[2, lane] + acc[idx, 2] * dt
+                if target == 0:
+                    b0 = vel[0, lane] + pred[lane] * dt
+                elif target == 1:
+                    b1 = vel[1, lane] + pred[lane] * dt
+                else:
+                    b2 = vel[2, lane] + pred[lane] * dt
+                vel[0, lane] = rot[idx, 0] * b0 + rot[idx, 1] * b1 + rot[idx, 2] * b2
+                vel[1, lane] = rot[idx, 3] * b0 + rot[idx, 4] * b1 + rot[idx, 5] * b2
+                vel[2, lane] = rot[idx, 6] * b0 + rot[idx, 7] * b1 + rot[idx, 8] * b2
+                x = vel[target, lane]
+            else:
+                if need_vel or need_att:
+                    d0, d1, d2, d3 = rate_increment(rates[0, lane], rates[1, lane],
+                                                    rates[2, lane], dt)
+                    if need_vel:
+                        vel[0, lane], vel[1, lane], vel[2, lane] = rotate_back(
+                            d0, d1, d2, d3, vel[0, lane] + acc[idx, 0] * dt,
+                            vel[1, lane] + acc[idx, 1] * dt, vel[2, lane] + acc[idx, 2] * dt)
+                    if need_att:
+                        n0, n1, n2, n3 = quat_mul(quat[0, lane], quat[1, lane], quat[2, lane],
+                                                  quat[3, lane], d0, d1, d2, d3)
+                        n0, n1, n2, n3 = renormalize(n0, n1, n2, n3)
+                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane] = n0, n1, n2, n3
+                for i in range(3):
+                    if i == target - 3:
+                        rates[i, lane] += pred[lane] * dt
+                    else:
+                        rates[i, lane] += acc[idx, 3 + i] * dt
+                x = rates[target - 3, lane]
+            e = x - states[idx + 1, 3 + target]
+            if squared:
+                e = e * e
+            else:
+                e = abs(e)
+            if not abs(x) < STATE_LIMIT:  # also catches NaN
+                e = DIVERGED
+                alive[lane] = False
+                n_alive -= 1
+            err[lane] += e
+            total += err[lane]
+        if total > budget or n_alive == 0:
+            for lane in range(n):
+                out[lane] = DIVERGED
+            return True
+    for lane in range(n):
+        out[lane] = err[lane] / n_steps
+    return False
+
+
+@njit
+def population_window_errors(codes, values, sizes, delays, target, flight, starts, n_steps, squared,
+                             bounds, out):
+    """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
+    for i in range(codes.shape[0]):
+        tree_window_errors(codes[i], values[i], sizes[i], delays[i], target, flight, starts,
+                           n_steps, squared, bounds[i], out[i])
+
+
+@njit
+def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, input_noise):
+    """Fly a full model: integrate every state from each window start, all six accelerations.
+
+    codes (6, M), values (6, M), sizes (6,), delays (6, n_inputs): one tree per target;
+    modelled (6,) bool: use the tree for this target, else the data's acceleration.
+    input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
+    Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
+    """
+    quat_d, states, acc, inputs, rot, dt = flight
+    n = starts.shape[0]
+    n_in = inputs.shape[1]
+    noisy = input_noise.shape[0] > 0
+    out = np.empty((n, n_steps + 1, 9))
+    features = np.empty((9 + n_in, 1))
+    stack = np.empty((STACK_ROWS, 1))
+    pred = np.empty(1)
+    a = np.empty(6)
+    for lane in range(n):
+        s = starts[lane]
+        q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
+        vel = states[s, 3:6].copy()
+        rates = states[s, 6:9].copy()
+        for k in range(n_steps + 1):
+            idx = s + k
+            phi, theta, psi = euler_from_quat(q0, q1, q2, q3)
+            out[lane, k, 0], out[lane, k, 1], out[lane, k, 2] = phi, theta, psi
+            for i in range(3):
+                out[lane, k, 3 + i] = vel[i]
+                out[lane, k, 6 + i] = rates[i]
+            if k == n_steps:
+                break
+            for i in range(9):
+                features[i, 0] = out[lane, k, i]
+            for t in range(6):
+                a[t] = acc[idx, t]
+                if modelled[t]:
+                    for j in range(n_in):
+                        u = inputs[idx - delays[t, j], j]
+                        if noisy and k - delays[t, j] >= 0:
+                            u += input_noise[lane, k - delays[t, j], j]
+                        features[9 + j, 0] = u
+                    eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
+                    a[t] = pred[0]
+            d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
+            vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + a[0] * dt,
+                                                 vel[1] + a[1] * dt, vel[2] + a[2] * dt)
+            n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
+            q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
+            for i in range(3):
+                rates[i] += a[3 + i] * dt
+    return out

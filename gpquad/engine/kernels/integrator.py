@@ -1,0 +1,116 @@
+"""The body-frame quaternion integrator (paper eq. 2) and its discrete inverse.
+
+Forward, for one step of dt seconds with body accelerations a (m/s^2) and
+angular accelerations alpha (rad/s^2):
+
+    dq        = exp(omega_t dt / 2)                 (body-frame increment)
+    q_{t+1}   = q_t * dq                            (attitude, body -> world)
+    V_{t+1}   = D^T (V_t + a_t dt)                  (D = R(dq); D^T = R_{b_t}^{b_{t+1}})
+    omega_{t+1} = omega_t + alpha_t dt
+    x_{t+1}   = x_t + R(q_t) V_t dt                 (world position)
+
+`body_accelerations` is the exact inverse: integrating its output from the
+data's first state reproduces the data's V and omega to round-off.
+"""
+
+import numpy as np
+
+from gpquad.engine.kernels.quaternion import (
+    quat_mul,
+    rate_from_increment,
+    rate_increment,
+    renormalize,
+    rotate_back,
+    rotation_matrix,
+)
+from gpquad.engine.numba_config import njit
+
+
+@njit
+def integrate_step(quat, vel, rates, pos, acc, dt, mat):
+    """Advance one step in place.
+
+    quat (4,), vel (3,) m/s body, rates (3,) rad/s, pos (3,) m world,
+    acc (6,) = [a_x, a_y, a_z, p_dot, q_dot, r_dot]; mat is a (3, 3) work buffer.
+    """
+    rotation_matrix(quat[0], quat[1], quat[2], quat[3], mat)
+    for i in range(3):
+        pos[i] += (mat[i, 0] * vel[0] + mat[i, 1] * vel[1] + mat[i, 2] * vel[2]) * dt
+    d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
+    vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + acc[0] * dt,
+                                         vel[1] + acc[1] * dt, vel[2] + acc[2] * dt)
+    n0, n1, n2, n3 = quat_mul(quat[0], quat[1], quat[2], quat[3], d0, d1, d2, d3)
+    quat[0], quat[1], quat[2], quat[3] = renormalize(n0, n1, n2, n3)
+    for i in range(3):
+        rates[i] += acc[3 + i] * dt
+
+
+@njit
+def integrate(quat0, vel0, rates0, pos0, acc, dt):
+    """Integrate accelerations acc (N, 6) from an initial state.
+
+    Returns quat (N+1, 4), vel (N+1, 3), rates (N+1, 3), pos (N+1, 3).
+    """
+    n = acc.shape[0]
+    quat = np.empty((n + 1, 4))
+    vel = np.empty((n + 1, 3))
+    rates = np.empty((n + 1, 3))
+    pos = np.empty((n + 1, 3))
+    q = quat0.copy()
+    v = vel0.copy()
+    w = rates0.copy()
+    x = pos0.copy()
+    mat = np.empty((3, 3))
+    quat[0], vel[0], rates[0], pos[0] = q, v, w, x
+    for t in range(n):
+        integrate_step(q, v, w, x, acc[t], dt, mat)
+        quat[t + 1], vel[t + 1], rates[t + 1], pos[t + 1] = q, v, w, x
+    return quat, vel, rates, pos
+
+
+@njit
+def body_accelerations(vel, rates, dt):
+    """Discrete inverse of the integrator: accelerations (N-1, 6) from vel and rates (N, 3).
+
+    alpha_t = (omega_{t+1} - omega_t) / dt and a_t = (D_t V_{t+1} - V_t) / dt,
+    with D_t the increment rotation of omega_t.
+    """
+    n = vel.shape[0]
+    acc = np.empty((n - 1, 6))
+    mat = np.empty((3, 3))
+    for t in range(n - 1):
+        d0, d1, d2, d3 = rate_increment(rates[t, 0], rates[t, 1], rates[t, 2], dt)
+        rotation_matrix(d0, d1, d2, d3, mat)
+        for i in range(3):
+            rotated = (mat[i, 0] * vel[t + 1, 0] + mat[i, 1] * vel[t + 1, 1]
+                       + mat[i, 2] * vel[t + 1, 2])
+            acc[t, i] = (rotated - vel[t, i]) / dt
+            acc[t, 3 + i] = (rates[t + 1, i] - rates[t, i]) / dt
+    return acc
+
+
+@njit
+def rates_from_quaternions(quat, dt):
+    """Body rates (N-1, 3) rad/s such that q_{t+1} = q_t * exp(omega_t dt / 2) exactly."""
+    n = quat.shape[0]
+    out = np.empty((n - 1, 3))
+    for t in range(n - 1):
+        d0, d1, d2, d3 = quat_mul(
+            quat[t, 0], -quat[t, 1], -quat[t, 2], -quat[t, 3],
+            quat[t + 1, 0], quat[t + 1, 1], quat[t + 1, 2], quat[t + 1, 3],
+        )
+        out[t, 0], out[t, 1], out[t, 2] = rate_from_increment(d0, d1, d2, d3, dt)
+    return out
+
+
+@njit
+def world_to_body(quat, world):
+    """Rotate world vectors (N, 3) into the body frame with quaternions (N, 4)."""
+    n = quat.shape[0]
+    out = np.empty((n, 3))
+    mat = np.empty((3, 3))
+    for t in range(n):
+        rotation_matrix(quat[t, 0], quat[t, 1], quat[t, 2], quat[t, 3], mat)
+        for i in range(3):
+            out[t, i] = mat[0, i] * world[t, 0] + mat[1, i] * world[t, 1] + mat[2, i] * world[t, 2]
+    return out

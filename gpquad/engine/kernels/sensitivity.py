@@ -1,0 +1,213 @@
+"""Forward-mode sensitivities of the integrated target state w.r.t. a tree's constants.
+
+For a tree modelling target k flown as in gpquad.engine.kernels.fitness (the tree supplies
+acceleration k, the data the other five), `window_residuals` returns for every window
+and step the residual x_k(pred) - x_k(data) (the fitness's error before abs/square) and
+its Jacobian with respect to the constants of the tree (one column per CONST node, in
+prefix order), for a Gauss-Newton / Levenberg-Marquardt fit on the integrated error.
+
+The tree is evaluated with tangents: a constant leaf j carries the unit tangent e_j, a
+leaf that the integrator produces from the tree carries the current sensitivity of that
+state, every other leaf (data, inputs) carries zero; the operators apply the chain rule
+(protected division: zero derivative where the division is replaced by 1). The state
+sensitivity is then advanced through the integrator step:
+
+- linear targets (a_x, a_y, a_z): the body velocity's sensitivity S (3, n_c) follows
+  S <- D^T (S + e_k dt da/dtheta), the rotation taken from the data, exactly as the
+  velocity itself; leaves u, v, w read rows of S. This is the exact derivative.
+- angular targets: the target rate's sensitivity s follows s <- s + dt da/dtheta and the
+  target's rate leaf reads it; the other rates come from the data's accelerations and do not
+  depend on the constants. Euler-angle and velocity leaves (integrated from the rates) are
+  given zero tangent: exact for trees that read only rates, inputs and data states, a
+  first-order approximation otherwise (the attitude moves by dt * rate error).
+
+Flat arrays only: codes, values, size, delays as the fitness kernel; flight is FlightArrays.
+"""
+
+import numpy as np
+
+from gpquad.engine.kernels.fitness import STATE_LIMIT
+from gpquad.engine.kernels.quaternion import (
+    euler_phi,
+    euler_psi,
+    euler_theta,
+    quat_mul,
+    rate_increment,
+    renormalize,
+    rotate_back,
+)
+from gpquad.engine.kernels.tree_eval import STACK_ROWS
+from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
+
+#: Residual given to every remaining step of a window whose state diverged.
+DIVERGED_RESIDUAL = STATE_LIMIT
+
+
+@njit
+def eval_with_tangent(codes, values, size, slot_of, features, tangents, stack, dstack, grad):
+    """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)).
+
+    slot_of (size,): column of each CONST node (-1 otherwise); features (n_terminals,);
+    tangents (n_terminals, n_c): d(leaf)/d(constants); stack (STACK_ROWS,), dstack
+    (STACK_ROWS, n_c) are work buffers. Returns the value.
+    """
+    n_c = grad.shape[0]
+    sp = 0
+    for i in range(size - 1, -1, -1):
+        c = codes[i]
+        if c >= VAR_BASE:
+            k = c - VAR_BASE
+            stack[sp] = features[k]
+            for j in range(n_c):
+                dstack[sp, j] = tangents[k, j]
+            sp += 1
+        elif c == CONST:
+            stack[sp] = values[i]
+            for j in range(n_c):
+                dstack[sp, j] = 0.0
+            if slot_of[i] >= 0:
+                dstack[sp, slot_of[i]] = 1.0
+            sp += 1
+        else:
+            top = sp - 1  # left operand
+            res = sp - 2  # right operand, overwritten by the result
+            a = stack[top]
+            b = stack[res]
+            if c == ADD:
+                stack[res] = a + b
+                for j in range(n_c):
+                    dstack[res, j] = dstack[top, j] + dstack[res, j]
+            elif c == SUB:
+                stack[res] = a - b
+                for j in range(n_c):
+                    dstack[res, j] = dstack[top, j] - dstack[res, j]
+            elif c == MUL:
+                stack[res] = a * b
+                for j in range(n_c):
+                    dstack[res, j] = dstack[top, j] * b + a * dstack[res, j]
+            elif c == DIV:
+                if abs(b) < DIV_EPS:
+                    stack[res] = 1.0
+                    for j in range(n_c):
+                        dstack[res, j] = 0.0
+                else:
+                    q = a / b
+                    stack[res] = q
+                    for j in range(n_c):
+                        dstack[res, j] = (dstack[top, j] - q * dstack[res, j]) / b
+            sp -= 1
+    for j in range(n_c):
+        grad[j] = dstack[0, j]
+    return stack[0]
+
+
+@njit
+def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, res, jac):
+    """Residuals res (n_windows * n_steps,) and Jacobian jac (n_windows * n_steps, n_c).
+
+    Row w * n_steps + k is window w after k + 1 steps. n_c = number of CONST nodes. A window
+    whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL and zero
+    Jacobian rows from that step on. Returns the number of diverged windows.
+    """
+    quat_d, states, acc, inputs, rot, dt = flight
+    n_in = inputs.shape[1]
+    n_c = jac.shape[1]
+    linear = target < 3
+    slot_of = np.full(size, -1, dtype=np.int64)
+    j = 0
+    for i in range(size):
+        if codes[i] == CONST:
+            slot_of[i] = j
+            j += 1
+    features = np.zeros(9 + n_in)
+    tangents = np.zeros((9 + n_in, n_c))
+    stack = np.empty(STACK_ROWS)
+    dstack = np.empty((STACK_ROWS, n_c))
+    grad = np.empty(n_c)
+    sens = np.zeros((3, n_c))  # linear: d vel / d theta; angular: row 0 = d rate_k / d theta
+    tmp = np.empty((3, n_c))
+    vel = np.empty(3)
+    rates = np.empty(3)
+    b = np.empty(3)
+    n_diverged = 0
+    for w in range(starts.shape[0]):
+        s = starts[w]
+        q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
+        for i in range(3):
+            vel[i] = states[s, 3 + i]
+            rates[i] = states[s, 6 + i]
+        sens[:, :] = 0.0
+        alive = True
+        for k in range(n_steps):
+            row = w * n_steps + k
+            if not alive:
+                res[row] = DIVERGED_RESIDUAL
+                jac[row, :] = 0.0
+                continue
+            idx = s + k
+            for i in range(9 + n_in):
+                for c in range(n_c):
+                    tangents[i, c] = 0.0
+            if linear:
+                for i in (0, 1, 2, 6, 7, 8):
+                    features[i] = states[idx, i]
+                for i in range(3):
+                    features[3 + i] = vel[i]
+                    for c in range(n_c):
+                        tangents[3 + i, c] = sens[i, c]
+            else:
+                features[0] = euler_phi(q0, q1, q2, q3)
+                features[1] = euler_theta(q0, q1, q2, q3)
+                features[2] = euler_psi(q0, q1, q2, q3)
+                for i in range(3):
+                    features[3 + i] = vel[i]
+                    features[6 + i] = rates[i]
+                for c in range(n_c):
+                    tangents[6 + target - 3, c] = sens[0, c]
+            for jj in range(n_in):
+                features[9 + jj] = inputs[idx - delays[jj], jj]
+            pred = eval_with_tangent(codes, values, size, slot_of, features, tangents, stack,
+                                     dstack, grad)
+            if linear:
+                for i in range(3):
+                    b[i] = vel[i] + acc[idx, i] * dt
+                b[target] = vel[target] + pred * dt
+                for i in range(3):
+                    for c in range(n_c):
+                        tmp[i, c] = sens[i, c]
+                for c in range(n_c):
+                    tmp[target, c] += grad[c] * dt
+                for i in range(3):
+                    vel[i] = rot[idx, 3 * i] * b[0] + rot[idx, 3 * i + 1] * b[1] \
+                        + rot[idx, 3 * i + 2] * b[2]
+                    for c in range(n_c):
+                        sens[i, c] = rot[idx, 3 * i] * tmp[0, c] + rot[idx, 3 * i + 1] * tmp[1, c] \
+                            + rot[idx, 3 * i + 2] * tmp[2, c]
+                x = vel[target]
+                for c in range(n_c):
+                    jac[row, c] = sens[target, c]
+            else:
+                d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
+                vel[0], vel[1], vel[2] = rotate_back(
+                    d0, d1, d2, d3, vel[0] + acc[idx, 0] * dt, vel[1] + acc[idx, 1] * dt,
+                    vel[2] + acc[idx, 2] * dt)
+                n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
+                q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
+                for i in range(3):
+                    if i == target - 3:
+                        rates[i] += pred * dt
+                    else:
+                        rates[i] += acc[idx, 3 + i] * dt
+                for c in range(n_c):
+                    sens[0, c] += grad[c] * dt
+                    jac[row, c] = sens[0, c]
+                x = rates[target - 3]
+            if not abs(x) < STATE_LIMIT:
+                alive = False
+                n_diverged += 1
+                res[row] = DIVERGED_RESIDUAL
+                jac[row, :] = 0.0
+                continue
+            res[row] = x - states[idx + 1, 3 + target]
+    return n_diverged

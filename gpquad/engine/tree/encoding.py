@@ -1,0 +1,89 @@
+"""Flat prefix trees: the Tree record and structural helpers.
+
+A tree is a prefix list of integer codes (gpquad.engine.tree.operators) with a
+parallel list of constant values (used only where the code is CONST) and one
+delay per control input. Depth counts edges: a single leaf has depth 0, so a
+depth-5 tree has at most 63 nodes.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpquad.engine.tree.operators import CONST, N_OPERATORS, VAR_BASE
+
+
+def max_nodes(max_depth: int) -> int:
+    """Node capacity of a full binary tree of the given depth."""
+    return 2 ** (max_depth + 1) - 1
+
+
+@dataclass(frozen=True)
+class Tree:
+    """One model: prefix codes (int64), constants (float64) and input delays (int64, samples)."""
+
+    codes: np.ndarray
+    values: np.ndarray
+    delays: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(len(self.codes))
+
+    @property
+    def depth(self) -> int:
+        return tree_depth(self.codes)
+
+    @classmethod
+    def from_lists(cls, codes, values, delays) -> "Tree":
+        return cls(np.asarray(codes, dtype=np.int64), np.asarray(values, dtype=np.float64),
+                   np.asarray(delays, dtype=np.int64))
+
+    def padded(self, capacity: int):
+        """(codes, values) padded to `capacity` for the kernels' 2-D population arrays."""
+        codes = np.full(capacity, CONST, dtype=np.int64)
+        values = np.zeros(capacity)
+        codes[: self.size] = self.codes
+        values[: self.size] = self.values
+        return codes, values
+
+    def used_inputs(self) -> set[int]:
+        """Indices of the inputs that appear in the tree."""
+        return {int(c) - VAR_BASE - 9 for c in self.codes if c >= VAR_BASE + 9}
+
+
+def subtree_end(codes, start: int) -> int:
+    """Index one past the subtree rooted at `start`."""
+    need = 1
+    i = start
+    while need:
+        need += (2 if codes[i] < N_OPERATORS else 0) - 1
+        i += 1
+    return i
+
+
+def node_depths(codes) -> list[int]:
+    """Depth of every node of a prefix tree."""
+    depths = []
+    open_slots: list[int] = []  # depths of children still to be read
+    for i, c in enumerate(codes):
+        d = open_slots.pop() if i else 0
+        depths.append(d)
+        if c < N_OPERATORS:
+            open_slots.extend((d + 1, d + 1))
+    return depths
+
+
+def tree_depth(codes) -> int:
+    """Largest node depth."""
+    return max(node_depths(codes))
+
+
+def is_valid(codes) -> bool:
+    """True when `codes` is exactly one complete prefix tree."""
+    need = 1
+    for c in codes:
+        if need == 0:
+            return False
+        need += (2 if c < N_OPERATORS else 0) - 1
+    return need == 0

@@ -1,0 +1,190 @@
+"""Variation operators of the paper (section 2.2), with explicit randomness.
+
+Every function takes a numpy Generator or a RandomStream built on one; nothing
+here draws from global state.
+Trees are handled as Python lists while they change and as Tree records otherwise.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpquad.engine.tree.encoding import Tree, node_depths, subtree_end
+from gpquad.engine.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
+from gpquad.engine.tree.random_stream import RandomStream, as_stream
+
+
+@dataclass(frozen=True)
+class VariationParams:
+    """Mutation settings; defaults are the paper's."""
+
+    n_variables: int  # leaves that are variables: 9 states + inputs
+    n_inputs: int
+    #: Variable indices a new leaf may take (None: all). States a log does not measure are
+    #: left out, so that no equation is fitted to a log's placeholder values.
+    variables: tuple[int, ...] | None = None
+    max_depth: int = 5
+    p_leaf: float = 0.7
+    p_constant_leaf: float = 0.25
+    const_low: float = -5.0
+    const_high: float = 5.0
+    const_sigma: float = 0.1 ** 0.5  # variance 0.1
+    p_const_perturb: float = 0.5
+    p_delay: float = 0.1
+    max_delay: int = 5
+
+
+def random_leaf(rng: RandomStream, params: VariationParams):
+    """(code, value) of a new leaf: a U(low, high) constant or a uniform variable."""
+    if rng.random() < params.p_constant_leaf:
+        return CONST, rng.uniform(params.const_low, params.const_high)
+    if params.variables is None:
+        return VAR_BASE + rng.below(params.n_variables), 0.0
+    return VAR_BASE + params.variables[rng.below(len(params.variables))], 0.0
+
+
+def random_subtree(rng, params: VariationParams, max_depth: int):
+    """Grow a random subtree of depth <= max_depth; each node is a leaf with p = p_leaf."""
+    rng = as_stream(rng)
+    codes: list[int] = []
+    values: list[float] = []
+
+    def grow(depth_left: int):
+        if depth_left == 0 or rng.random() < params.p_leaf:
+            c, v = random_leaf(rng, params)
+            codes.append(c)
+            values.append(v)
+            return
+        codes.append(rng.below(N_OPERATORS))
+        values.append(0.0)
+        grow(depth_left - 1)
+        grow(depth_left - 1)
+
+    grow(max_depth)
+    return codes, values
+
+
+def random_tree(rng, params: VariationParams) -> Tree:
+    """A new model: a random tree whose root is an operator when depth allows, delays all 0."""
+    rng = as_stream(rng)
+    while True:
+        codes, values = random_subtree(rng, params, params.max_depth)
+        if len(codes) > 1 or params.max_depth == 0:
+            return Tree.from_lists(codes, values, np.zeros(params.n_inputs, dtype=np.int64))
+
+
+def macro_mutation(rng, codes, values, params: VariationParams):
+    """Replace one node by a new one, dropping or growing children as needed."""
+    rng = as_stream(rng)
+    i = rng.below(len(codes))
+    depth = node_depths(codes)[i]
+    end = subtree_end(codes, i)
+    was_op = codes[i] < N_OPERATORS
+    if depth < params.max_depth and rng.random() >= params.p_leaf:
+        new_op = rng.below(N_OPERATORS)
+        if was_op:
+            return codes[:i] + [new_op] + codes[i + 1:], values[:i] + [0.0] + values[i + 1:]
+        left_c, left_v = random_subtree(rng, params, params.max_depth - depth - 1)
+        right_c, right_v = random_subtree(rng, params, params.max_depth - depth - 1)
+        return (codes[:i] + [new_op] + left_c + right_c + codes[end:],
+                values[:i] + [0.0] + left_v + right_v + values[end:])
+    c, v = random_leaf(rng, params)
+    return codes[:i] + [c] + codes[end:], values[:i] + [v] + values[end:]
+
+
+def micro_mutation(rng, codes, values, params: VariationParams):
+    """Replace the subtree at one node by a newly grown subtree."""
+    rng = as_stream(rng)
+    i = rng.below(len(codes))
+    depth = node_depths(codes)[i]
+    end = subtree_end(codes, i)
+    new_c, new_v = random_subtree(rng, params, params.max_depth - depth)
+    return codes[:i] + new_c + codes[end:], values[:i] + new_v + values[end:]
+
+
+def perturb_constant(rng, codes, values, sigma: float) -> list[float]:
+    """Add N(0, sigma^2) to one randomly chosen constant (if there is one)."""
+    slots = [i for i, c in enumerate(codes) if c == CONST]
+    if not slots:
+        return values
+    rng = as_stream(rng)
+    values = list(values)
+    values[slots[rng.below(len(slots))]] += rng.normal(sigma)
+    return values
+
+
+def mutate(rng, tree: Tree, params: VariationParams) -> Tree:
+    """The paper's mutation: macro or micro (p = 0.5 each), then constant and delay mutation."""
+    rng = as_stream(rng)
+    codes = tree.codes.tolist()
+    values = tree.values.tolist()
+    if rng.random() < 0.5:
+        codes, values = macro_mutation(rng, codes, values, params)
+    else:
+        codes, values = micro_mutation(rng, codes, values, params)
+    if rng.random() < params.p_const_perturb:
+        values = perturb_constant(rng, codes, values, params.const_sigma)
+    delays = tree.delays.tolist()
+    for j in range(params.n_inputs):
+        if rng.random() < params.p_delay:
+            delays[j] = rng.below(params.max_delay + 1)
+    return Tree.from_lists(codes, values, delays)
+
+
+def constant_mutation(rng, tree: Tree, params: VariationParams) -> Tree:
+    """Gaussian perturbation of one constant only (re-convergence after simplification)."""
+    values = perturb_constant(rng, tree.codes.tolist(), tree.values.tolist(), params.const_sigma)
+    return Tree.from_lists(tree.codes, values, tree.delays)
+
+
+def replace_with_constant(rng, tree: Tree, constant_of) -> Tree:
+    """Bloat simplification: replace a random subtree by one constant.
+
+    constant_of(start, end) gives the constant for the subtree codes[start:end]
+    (for instance its mean value on the data).
+    """
+    codes = tree.codes.tolist()
+    values = tree.values.tolist()
+    i = as_stream(rng).below(len(codes))
+    end = subtree_end(codes, i)
+    value = float(constant_of(i, end))
+    return Tree.from_lists(codes[:i] + [CONST] + codes[end:], values[:i] + [value] + values[end:],
+                           tree.delays)
+
+
+def _apply(code: int, a: float, b: float) -> float:
+    if code == 0:
+        return a + b
+    if code == 1:
+        return a - b
+    if code == 2:
+        return a * b
+    return 1.0 if abs(b) < DIV_EPS else a / b
+
+
+def fold_constants(tree: Tree) -> Tree:
+    """Exact simplification: an operator whose two children are constants becomes a constant.
+
+    Uses the kernel's protected division, so the tree's values are unchanged.
+    """
+    codes = tree.codes.tolist()
+    values = tree.values.tolist()
+    changed = True
+    while changed:
+        changed = False
+        for i in range(len(codes) - 2):
+            if codes[i] < N_OPERATORS and codes[i + 1] == CONST and codes[i + 2] == CONST:
+                v = _apply(codes[i], values[i + 1], values[i + 2])
+                if not np.isfinite(v):
+                    continue
+                codes[i:i + 3] = [CONST]
+                values[i:i + 3] = [v]
+                changed = True
+                break
+    return Tree.from_lists(codes, values, tree.delays)
+
+
+__all__ = [
+    "VariationParams", "random_tree", "random_subtree", "mutate", "constant_mutation",
+    "macro_mutation", "micro_mutation", "replace_with_constant", "fold_constants",
+]

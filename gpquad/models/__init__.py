@@ -1,0 +1,1 @@
+"""Identified models: equations and their exports, analysis, rollout scoring."""

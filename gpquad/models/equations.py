@@ -1,0 +1,265 @@
+"""A discovered model: one equation per target, exportable and flyable.
+
+model.json contract:
+{"targets": {"p_dot": {"expr": "<sympy string>", "delays": {"u_R": 1, ...}, "error": ...,
+             "validation_error": ..., "latex": ..., "prefix": {...}}, ...},
+ "seed": ..., "config": {...}, "input_names": [...], "trim": {...}, "dt": ...}
+`expr` is in the model's own variables (trim-subtracted inputs); `expr_raw` writes
+the same equation in the log's raw inputs (u = u' + trim).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import sympy as sp
+
+from gpquad.data.flight import Flight
+from gpquad.engine.kernels.flight_arrays import FlightArrays
+from gpquad.engine.kernels.quaternion import quat_from_euler, rotation_matrix
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
+from gpquad.engine.tree.operators import CONST
+from gpquad.engine.variables import TARGET_LATEX, TARGET_NAMES, target_index
+from gpquad.errors import GpquadError
+from gpquad.study.store import read_json
+
+
+@dataclass
+class Equation:
+    """One discovered equation: its tree and errors (integrated-state MAE or MSE)."""
+
+    target: str
+    tree: Tree
+    input_names: tuple[str, ...]
+    error: float
+    validation_error: float
+    trim: dict[str, float] = field(default_factory=dict)
+    #: Simpler or other alternatives: the run's size/error Pareto front, as JSON records.
+    candidates: list[dict] = field(default_factory=list)
+
+    @property
+    def delays(self) -> dict[str, int]:
+        return {n: int(d) for n, d in zip(self.input_names, self.tree.delays, strict=True)}
+
+    def used_delays(self) -> dict[str, int]:
+        """Delays of the inputs that appear in the equation."""
+        used = self.tree.used_inputs()
+        return {n: d for i, (n, d) in enumerate(self.delays.items()) if i in used}
+
+    def sympy(self) -> sp.Expr:
+        """Simplified sympy expression in the model's variables."""
+        return simplify(to_sympy(self.tree, self.input_names))
+
+    def sympy_raw(self) -> sp.Expr:
+        """The same equation in the raw (not trim-subtracted) inputs."""
+        expr = self.sympy()
+        reps = {sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(n, 0.0)
+                for n in self.input_names if self.trim.get(n, 0.0)}
+        return simplify(expr.xreplace(reps)) if reps else expr
+
+    def latex(self, digits: int = 3, raw: bool = False) -> str:
+        lhs = TARGET_LATEX[target_index(self.target)]
+        expr = self.sympy_raw() if raw else self.sympy()
+        return f"{lhs} = {to_latex(expr, self.delays, self.input_names, digits)}"
+
+    def text(self, digits: int = 3, raw: bool = False) -> str:
+        """One line, delayed inputs written u_T(t-5), constants rounded for display."""
+        expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits)
+        shown = {sp.Symbol(n, real=True): sp.Symbol(f"{n}(t-{d})", real=True)
+                 for n, d in self.delays.items() if d}
+        return f"{self.target} = {expr.xreplace(shown)}"
+
+    def summary(self) -> dict:
+        """A short JSON record: expression, delays used, training error, size."""
+        return {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
+                "error": _json_number(self.error), "size": self.tree.size}
+
+    def to_dict(self) -> dict:
+        out = {
+            "expr": expr_string(self.sympy()),
+            "delays": self.delays,
+            "error": _json_number(self.error),
+            "validation_error": _json_number(self.validation_error),
+            "latex": self.latex(),
+            "size": self.tree.size,
+            "prefix": {"codes": self.tree.codes.tolist(), "values": self.tree.values.tolist()},
+        }
+        if any(self.trim.values()):
+            out["expr_raw"] = expr_string(self.sympy_raw())
+        if self.candidates:
+            out["candidates"] = self.candidates
+        return out
+
+    @classmethod
+    def from_dict(cls, target: str, d: dict, input_names, trim) -> Equation:
+        delays = [int(d["delays"].get(n, 0)) for n in input_names]
+        tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
+        def number(x):
+            return np.nan if x is None else float(x)
+
+        return cls(target, tree, tuple(input_names), number(d["error"]),
+                   number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])))
+
+
+@dataclass
+class DiscoveredModel:
+    """The equations of a run, with what is needed to reproduce and fly them."""
+
+    equations: dict[str, Equation]
+    input_names: tuple[str, ...]
+    trim: dict[str, float]
+    dt: float
+    seed: int
+    config: dict
+    interrupted: bool = False
+
+    def to_dict(self) -> dict:
+        out = {
+            "targets": {t: self.equations[t].to_dict() for t in TARGET_NAMES
+                        if t in self.equations},
+            "seed": self.seed,
+            "config": self.config,
+            "input_names": list(self.input_names),
+            "trim": self.trim,
+            "dt": self.dt,
+        }
+        if self.interrupted:
+            out["interrupted"] = True
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> DiscoveredModel:
+        names = tuple(d["input_names"])
+        eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
+               for t, e in d["targets"].items()}
+        return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
+                   d.get("config", {}), bool(d.get("interrupted", False)))
+
+    @classmethod
+    def load(cls, path) -> DiscoveredModel:
+        path = Path(path)
+        if path.is_dir():
+            path = path / "model.json"
+        d = read_json(path, "gpquad run folder", "give the folder a `gpquad run` wrote")
+        try:
+            return cls.from_dict(d)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
+                              "model.json a `gpquad run` wrote", source=str(path)) from None
+
+    def to_sympy(self) -> dict[str, sp.Expr]:
+        return {t: e.sympy() for t, e in self.equations.items()}
+
+    def latex(self, raw: bool = False) -> str:
+        rows = [self.equations[t].latex(raw=raw) for t in TARGET_NAMES if t in self.equations]
+        return "\\begin{align}\n" + " \\\\\n".join(r.replace(" = ", " &= ", 1) for r in rows) + \
+            "\n\\end{align}\n"
+
+    def markdown(self) -> str:
+        lines = ["| target | equation | train error | validation error |", "|---|---|---|---|"]
+        for t in TARGET_NAMES:
+            if t in self.equations:
+                e = self.equations[t]
+                lines.append(f"| {t} | ${e.latex()}$ | {e.error:.4g} | {e.validation_error:.4g} |")
+        return "\n".join(lines) + "\n"
+
+    def __str__(self) -> str:
+        return self.text()
+
+    def text(self, raw: bool = False) -> str:
+        """The equations, one per line (raw=True: in the untrimmed inputs)."""
+        return "\n".join(self.equations[t].text(raw=raw) for t in TARGET_NAMES
+                         if t in self.equations)
+
+    def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
+        """Fly the model from an initial state with given inputs (no data needed).
+
+        inputs: (N, n_inputs) control inputs, one row per sample of dt = self.dt; raw (the
+        trim is subtracted here) unless raw_inputs=False. initial_state: 9 values
+        [phi, theta, psi, u, v, w, p, q, r] (rad, m/s, rad/s), default all zero. Inputs
+        before the first row are held at the first row. Targets without an equation have
+        zero acceleration. Returns a Flight (NED/FRD, position from x = 0) that
+        gpquad.data.flight.write_flight_file can save.
+        """
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        n_in = len(self.input_names)
+        if inputs.shape[1] != n_in or len(inputs) < 2:
+            raise GpquadError(f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}",
+                              field="inputs")
+        state0 = np.zeros(9) if initial_state is None else np.asarray(initial_state, float)
+        if state0.shape != (9,) or not np.all(np.isfinite(state0)):
+            raise GpquadError("initial_state needs 9 finite values [phi, theta, psi, u, v, w, "
+                              "p, q, r]", field="initial_state")
+        trim = np.array([self.trim.get(n, 0.0) for n in self.input_names])
+        model_inputs = inputs - trim if raw_inputs else inputs
+        history = max([int(e.tree.delays.max()) for e in self.equations.values()] + [0])
+        n = len(inputs)
+        rows = history + n
+        padded = np.vstack([np.repeat(model_inputs[:1], history, axis=0), model_inputs])
+        quat = np.zeros((rows, 4))
+        quat[history] = quat_from_euler(*state0[:3])
+        states = np.zeros((rows, 9))
+        states[history] = state0
+        arrays = FlightArrays(quat=quat, states=states, acc=np.zeros((rows, 6)),
+                              inputs=np.ascontiguousarray(padded), rot=np.zeros((rows, 9)),
+                              dt=float(self.dt))
+        flown = self._rollout(arrays, np.array([history]), n - 1, None, missing_from_data=False)[0]
+        out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
+        world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
+        pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
+        return Flight(name="simulated model", t=np.arange(n) * self.dt, quat=out_quat,
+                      vel=flown[:, 3:6].copy(), rates=flown[:, 6:9].copy(), inputs=inputs,
+                      input_names=self.input_names, pos=pos,
+                      meta={"source": "gpquad.models.equations.DiscoveredModel.fly",
+                            "equations": {t: e.text() for t, e in self.equations.items()}})
+
+    def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
+        """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
+
+        Targets without an equation use the data's accelerations. input_noise, if given,
+        has shape (n_windows, n_steps, n_inputs) and is added to the recorded inputs.
+        """
+        return self._rollout(dataset.arrays, starts, n_steps, input_noise,
+                             missing_from_data=True)
+
+    def _rollout(self, arrays: FlightArrays, starts, n_steps: int, input_noise,
+                 missing_from_data: bool) -> np.ndarray:
+        """The rollout kernel over `arrays`; targets without an equation take the data's
+        acceleration (missing_from_data) or zero."""
+        from gpquad.engine.kernels.fitness import rollout
+
+        capacity = max(e.tree.size for e in self.equations.values())
+        n_in = len(self.input_names)
+        codes = np.zeros((6, capacity), dtype=np.int64)
+        values = np.zeros((6, capacity))
+        sizes = np.ones(6, dtype=np.int64)
+        delays = np.zeros((6, n_in), dtype=np.int64)
+        modelled = np.zeros(6, dtype=np.bool_)
+        codes[:, 0] = CONST  # a constant-0 placeholder where there is no equation
+        for t, eq in self.equations.items():
+            k = target_index(t)
+            codes[k, : eq.tree.size] = eq.tree.codes
+            values[k, : eq.tree.size] = eq.tree.values
+            sizes[k] = eq.tree.size
+            delays[k] = eq.tree.delays
+            modelled[k] = True
+        if not missing_from_data:
+            modelled[:] = True  # the constant-0 placeholders give zero acceleration
+        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
+        return rollout(codes, values, sizes, delays, modelled, arrays,
+                       np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
+
+
+def _rotate(quat, body_vector) -> np.ndarray:
+    """World vector of a body vector."""
+    mat = np.empty((3, 3))
+    rotation_matrix(*quat, mat)
+    return mat @ body_vector
+
+
+def _json_number(x: float):
+    """A float for JSON; NaN or inf (no validation data, a diverged model) becomes null."""
+    return float(x) if np.isfinite(x) else None

@@ -1,0 +1,192 @@
+"""Common scoring of identified models: RSE of integrated states on validation windows.
+
+Any model with `simulate(dataset, starts, n_steps) -> states (W, n_steps + 1, 9)` can be
+scored: GP run folders (`gpquad.models.equations.DiscoveredModel`) and baseline run folders
+(`gpquad.baselines.flyable`). Every model flies from the recorded state at each window
+start with the recorded inputs, over the same tiling of the dataset's validation ranges
+(`gpquad.engine.evolve.windows.tile`).
+
+    RSE_s = sum_{w,k} (s_hat[w,k] - s[w,k])^2 / sum_{w,k} (s[w,k] - mean(s))^2
+
+for each integrated state s in (u, v, w, p, q, r), over windows w and steps k = 1..n.
+RSE 0 is perfect; 1 is no better than predicting the validation mean.
+
+API: `validation_windows`, `rse`, `score_model`, `load_run`, `run_dataset`, `compare`,
+`format_table`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.data.dataset import Dataset, build_dataset
+from gpquad.engine.evolve.windows import tile
+from gpquad.errors import GpquadError
+from gpquad.study.store import read_json
+
+SCORED_STATES = ("u", "v", "w", "p", "q", "r")
+SCORED_INDEX = (3, 4, 5, 6, 7, 8)
+
+
+def validation_windows(dataset: Dataset, horizon_steps: int, max_delay: int = 0
+                       ) -> tuple[np.ndarray, int]:
+    """Non-overlapping window starts over the validation ranges, and their step count."""
+    starts, steps = tile(dataset.validation, horizon_steps, max_delay)
+    if steps == 0 or len(starts) == 0:
+        raise GpquadError(f"no validation range fits a window of {horizon_steps} steps; give "
+                          "more validation data or a shorter horizon", field="horizon")
+    return starts, steps
+
+
+def rse(pred: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """RSE per scored state (6,) of predicted vs recorded states (W, n + 1, 9).
+
+    Non-finite predictions (a diverged model) give RSE = inf for that state.
+    """
+    p = pred[:, 1:, SCORED_INDEX]
+    d = data[:, 1:, SCORED_INDEX]
+    den = ((d - d.reshape(-1, 6).mean(axis=0)) ** 2).reshape(-1, 6).sum(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        num = ((p - d) ** 2).reshape(-1, 6).sum(axis=0)
+    num = np.where(np.isfinite(num), num, np.inf)
+    return num / np.maximum(den, 1e-300)
+
+
+def model_view(dataset: Dataset, trim: dict[str, float]) -> Dataset:
+    """The dataset with its (raw) inputs shifted by a model's trim: inputs - trim."""
+    if not any(trim.values()):
+        return dataset
+    offsets = np.array([trim.get(n, 0.0) for n in dataset.input_names])
+    arrays = dataset.arrays._replace(inputs=np.ascontiguousarray(dataset.arrays.inputs - offsets))
+    return dataclasses.replace(dataset, arrays=arrays)
+
+
+@dataclass
+class Score:
+    rse: dict[str, float]
+    mean_rse: float
+    n_windows: int
+    steps: int
+
+
+def score_model(model, dataset: Dataset, horizon_steps: int, trim: dict | None = None,
+                max_delay: int = 0) -> Score:
+    """Fly `model` over the validation windows of `dataset` (raw inputs) and score it."""
+    missing = [n for n in model.input_names if n not in dataset.input_names]
+    if missing or tuple(model.input_names) != tuple(dataset.input_names):
+        raise GpquadError(f"the model reads inputs {list(model.input_names)} but the scoring data "
+                          f"has {list(dataset.input_names)}", field="compare")
+    starts, steps = validation_windows(dataset, horizon_steps, max_delay)
+    view = model_view(dataset, trim or {})
+    pred = model.simulate(view, starts, steps)
+    idx = starts[:, None] + np.arange(steps + 1)[None, :]
+    values = rse(pred, dataset.arrays.states[idx])
+    return Score(dict(zip(SCORED_STATES, map(float, values), strict=True)), float(np.mean(values)),
+                 len(starts), steps)
+
+
+@dataclass
+class RunInfo:
+    """A run folder seen by the scorer."""
+
+    path: Path
+    kind: str          # "gp" or the baseline method
+    model: object      # has simulate(dataset, starts, n_steps) and input_names
+    n_parameters: int
+    fit_time_s: float
+    trim: dict
+    max_delay: int
+
+
+def load_run(run_dir) -> RunInfo:
+    """Read a GP or baseline run folder (model.json + run.json)."""
+    run_dir = Path(run_dir)
+    fix = "give a folder written by `gpquad run` or `gpquad baseline`"
+    d = read_json(run_dir / "model.json", "run folder", fix)
+    info = read_json(run_dir / "run.json", "run folder", fix) \
+        if (run_dir / "run.json").is_file() else {}
+    if d.get("kind") == "baseline":
+        from gpquad.baselines.flyable import from_model_dict
+
+        model = from_model_dict(d)
+        return RunInfo(run_dir, d["method"], model, model.n_parameters,
+                       float(info.get("fit_time_s", np.nan)), {}, 0)
+    from gpquad.engine.tree.operators import CONST
+    from gpquad.models.equations import DiscoveredModel
+
+    model = DiscoveredModel.from_dict(d)
+    n_const = sum(int(np.sum(e.tree.codes[: e.tree.size] == CONST))
+                  for e in model.equations.values())
+    max_delay = max([int(np.max(e.tree.delays, initial=0)) for e in model.equations.values()]
+                    + [0])
+    return RunInfo(run_dir, "gp", model, n_const, float(info.get("wall_time_s", np.nan)),
+                   dict(model.trim), max_delay)
+
+
+def run_dataset(run_dir) -> Dataset:
+    """The scoring data of a run folder, with raw inputs (trim 'none').
+
+    Baseline folders list their flight files in run.json ("scoring_data"); GP folders are
+    re-read from config.json (re-flying the reference simulator if it has no files).
+    """
+    run_dir = Path(run_dir)
+    info_path = run_dir / "run.json"
+    info = read_json(info_path, "run folder",
+                     "give a folder written by `gpquad run` or `gpquad baseline`")
+    if "scoring_data" in info:
+        from gpquad.data.flight import read_flight_file
+
+        sd = info["scoring_data"]
+        flights = [read_flight_file(run_dir / f, tuple(sd["inputs"])) for f in sd["files"]]
+        return build_dataset(flights, validation_fraction=sd["validation_fraction"])
+    from gpquad.data.io import load_dataset
+    from gpquad.study.config import config_from_dict
+
+    table = dict(info["config"])
+    table["data"] = {**table["data"], "trim": "none"}
+    table.pop("base_dir", None)
+    return load_dataset(config_from_dict(table, str(info_path)))
+
+
+def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
+    """One row per run: RSE per state, mean RSE, parameter count and fit time.
+
+    All runs are scored on the validation windows of one dataset: that of `data_from`
+    (a run folder) or of the first run. A run whose inputs the data lacks gets an error row.
+    """
+    if not run_dirs:
+        raise GpquadError("give at least one run folder", field="compare")
+    dataset = run_dataset(data_from or run_dirs[0])
+    rows = []
+    for run_dir in run_dirs:
+        run = load_run(run_dir)
+        row = {"run": str(run.path), "kind": run.kind, "n_parameters": run.n_parameters,
+               "fit_time_s": run.fit_time_s}
+        try:
+            score = score_model(run.model, dataset, horizon_steps, run.trim, run.max_delay)
+        except GpquadError as exc:
+            row.update({f"rse_{s}": np.nan for s in SCORED_STATES}, mean_rse=np.nan,
+                       note=str(exc))
+        else:
+            row.update({f"rse_{s}": v for s, v in score.rse.items()}, mean_rse=score.mean_rse,
+                       windows=score.n_windows, steps=score.steps, note="")
+        rows.append(row)
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    """Markdown table of compare() rows."""
+    head = ["run", "kind"] + [f"RSE {s}" for s in SCORED_STATES] + ["mean RSE", "params",
+                                                                      "fit time s"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [Path(r["run"]).name, r["kind"]]
+        cells += [f"{r[f'rse_{s}']:.4g}" for s in SCORED_STATES]
+        cells += [f"{r['mean_rse']:.4g}", str(r["n_parameters"]), f"{r['fit_time_s']:.3g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    notes = [f"- {Path(r['run']).name}: {r['note']}" for r in rows if r.get("note")]
+    return "\n".join(lines + ([""] + notes if notes else [])) + "\n"

@@ -1,0 +1,1 @@
+"""Studies: configs, the run loop, run folders and checkpoints, sweeps, full models."""

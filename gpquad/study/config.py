@@ -1,0 +1,414 @@
+"""Experiment configuration: frozen dataclasses loaded from TOML.
+
+Unknown keys and wrong types are errors that name the file and the field.
+Defaults are the paper's numbers (coevolutionary-gp-rotorcraft, sections 2.2 and 3.2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
+from gpquad.errors import GpquadError
+from gpquad.study.config_names import validate_names
+from gpquad.study.config_tables import build_dataclass
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+FRAMES = ("NED/FRD", "ENU/FLU")
+METRICS = ("mae", "mse")
+LOCAL_SEARCHES = ("none", "delays", "delays+constants")
+CONSTANT_FITS = ("nelder-mead", "gauss-newton")
+FINAL_SELECTIONS = ("prune", "bic")
+
+#: The dominant terms of the paper's median model (Table 1), used by the reference simulator.
+MEDIAN_MODEL = {
+    "a_x": "10.0*theta - 0.6*u",
+    "a_y": "-9.2*phi - 0.6*v",
+    "a_z": "28.2*u_T(t-5) - w - 9.81",
+    "p_dot": "10.3*u_R(t-1) - 4.15*p",
+    "q_dot": "-9.8*u_P - 3.3*q",
+    "r_dot": "-7.8*u_Y(t-2) - 1.9*r",
+}
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Where the flight data comes from and how it is read."""
+
+    files: tuple[str, ...] = ()  # empty: fly the reference simulator
+    format: str = "generic"
+    frame: str = "NED/FRD"
+    # input names, or a level for log readers: "rates" | "torque" | "sticks" | "motors"
+    # (gpquad.data.levels); the default names take "rates" wherever a log has rate set-points
+    inputs: tuple[str, ...] | str = DEFAULT_INPUTS
+    columns: dict[str, str] = field(default_factory=dict)  # canonical name -> file column
+    trim: str = "none"  # none | mean | given
+    trim_values: dict[str, float] = field(default_factory=dict)
+    validation_fraction: float = 2000 / 13800  # paper: 11,800 train + 2,000 validation
+    # "fraction" (the last validation_fraction of every flight) or files held out whole
+    validation: tuple[str, ...] | str = "fraction"
+    # Log pipeline (formats px4-csv, ulog, betaflight, table; see gpquad.data.pipeline).
+    log_index: int = 0  # Betaflight: which log of a multi-log file (1-based); 0 = every log
+    resample_hz: float = 100.0  # common clock before filtering (paper: 100 Hz)
+    max_gap_s: float = 0.2  # a longer gap in any stream splits the flight there
+    segment: str = "auto"  # auto (armed and thrust) | armed | thrust | range | none
+    thrust_threshold: float = 0.2  # normalised collective thrust above which the craft flies
+    time_range: tuple[float, ...] = ()  # segment = "range": (start_s, stop_s) from log start
+    min_segment_s: float = 10.0  # shorter in-flight segments are dropped
+    filter_taps: int = 200  # zero-phase FIR low-pass length (paper: 200)
+    cutoff_hz: float = 5.0  # FIR cutoff (paper: 5 Hz); 0 = no filter
+    filter_inputs: bool = True  # filter the inputs too (anti-aliasing before downsampling)
+    downsample: int = 4  # paper: 100 Hz -> 25 Hz
+    rates_from: str = "quaternion"  # quaternion (exact discrete inverse) | log
+    check_steps: int = 750  # integration-check window (paper: 750 steps)
+    check_max_rse: float = 0.05  # integration check passes below this RSE (paper: 5 %)
+    check_before_run: bool = True  # refuse to start a run on a dataset that fails the check
+    # an attitude step this much larger than the gyro explains (deg per clock sample) is an
+    # estimator reset: the flight is split there (as at a change of a reset counter)
+    max_attitude_step_deg: float = 5.0
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Reference simulator: a known model flown by a pilot-like closed loop."""
+
+    seed: int = 0
+    rate_hz: float = 25.0
+    duration_s: float = 552.0  # 13,800 samples at 25 Hz, as in the paper
+    equations: dict[str, str] = field(default_factory=lambda: dict(MEDIAN_MODEL))
+    trim: dict[str, float] = field(default_factory=lambda: {"u_T": 9.81 / 28.2})
+    stick_sd: dict[str, float] = field(
+        default_factory=lambda: {"u_P": 0.08, "u_R": 0.08, "u_Y": 0.08, "u_T": 0.03})
+    stick_time_constant_s: float = 0.6
+    # Pilot feedback: input -> {state: gain}; keeps attitude and speed bounded.
+    pilot_gains: dict[str, dict[str, float]] = field(default_factory=lambda: {
+        "u_R": {"phi": -0.6, "v": 0.05},
+        "u_P": {"theta": 0.6, "u": 0.05},
+        "u_Y": {"psi": 0.15},
+    })
+    input_limit: float = 1.0
+    # Gaussian measurement noise on the recorded flight (not on the dynamics), SD per signal:
+    # "attitude" (rad, a random small rotation), "velocity" (m/s), "rates" (rad/s).
+    measurement_noise: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EvolutionConfig:
+    """Coevolution settings; defaults are the paper's."""
+
+    targets: tuple[str, ...] = TARGET_NAMES
+    iterations: int = 30
+    model_generations: int = 600
+    test_generations: int = 80
+    n_models: int = 14
+    n_tests: int = 5
+    suite_size: int = 6
+    window_steps: int = 750
+    max_depth: int = 5
+    p_leaf: float = 0.7
+    p_constant_leaf: float = 0.25
+    const_low: float = -5.0
+    const_high: float = 5.0
+    const_variance: float = 0.1
+    p_const_perturb: float = 0.5
+    p_delay: float = 0.1
+    max_delay: int = 5
+    metric: str = "mae"
+    simplify_generations: int = 50
+    simplify_tolerance: float = 0.0  # 0: keep a simplification only if better (paper 2.2);
+    # > 0 (extension): keep it if error <= (1 + tol) * before
+    test_offset_max: int = 375
+    # Not in the paper: a local search on every model after the model phase. "none" keeps
+    # the paper's method; "delays" tries every single-input delay change; "delays+constants"
+    # first runs Nelder-Mead on the constants (at most local_search_evals evaluations),
+    # then tries the delay changes, each with its constants re-fitted (evals / 5).
+    local_search: str = "none"
+    local_search_evals: int = 150
+    # Not in the paper: prune the final equation (subtrees -> constants, constants re-fitted)
+    # while its training error grows by less than prune_tolerance x the error of the best
+    # constant model (a parsimony threshold on the error scale); 0 = off.
+    prune_tolerance: float = 0.0
+    # Not in the paper: how local search and pruning re-fit constants. "nelder-mead" (at most
+    # local_search_evals evaluations) or "gauss-newton": Levenberg-Marquardt on the integrated
+    # error with forward-mode sensitivities (at most gradient_steps evaluations).
+    constant_fit: str = "nelder-mead"
+    gradient_steps: int = 20
+    # Not in the paper: how the final equation is chosen. "prune" = the best climber, pruned
+    # by prune_tolerance if > 0; "bic" = pruned while the training BIC of the integrated
+    # state does not grow, then the lowest validation BIC among it and the front's climbers.
+    final_selection: str = "prune"
+    # Not in the paper: after the local search, try adding c*x_i or c*x_i*x_j to the best
+    # climber (constants re-fitted); keep the best if the error drops by > term_min_gain.
+    term_search: bool = False
+    # Not in the paper: state or input names no equation may read (for example "psi": the
+    # heading, which the body-frame dynamics do not depend on and a model can overfit to).
+    exclude_leaves: tuple[str, ...] = ()
+    term_min_gain: float = 0.01
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Repeated runs and full-model assembly (`gpquad sweep`); defaults are the paper's
+    (section 3.2: 30 repetitions per equation, 30 full models, input noise SD = 10 %)."""
+
+    runs: int = 30  # repetitions of each equation's identification
+    full_models: int = 30  # full six-equation models assembled from the runs
+    selection: str = "validation"  # error that picks the best run: validation | train
+    assembly: str = "bootstrap"  # full model k: best of a resample of the runs | repetition k
+    input_noise: float = 0.1  # Gaussian input noise SD as a fraction of max |input|; 0 = off
+    window_s: float = 7.0  # prediction window of the figure (paper Figure 2), s
+    horizons_s: tuple[float, ...] = (1.0, 7.0, 30.0)  # RSE horizons of the metrics table, s
+    shared_fraction: float = 0.5  # a term is "shared" when more than this fraction of runs has it
+    divergence_factor: float = 10.0  # diverged: non-finite or |state| > factor * max |data|
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    dir: str = "results"
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole experiment."""
+
+    seed: int = 0
+    name: str = "experiment"
+    data: DataConfig = field(default_factory=DataConfig)
+    simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
+    evolution: EvolutionConfig = field(default_factory=EvolutionConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    sweep: SweepConfig = field(default_factory=SweepConfig)
+    # Folder that relative data paths are read from (set by load_config, not a TOML key).
+    base_dir: str = field(default=".", metadata={"toml": False})
+
+    def to_dict(self) -> dict:
+        out = dataclasses.asdict(self)
+        out.pop("base_dir")
+        return out
+
+    def data_paths(self) -> list[Path]:
+        return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
+
+
+def _check_probability(value: float, source: str, where: str):
+    if not 0.0 <= value <= 1.0:
+        raise GpquadError(f"must be a probability in [0, 1], got {value}", source=source,
+                          field=where)
+
+
+def validate(cfg: Config, source: str = "config") -> Config:
+    """Semantic checks that types alone cannot express."""
+    ev = cfg.evolution
+    for i, t in enumerate(ev.targets):
+        if t not in TARGET_NAMES:
+            raise GpquadError(f"unknown target '{t}'; choose from {list(TARGET_NAMES)}",
+                              source=source, field=f"evolution.targets[{i}]")
+    if not ev.targets:
+        raise GpquadError("at least one target is needed", source=source, field="evolution.targets")
+    for name in ("p_leaf", "p_constant_leaf", "p_const_perturb", "p_delay"):
+        _check_probability(getattr(ev, name), source, f"evolution.{name}")
+    positive = ("iterations", "n_models", "n_tests", "suite_size", "window_steps")
+    for name in positive:
+        if getattr(ev, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"evolution.{name}")
+    for name in ("model_generations", "test_generations", "simplify_generations", "max_delay",
+                 "test_offset_max"):
+        if getattr(ev, name) < 0:
+            raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
+    if not 1 <= ev.max_depth <= 8:
+        raise GpquadError("must be between 1 and 8", source=source, field="evolution.max_depth")
+    if ev.n_models < 2:
+        raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
+                          source=source, field="evolution.n_models")
+    if ev.local_search not in LOCAL_SEARCHES:
+        raise GpquadError(f"choose one of {list(LOCAL_SEARCHES)}", source=source,
+                          field="evolution.local_search")
+    if ev.constant_fit not in CONSTANT_FITS:
+        raise GpquadError(f"choose one of {list(CONSTANT_FITS)}", source=source,
+                          field="evolution.constant_fit")
+    if ev.final_selection not in FINAL_SELECTIONS:
+        raise GpquadError(f"choose one of {list(FINAL_SELECTIONS)}", source=source,
+                          field="evolution.final_selection")
+    known = set(STATE_NAMES) | set(cfg.data.inputs if not isinstance(cfg.data.inputs, str)
+                                   else DEFAULT_INPUTS)
+    for i, name in enumerate(ev.exclude_leaves):
+        if name not in known:
+            raise GpquadError(f"unknown variable '{name}'; choose from the states "
+                              f"{list(STATE_NAMES)} or the inputs", source=source,
+                              field=f"evolution.exclude_leaves[{i}]")
+    if not 0.0 <= ev.term_min_gain < 1.0:
+        raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
+    if ev.gradient_steps < 0:
+        raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
+    if ev.simplify_tolerance < 0 or ev.local_search_evals < 0 or ev.prune_tolerance < 0:
+        raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
+    if ev.metric not in METRICS:
+        raise GpquadError(f"choose one of {list(METRICS)}", source=source, field="evolution.metric")
+    if ev.const_low >= ev.const_high or ev.const_variance < 0:
+        raise GpquadError("need const_low < const_high and const_variance >= 0", source=source,
+                          field="evolution.const_low")
+    d = cfg.data
+    if d.frame not in FRAMES:
+        raise GpquadError(f"choose one of {list(FRAMES)}", source=source, field="data.frame")
+    if d.trim not in ("none", "mean", "given"):
+        raise GpquadError("choose none, mean or given", source=source, field="data.trim")
+    if not 0.0 <= d.validation_fraction < 1.0:
+        raise GpquadError("must be in [0, 1)", source=source, field="data.validation_fraction")
+    validate_pipeline(d, source)
+    validate_inputs(d, source)
+    s = cfg.simulator
+    unknown_eq = set(s.equations) - set(TARGET_NAMES)
+    if unknown_eq:
+        raise GpquadError(f"unknown targets {sorted(unknown_eq)}", source=source,
+                          field="simulator.equations")
+    bad_noise = set(s.measurement_noise) - {"attitude", "velocity", "rates"}
+    if bad_noise or any(v < 0 for v in s.measurement_noise.values()):
+        raise GpquadError("keys attitude, velocity, rates with SD >= 0", source=source,
+                          field="simulator.measurement_noise")
+    if s.rate_hz <= 0 or s.duration_s <= 0:
+        raise GpquadError("rate_hz and duration_s must be > 0", source=source,
+                          field="simulator.rate_hz")
+    if round(s.rate_hz * s.duration_s) < 2:
+        raise GpquadError(f"{s.duration_s} s at {s.rate_hz} Hz is less than two samples; fly "
+                          "for longer", source=source, field="simulator.duration_s")
+    validate_sweep(cfg.sweep, source)
+    validate_names(cfg, source)
+    return cfg
+
+
+def validate_sweep(sw: SweepConfig, source: str = "config") -> None:
+    """Checks of the [sweep] section."""
+    for name in ("runs", "full_models"):
+        if getattr(sw, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"sweep.{name}")
+    if sw.selection not in ("validation", "train"):
+        raise GpquadError("choose validation or train", source=source, field="sweep.selection")
+    if sw.assembly not in ("bootstrap", "repetition"):
+        raise GpquadError("choose bootstrap or repetition", source=source, field="sweep.assembly")
+    if sw.assembly == "repetition" and sw.full_models > sw.runs:
+        raise GpquadError(f"assembly = 'repetition' needs full_models <= runs ({sw.runs}); "
+                          "lower full_models or use assembly = 'bootstrap'", source=source,
+                          field="sweep.full_models")
+    if sw.input_noise < 0 or sw.window_s <= 0 or sw.divergence_factor <= 0:
+        raise GpquadError("input_noise must be >= 0, window_s and divergence_factor > 0",
+                          source=source, field="sweep.input_noise")
+    if not sw.horizons_s or min(sw.horizons_s) <= 0:
+        raise GpquadError("need positive horizons in s", source=source, field="sweep.horizons_s")
+    _check_probability(sw.shared_fraction, source, "sweep.shared_fraction")
+
+
+SEGMENT_MODES = ("auto", "armed", "thrust", "range", "none")
+
+
+def validate_pipeline(d: DataConfig, source: str = "config") -> None:
+    """Checks of the log-pipeline fields of [data]."""
+    if d.segment not in SEGMENT_MODES:
+        raise GpquadError(f"choose one of {list(SEGMENT_MODES)}", source=source,
+                          field="data.segment")
+    if d.segment == "range" and (len(d.time_range) != 2 or d.time_range[0] >= d.time_range[1]):
+        raise GpquadError("segment = 'range' needs time_range = [start_s, stop_s], start < stop",
+                          source=source, field="data.time_range")
+    for name in ("resample_hz", "max_gap_s", "check_max_rse"):
+        if getattr(d, name) <= 0:
+            raise GpquadError("must be > 0", source=source, field=f"data.{name}")
+    if d.cutoff_hz < 0 or d.cutoff_hz >= d.resample_hz / 2:
+        raise GpquadError(f"must be in [0, resample_hz / 2 = {d.resample_hz / 2}) (0 = no filter)",
+                          source=source, field="data.cutoff_hz")
+    for name in ("filter_taps", "downsample", "check_steps"):
+        if getattr(d, name) < 1:
+            raise GpquadError("must be >= 1", source=source, field=f"data.{name}")
+    if d.min_segment_s < 0 or d.log_index < 0:
+        raise GpquadError("must be >= 0", source=source, field="data.min_segment_s")
+    if d.rates_from not in ("quaternion", "log"):
+        raise GpquadError("choose quaternion or log", source=source, field="data.rates_from")
+
+
+def validate_inputs(d: DataConfig, source: str = "config") -> None:
+    """data.inputs: distinct names, or a level that a log reader resolves; data.validation."""
+    from gpquad.data.levels import LEVELS
+
+    if isinstance(d.inputs, str):
+        if d.inputs not in LEVELS:
+            raise GpquadError(f"choose a level {list(LEVELS)} or a list of input names",
+                              source=source, field="data.inputs")
+        if d.format in ("generic", "table") or not d.files:
+            raise GpquadError(f"input level '{d.inputs}' is chosen by a log reader (px4-csv, "
+                              "ulog, betaflight, ardupilot); the simulator, generic files and "
+                              "tables need a list of input names",
+                              source=source, field="data.inputs")
+    else:
+        if not d.inputs or len(set(d.inputs)) != len(d.inputs):
+            raise GpquadError("need distinct input names", source=source, field="data.inputs")
+        clash = set(d.inputs) & set(STATE_NAMES)
+        if clash:
+            raise GpquadError(f"input names {sorted(clash)} clash with state names",
+                              source=source, field="data.inputs")
+    if isinstance(d.validation, str) and d.validation != "fraction":
+        raise GpquadError("choose \"fraction\" or a list of flight files held out whole",
+                          source=source, field="data.validation")
+    if d.max_attitude_step_deg <= 0:
+        raise GpquadError("must be > 0", source=source, field="data.max_attitude_step_deg")
+
+
+def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:
+    cfg = build_dataclass(Config, table, source)
+    cfg = dataclasses.replace(cfg, base_dir=str(base_dir))
+    return validate(cfg, source)
+
+
+def load_config(path) -> Config:
+    """Read and validate a TOML experiment file."""
+    path = Path(path)
+    if not path.is_file():
+        raise GpquadError("config file not found", source=str(path))
+    try:
+        table = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
+    data = table.get("data")
+    if isinstance(data, dict) and data.get("files") == []:
+        raise GpquadError("files = [] lists no flight; list flight files, or remove the key to "
+                          "fly the reference simulator", source=str(path), field="data.files")
+    return config_from_dict(table, str(path), str(path.parent.resolve()))
+
+
+def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=None,
+             out=None) -> Config:
+    """Apply command-line overrides; file paths are taken relative to the current folder."""
+    data, ev, output = cfg.data, cfg.evolution, cfg.output
+    base_dir = cfg.base_dir
+    if files:
+        data = dataclasses.replace(data, files=tuple(str(Path(f).resolve()) for f in files))
+    if targets:
+        ev = dataclasses.replace(ev, targets=tuple(targets))
+    if iterations is not None:
+        ev = dataclasses.replace(ev, iterations=int(iterations))
+    if out is not None:
+        output = dataclasses.replace(output, dir=str(Path(out).resolve()))
+    new = dataclasses.replace(cfg, data=data, evolution=ev, output=output, base_dir=base_dir,
+                              seed=cfg.seed if seed is None else int(seed))
+    return validate(new, "command line")
+
+
+def folder_config_dict(cfg: Config) -> dict:
+    """What a run or sweep folder stores as config.json (with the data files' base folder)."""
+    return {**cfg.to_dict(), "base_dir": cfg.base_dir}
+
+
+def load_folder_config(folder) -> Config:
+    """The config a run or sweep folder was made with (its config.json)."""
+    from gpquad.study.store import read_json
+
+    path = Path(folder) / "config.json"
+    table = read_json(path, "gpquad run or sweep folder",
+                      "give a folder written by `gpquad run` or `gpquad sweep`")
+    base = table.pop("base_dir", ".")
+    return config_from_dict(table, str(path), base)

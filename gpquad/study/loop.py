@@ -1,0 +1,60 @@
+"""The one run loop, shared by `gpquad run` (gpquad.study.runner) and `gpquad sweep`.
+
+`evolve` iterates a coevolution state to its last iteration. After every iteration it
+appends the iteration's history rows (written and fsynced by HistoryWriter), then replaces
+the checkpoint atomically, recording the history's length, so that a run killed at any
+moment resumes from its last iteration with no duplicated history rows. `final_equation`
+picks the reported equation and its Pareto front the same way for both commands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from gpquad.data.dataset import Dataset
+from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.models.equations import Equation
+from gpquad.study import checkpoint
+from gpquad.study.store import HistoryWriter
+
+
+def evolve(co: Coevolution, state: RunState, iterations: int,
+           history: HistoryWriter | None = None, checkpoint_path: Path | None = None,
+           meta: dict | None = None,
+           on_iteration: Callable[[RunState], None] | None = None) -> RunState:
+    """Iterate `state` until `iterations`; history, checkpoint, then `on_iteration(state)`."""
+    while state.iteration < iterations:
+        co.iterate(state)
+        if history is not None:
+            history.write(state.history)
+        state.history.clear()
+        if checkpoint_path is not None:
+            checkpoint.save(checkpoint_path, state,
+                            {**(meta or {}), "history_bytes": history.size() if history else 0})
+        if on_iteration is not None:
+            on_iteration(state)
+    return state
+
+
+def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str
+                   ) -> Equation:
+    """The reported equation and the run's size/error Pareto front (training errors).
+
+    The equation is the final climbers' best, pruned or chosen by the configured
+    `final_selection`. With "prune", a front candidate that is no larger and has a lower
+    training error than the pruned equation replaces it: the reported equation is never
+    beaten by one the run already holds. With "bic" the choice is by BIC on the validation
+    windows, which can prefer a smaller equation over a more accurate one by design.
+    """
+    train_errors = co.training_errors(state)
+    tree, train, val = co.best(state, train_errors)
+    front = co.front(state, train_errors)
+    if co.cfg.final_selection != "bic":
+        better = [(t, e) for t, e in front if t.size <= tree.size and e < train]
+        if better:
+            tree, train = min(better, key=lambda te: (te[1], te[0].size))
+            val = float(co.tiled_errors([tree], dataset.validation)[0])
+    summaries = [Equation(target, t, dataset.input_names, err, float("nan"),
+                          dataset.trim).summary() for t, err in front]
+    return Equation(target, tree, dataset.input_names, train, val, dataset.trim, summaries)
