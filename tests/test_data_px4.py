@@ -2,6 +2,7 @@
 real flights in ../shared/data (skipped when absent), and every bad-input case."""
 
 import dataclasses
+import re
 import shutil
 import time
 from pathlib import Path
@@ -337,6 +338,12 @@ def test_flips_fail_the_check_at_the_paper_settings():
     assert not check.passed
     assert check.row("r").status == "FAIL" and check.row("r").rse > 0.05
     assert "r " in check.failure() and "limit 5%" in check.failure()
+    # and says why: the estimator's attitude and the gyro disagree, at flip rates
+    assert "attitude and the gyro disagree on" in check.failure()
+    assert re.search(r"gyro reaches 2\d\.\d rad/s", check.failure())
+    # a log whose gyro follows its attitude gets no such diagnosis
+    s250 = integration_check(read_px4_csv(S250, DataConfig()), 750, 0.05)
+    assert s250.passed and s250.diagnosis == ""
 
 
 @needs_shared

@@ -69,6 +69,7 @@ class CheckResult:
     n_windows: int
     threshold: float
     notes: list[str] = field(default_factory=list)
+    diagnosis: str = ""  # why the failing rates fail, when the log tells
 
     @property
     def passed(self) -> bool:
@@ -98,7 +99,8 @@ class CheckResult:
     def failure(self) -> str:
         bad = [f"{r.name} {r.rse:.1%}" for r in self.rows if r.status == "FAIL"]
         return (f"integration check failed: RSE over {self.window_steps}-step windows "
-                f"{', '.join(bad)} (limit {self.threshold:.0%})")
+                f"{', '.join(bad)} (limit {self.threshold:.0%})"
+                + (f"; {self.diagnosis}" if self.diagnosis else ""))
 
     def to_dict(self) -> dict:
         return {"window_steps": self.window_steps, "n_windows": self.n_windows,
@@ -197,7 +199,30 @@ def integration_check(flights: list[Flight], window_steps: int = 750, threshold:
                              text, status))
     if n_windows == 0:
         raise GpquadError("flights too short for the integration check", field="data.files")
-    return CheckResult(rows, window_steps, n_windows, threshold, notes)
+    failing = [j for j, r in enumerate(rows) if r.status == "FAIL" and r.name in "pqr"]
+    return CheckResult(rows, window_steps, n_windows, threshold, notes,
+                       diagnose_rates(flights, failing))
+
+
+def diagnose_rates(flights: list[Flight], failing: list[int]) -> str:
+    """Why body rates fail the check: the gyro's peak and its agreement with the estimator's
+    attitude (the rates the quaternion implies), from the unfiltered reference of a log."""
+    raws = [f.meta.get("reference_raw") for f in flights]
+    if not failing or any(r is None for r in raws):
+        return ""
+    gyro = np.vstack([r[:-1, 6:9] for r in raws])
+    implied = np.vstack([f.rates[:-1] for f in flights])  # from the quaternion
+    n = min(len(gyro), len(implied))
+    gyro, implied = gyro[:n], implied[:n]
+    corr = [float(np.corrcoef(gyro[:, j - 6], implied[:, j - 6])[0, 1]) for j in failing]
+    names = [STATE_NAMES[j] for j in failing]
+    peak = float(np.abs(gyro).max())
+    text = (f"the estimator's attitude and the gyro disagree on {', '.join(names)} "
+            f"(correlation of the quaternion's rates with the gyro "
+            f"{', '.join(f'{c:.2f}' for c in corr)})")
+    if peak > 10.0:
+        text += f"; the gyro reaches {peak:.1f} rad/s (flips?)"
+    return text
 
 
 def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: float = 0.05,
