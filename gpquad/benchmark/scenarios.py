@@ -21,6 +21,7 @@ held-out flights that every method is scored on (same trim as `fit`).
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -150,7 +151,7 @@ def _from_log(name: str, path: Path) -> Scenario:
 def _rotorpy(name: str, cache_dir: Path) -> Scenario:
     mode, noisy = ROTORPY[name]
     try:
-        from gpquad.benchmark import rotorpy_flights
+        rotorpy_flights = importlib.import_module("gpquad.benchmark.rotorpy_flights")
     except ImportError as exc:
         raise Skipped(f"{name}: gpquad.benchmark.rotorpy_flights unavailable ({exc})") from None
     try:

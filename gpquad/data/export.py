@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from gpquad.data.flight import Flight
-from gpquad.data.generic import SEGMENT
+from gpquad.data.generic import MEASURED_STATES, SEGMENT
 from gpquad.engine.kernels.integrator import body_accelerations
 from gpquad.engine.variables import (
     TARGET_NAMES,
@@ -37,6 +37,10 @@ def export_frame(flights: list[Flight]) -> pd.DataFrame:
         for j, name in enumerate(TARGET_NAMES):
             frame[name] = acc[:, j]
         frame[SEGMENT] = k
+        measured = f.meta.get("measured", {})
+        for state in MEASURED_STATES:  # 1 where the log measures the state, 0 where not
+            frame[f"measured_{state}"] = int(measured.get(state, "measured")
+                                             .startswith("measured"))
         parts.append(frame)
     return pd.concat(parts, ignore_index=True)
 

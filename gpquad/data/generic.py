@@ -14,6 +14,9 @@ from gpquad.engine.variables import BODY_VEL_COLUMNS, QUAT_COLUMNS, RATE_COLUMNS
 from gpquad.errors import GpquadError
 
 SEGMENT = "segment"
+#: States whose `measured_<state>` column (1/0) an export carries, so that a run on the export
+#: knows, as a run on the log does, which states the log does not measure.
+MEASURED_STATES = ("u", "v", "w", "p", "q", "r")
 
 
 def _exact_flight(df: pd.DataFrame, path: Path, seg, input_names, columns) -> Flight:
@@ -43,7 +46,18 @@ def _exact_flight(df: pd.DataFrame, path: Path, seg, input_names, columns) -> Fl
                   vel=np.ascontiguousarray(np.column_stack([col(c) for c in BODY_VEL_COLUMNS])),
                   rates=np.ascontiguousarray(np.column_stack([col(c) for c in RATE_COLUMNS])),
                   inputs=np.ascontiguousarray(np.column_stack([col(c) for c in input_names])),
-                  input_names=tuple(input_names), meta={"source": str(path), "dt": dt})
+                  input_names=tuple(input_names), meta={"source": str(path), "dt": dt,
+                                                        **_measured(df)})
+
+
+def _measured(df: pd.DataFrame) -> dict:
+    """{"measured": {...}} from an export's measured_<state> columns ({} without them)."""
+    flags = {s: df[f"measured_{s}"].iloc[0] for s in MEASURED_STATES
+             if f"measured_{s}" in df.columns and len(df)}
+    if not flags:
+        return {}
+    return {"measured": {s: "measured (export)" if int(v) else "not measured (export)"
+                         for s, v in flags.items()}}
 
 
 def read_generic(path, data) -> list[Flight]:
