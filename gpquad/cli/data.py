@@ -130,19 +130,11 @@ def quick_look(flights, path: Path, title: str) -> Path:
 def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -> int:
     """The `data check` command; returns 0 when the data is usable, raises GpquadError if not."""
     from gpquad.data.integration_check import integration_check, screen_segments
-    from gpquad.data.io import READERS
+    from gpquad.data.io import READERS, resolve_log
     from gpquad.data.pipeline import flights_from_log
-    from gpquad.study.config import Config, load_config, validate
 
-    path = Path(path)
-    if not path.exists():
-        raise GpquadError("no such file or folder", source=str(path))
-    cfg = load_config(config) if config else Config()
-    # A config's default format ("generic") does not override what the path says.
-    fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
-        or guess_format(path)
-    data = dataclasses.replace(cfg.data, format=fmt)
-    validate(dataclasses.replace(cfg, data=data), "command line")
+    path, cfg, data = resolve_log(path, fmt, config)
+    fmt = data.format
     out(f"gpquad data check: {path} (format {fmt})")
     if fmt in _LOG_READERS or fmt == "betaflight":
         flights, errors = [], []

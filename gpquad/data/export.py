@@ -11,7 +11,6 @@ run on the export sees bit-identical data and gives the same equations as a run 
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -61,17 +60,10 @@ def write_export(flights: list[Flight], path) -> Path:
 def export_flights(path, fmt: str | None, config=None) -> tuple[list[Flight], list[str]]:
     """Flights of a log after the pipeline and the per-segment integration check."""
     from gpquad.data.integration_check import screen_segments
-    from gpquad.data.io import READERS, guess_format
-    from gpquad.study.config import Config, load_config, validate
+    from gpquad.data.io import READERS, resolve_log
 
-    path = Path(path)
-    if not path.exists():
-        raise GpquadError("no such file or folder", source=str(path))
-    cfg = load_config(config) if config else Config()
-    fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
-        or guess_format(path)
-    data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
-    validate(dataclasses.replace(cfg, data=data), "command line")
+    path, cfg, data = resolve_log(path, fmt, config)
+    fmt = data.format
     if fmt not in READERS:
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
                           field="--format")

@@ -151,3 +151,22 @@ def load_dataset(cfg: Config) -> Dataset:
     if check is not None:
         dataset.integration_check = check.to_dict()
     return dataset
+
+
+def resolve_log(path, fmt: str | None, config=None):
+    """(path, config, data settings) for a command that reads one log (`data check`, `data
+    export`): the format from --format, else the config's (unless it is the default
+    "generic"), else the path; the settings are validated before any reading."""
+    import dataclasses
+
+    from gpquad.study.config import Config, load_config, validate
+
+    path = Path(path)
+    if not path.exists():
+        raise GpquadError("no such file or folder", source=str(path))
+    cfg = load_config(config) if config else Config()
+    fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
+        or guess_format(path)
+    data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
+    validate(dataclasses.replace(cfg, data=data), "command line")
+    return path, cfg, data
