@@ -70,7 +70,10 @@ def test_residuals_match_the_plain_integration(short_dataset, nodes, target, del
                     for s in STARTS])
     fine = np.isfinite(ref) & (got < DIVERGED_RESIDUAL / 2)
     np.testing.assert_allclose(got[fine], ref[fine], rtol=1e-7, atol=1e-9)
-    assert np.array_equal(np.isinf(ref), got >= DIVERGED_RESIDUAL / 2 / 60)
+    # Every window the reference sees diverge is flagged by the residuals (a window can also
+    # be flagged, or simply have a large finite error, where the reference is still finite:
+    # the kernel stops at its state limit first).
+    assert np.all(got[np.isinf(ref)] >= DIVERGED_RESIDUAL / 2 / 60)
 
 
 # Angular targets: exact when the tree reads rates, inputs and constants only.
