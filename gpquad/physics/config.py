@@ -14,6 +14,7 @@ from gpquad.errors import GpquadError
 from gpquad.physics.regression import METHODS
 from gpquad.physics.sensors import SensorNoise
 from gpquad.physics.truth import MANOEUVRES, PARAM_SETS
+from gpquad.study.config_tables import read_toml
 
 
 @dataclass(frozen=True)
@@ -126,18 +127,8 @@ def _check(cfg: PhysicsConfig, source: str) -> None:
 
 
 def load_physics_config(path) -> PhysicsConfig:
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
-
     path = Path(path)
-    if not path.is_file():
-        raise GpquadError("config file not found", source=str(path))
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
+    raw, _ = read_toml(path)
     top = {}
     for key, value in raw.items():
         if key in SECTIONS:

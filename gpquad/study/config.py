@@ -7,19 +7,13 @@ Defaults are the paper's numbers (coevolutionary-gp-rotorcraft, sections 2.2 and
 from __future__ import annotations
 
 import dataclasses
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.study.config_names import validate_names
-from gpquad.study.config_tables import build_dataclass
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from gpquad.study.config_tables import build_dataclass, read_toml
 
 FRAMES = ("NED/FRD", "ENU/FLU")
 METRICS = ("mae", "mse")
@@ -367,12 +361,7 @@ def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -
 def load_config(path) -> Config:
     """Read and validate a TOML experiment file."""
     path = Path(path)
-    if not path.is_file():
-        raise GpquadError("config file not found", source=str(path))
-    try:
-        table = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
+    table, _ = read_toml(path)
     data = table.get("data")
     if isinstance(data, dict) and data.get("files") == []:
         raise GpquadError("files = [] lists no flight; list flight files, or remove the key to "

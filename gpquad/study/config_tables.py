@@ -4,10 +4,28 @@ naming the file and the dotted field (used by every config of gpquad)."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 import types
 import typing
+from pathlib import Path
 
 from gpquad.errors import GpquadError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+def read_toml(path) -> tuple[dict, str]:
+    """(table, source) of a TOML file, with one-line errors for missing or invalid files."""
+    path = Path(path)
+    if not path.is_file():
+        raise GpquadError("config file not found", source=str(path))
+    try:
+        return tomllib.loads(path.read_text()), str(path)
+    except tomllib.TOMLDecodeError as exc:
+        raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
 
 
 def _type_name(tp) -> str:

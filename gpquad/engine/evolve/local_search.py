@@ -85,8 +85,7 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
     constant_of(tree, start, end) gives the constant that replaces tree.codes[start:end].
     Errors are measured on `starts` windows.
     """
-    from gpquad.engine.tree.encoding import subtree_end
-    from gpquad.engine.tree.variation import fold_constants
+    from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
 
     def error_of(tree: Tree) -> float:
         return float(ev.window_errors([tree], starts, n_steps=n_steps).mean())
@@ -103,17 +102,8 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
     changed = True
     while changed and model.size > 1:
         changed = False
-        codes = model.codes.tolist()
-        spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
-                        if codes[i] != CONST), reverse=True)
-        for _, i in spans:
-            end = subtree_end(codes, i)
-            value = constant_of(model, i, end)
-            candidate = fold_constants(Tree.from_lists(
-                codes[:i] + [CONST] + codes[end:],
-                model.values.tolist()[:i] + [value] + model.values.tolist()[end:], model.delays))
-            cand_err = error_of(candidate)
-            candidate, cand_err = refit(candidate, cand_err)
+        for candidate in subtrees_as_constants(model, constant_of):
+            candidate, cand_err = refit(candidate, error_of(candidate))
             if cand_err <= limit:
                 model, err, changed = candidate, cand_err, True
                 break

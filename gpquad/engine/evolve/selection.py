@@ -20,9 +20,8 @@ import math
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.tree.encoding import Tree, subtree_end
-from gpquad.engine.tree.operators import CONST
-from gpquad.engine.tree.variation import fold_constants
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
 
 #: MSE floor of the criterion (an exact model on noise-free data scores ~1e-20).
 MSE_FLOOR = 1e-18
@@ -53,15 +52,7 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     changed = True
     while changed and model.size > 1:
         changed = False
-        codes = model.codes.tolist()
-        spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
-                        if codes[i] != CONST), reverse=True)
-        for _, i in spans:
-            end = subtree_end(codes, i)
-            candidate = fold_constants(Tree.from_lists(
-                codes[:i] + [CONST] + codes[end:],
-                model.values.tolist()[:i] + [constant_of(model, i, end)]
-                + model.values.tolist()[end:], model.delays))
+        for candidate in subtrees_as_constants(model, constant_of):
             candidate, cand_err = fit(candidate, mse_of(ev_mse, candidate, starts, n_steps),
                                       starts, n_steps)
             cand_score = bic(cand_err, n, candidate.size)

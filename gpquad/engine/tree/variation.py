@@ -188,3 +188,17 @@ __all__ = [
     "VariationParams", "random_tree", "random_subtree", "mutate", "constant_mutation",
     "macro_mutation", "micro_mutation", "replace_with_constant", "fold_constants",
 ]
+
+
+def subtrees_as_constants(model: Tree, constant_of):
+    """Yield `model` with one non-constant subtree replaced by constant_of(model, start, end),
+    largest subtree first (the candidates of every pruning pass), each constant-folded."""
+    codes = model.codes.tolist()
+    values = model.values.tolist()
+    spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
+                    if codes[i] != CONST), reverse=True)
+    for _, i in spans:
+        end = subtree_end(codes, i)
+        yield fold_constants(Tree.from_lists(codes[:i] + [CONST] + codes[end:],
+                                             values[:i] + [constant_of(model, i, end)]
+                                             + values[end:], model.delays))
