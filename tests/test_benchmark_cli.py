@@ -116,10 +116,32 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     assert saved["benchmark"]["engine_config"].endswith("quickstart.toml")
 
 
-def test_folder_with_other_settings_is_refused(tiny, capsys):
+def test_folder_scored_at_other_horizons_is_refused(tiny, capsys):
     out = tiny / "run3"
     shutil.copytree(tiny / "run1", out)
-    with pytest.raises(Exception, match="other settings"):
+    with pytest.raises(Exception, match="other horizons"):
         run_benchmark([str(tiny / "tiny.toml")], ["zero"], 1, out, horizons_s=(1.0,),
                       engine_dir=tiny / "engine", log=lambda s: None)
     assert Path(out / "benchmark.json").is_file()
+
+
+def test_changed_engine_config_recomputes_only_gpquad_cells(tiny):
+    out = tiny / "run4"
+    shutil.copytree(tiny / "run1", out)
+    engine = tiny / "engine2"
+    engine.mkdir()
+    (engine / "quickstart.toml").write_text(TINY_ENGINE.replace("iterations = 1",
+                                                                "iterations = 2"))
+    before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
+    # peers only: gpquad's cells (made with the old engine) are not touched
+    run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
+                  engine_dir=engine, log=lambda s: None, with_gpquad=False)
+    assert {c: c.read_bytes() for c in before} == before
+    info = run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out,
+                         horizons_s=(1.0, 2.0), engine_dir=engine, log=lambda s: None)
+    changed = sorted(c.relative_to(out / "cells").as_posix() for c in before
+                     if c.read_bytes() != before[c])
+    assert changed == ["tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json"]
+    cell = json.loads((out / "cells/tiny/gpquad/seed1.json").read_text())
+    assert cell["settings"]["evolution"]["iterations"] == 2
+    assert cell["fingerprint"] == info["fingerprints"]["gpquad"]

@@ -26,12 +26,17 @@ def cell_path(out: Path, scenario: str, method: str, seed: int) -> Path:
     return Path(out) / "cells" / scenario / method / f"seed{seed}.json"
 
 
-def load_cell(path: Path) -> dict | None:
-    """A finished cell, or None (missing or damaged: it is recomputed)."""
+def load_cell(path: Path, fingerprint: str | None = None) -> dict | None:
+    """A finished cell, or None (missing, damaged, or made with other method settings than
+    `fingerprint`: it is recomputed)."""
     try:
-        return json.loads(Path(path).read_text())
+        cell = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
+    if not isinstance(cell, dict) or (fingerprint is not None
+                                      and cell.get("fingerprint") != fingerprint):
+        return None
+    return cell
 
 
 def _recovery_gpquad(model, scenario) -> dict | None:
@@ -73,7 +78,7 @@ def _fit(method: str, scenario, seed: int, engine_dir: Path):
 
 
 def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
-             horizons_s) -> dict:
+             horizons_s, fingerprint: str | None = None) -> dict:
     """Fit, fly and score one cell and save it atomically; returns the cell record."""
     cpu0 = time.process_time()
     with PeakRss() as memory:
@@ -83,6 +88,7 @@ def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
         trace = evaluate.figure_trace(simulate, scenario.test)
         score_time = time.perf_counter() - t0
     cell = {"scenario": scenario.name, "method": method, "seed": int(seed),
+            "fingerprint": fingerprint,
             "version": peers.package_version(method) if method != "gpquad" else None,
             "metrics": metrics, **record, "figure": trace,
             "cost": {"fit_time_s": fit_time, "score_time_s": score_time,

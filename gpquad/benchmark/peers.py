@@ -39,6 +39,9 @@ OPERON_SETTINGS = {"allowed_symbols": "add,sub,mul,div,constant,variable", "max_
                    "max_length": 30, "population_size": 100, "generations": 25,
                    "max_evaluations": 1_000_000, "optimizer": "lm", "optimizer_iterations": 5,
                    "n_threads": 1, "model_selection_criterion": "minimum_description_length"}
+#: Every setting a peer's result depends on (recorded with its cells; a change recomputes them).
+PEER_SETTINGS = {"zero": {}, "ols": {"features": "state + inputs lagged 0..MAX_LAG"},
+                 "sindy": SINDY_SETTINGS, "operon": OPERON_SETTINGS}
 
 
 @dataclasses.dataclass

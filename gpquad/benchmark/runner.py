@@ -2,8 +2,11 @@
 
 gpquad and operon are fitted with seeds 1..N; zero, OLS and SINDy are deterministic and
 are fitted once (seed 0). Each cell is saved when done (`gpquad.benchmark.cells`); a
-rerun with the same --out skips finished cells. Cells do not depend on each other or on
-the order they finish, so --jobs 2 gives the same table as --jobs 1.
+rerun with the same --out skips finished cells whose method settings are unchanged (each
+cell records a fingerprint of its method's settings: gpquad's engine config and version,
+a peer's settings and package version), so changing the engine config recomputes only
+gpquad's cells. Cells do not depend on each other or on the order they finish, so --jobs 2
+gives the same table as --jobs 1.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from pathlib import Path
 
 from gpquad.benchmark import cells, peers, scenarios
 from gpquad.benchmark.engine import engine_source
+from gpquad.benchmark.rollout import MAX_LAG
 from gpquad.errors import GpquadError
 from gpquad.study.store import provenance, write_json
 
@@ -40,35 +44,51 @@ def settings_fingerprint(settings: dict) -> str:
     return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def method_settings(method: str, engine_file: Path) -> dict:
+    """What a method's cells depend on besides the scenario and seed."""
+    if method == "gpquad":
+        from gpquad import __version__
+
+        return {"engine_text": engine_file.read_text(), "gpquad": __version__}
+    return {"settings": peers.PEER_SETTINGS.get(method), "version": peers.package_version(method),
+            "max_lag": MAX_LAG}
+
+
 def check_folder(out: Path, settings: dict) -> None:
-    """Refuse a folder that holds a benchmark with other settings (resume needs the same)."""
+    """Refuse a folder that holds a benchmark scored another way (resume needs the same
+    horizons); changed method settings only recompute that method's cells."""
     path = out / "benchmark.json"
     if path.is_file():
-        saved = json.loads(path.read_text()).get("fingerprint")
-        if saved != settings_fingerprint(settings):
-            raise GpquadError("the folder holds a benchmark with other settings (engine config, "
-                              "horizons or peer settings); give another --out", source=str(out),
-                              field="--out")
+        try:
+            saved = json.loads(path.read_text()).get("fingerprint")
+        except ValueError:
+            saved = None  # damaged: rewritten below; the cells carry their own fingerprints
+        if saved is not None and saved != settings_fingerprint(settings):
+            raise GpquadError("the folder holds a benchmark scored at other horizons; give "
+                              "another --out", source=str(out), field="--out")
 
 
 def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_s=(1, 7, 30),
-                  log=print, engine_dir=None) -> dict:
+                  log=print, engine_dir=None, with_gpquad: bool = True) -> dict:
     """Run every missing cell; returns the summary (also written to benchmark.json).
 
     engine_dir: folder holding recommended.toml or quickstart.toml (default the
-    repository's experiments/).
+    repository's experiments/). with_gpquad=False runs the peers only (gpquad's cells
+    already in the folder are still reported).
     """
     out = Path(out)
     engine_dir = Path(engine_dir) if engine_dir else scenarios.repo_root() / "experiments"
     engine_file = engine_source(engine_dir)
-    settings = {"horizons_s": list(horizons_s), "engine_config": engine_file.name,
-                "engine_text": engine_file.read_text(), "sindy": peers.SINDY_SETTINGS,
-                "operon": peers.OPERON_SETTINGS, "max_lag": 5}
+    settings = {"horizons_s": list(horizons_s)}
     check_folder(out, settings)
     use_peers, skipped_peers = available_peers(peer_names)
     for p, why in skipped_peers.items():
         log(f"gpquad benchmark: skipping peer {p}: {why}")
-    methods = ["gpquad"] + use_peers
+    methods = ["gpquad"] + use_peers  # reported
+    run_methods = methods if with_gpquad else use_peers
+    if not run_methods:
+        raise GpquadError("nothing to run: no gpquad and no installed peer", field="--peers")
+    fingerprints = {m: settings_fingerprint(method_settings(m, engine_file)) for m in methods}
     built, skipped = {}, {}
     for name in names:
         t0 = time.perf_counter()
@@ -85,15 +105,18 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         log(f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
             f"and {sc.test.summary()['validation_samples']} test samples "
             f"({time.perf_counter() - t0:.1f} s to build)")
-    todo = [(sc, m, s) for sc in built.values() for m in methods for s in seeds_of(m, n_seeds)]
+    todo = [(sc, m, s) for sc in built.values() for m in run_methods
+            for s in seeds_of(m, n_seeds)]
     missing = [(sc, m, s) for sc, m, s in todo
-               if cells.load_cell(cells.cell_path(out, sc.name, m, s)) is None]
+               if cells.load_cell(cells.cell_path(out, sc.name, m, s), fingerprints[m]) is None]
     from gpquad.benchmark.evaluate import figure_data
 
     info = {"fingerprint": settings_fingerprint(settings), "settings": settings,
             "scenarios": {n: sc.source for n, sc in built.items()},
             "skipped_scenarios": skipped, "skipped_peers": skipped_peers, "methods": methods,
             "seeds": {m: seeds_of(m, n_seeds) for m in methods},
+            "method_settings": {m: method_settings(m, engine_file) for m in methods},
+            "fingerprints": fingerprints,
             "peer_versions": {p: peers.package_version(p) for p in use_peers},
             "engine_config": str(engine_file),
             "figures": {n: figure_data(sc.test) for n, sc in built.items()}, **provenance()}
@@ -108,7 +131,8 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         order = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
         missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_dir, horizons_s)
+        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_dir, horizons_s,
+                                                     fingerprints[m])
                              for sc, m, s in missing):
             h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")
                       is not None), None)
@@ -128,7 +152,8 @@ def collect(out, info: dict) -> list[dict]:
     for name in info["scenarios"]:
         for m in info["methods"]:
             for s in info["seeds"][m]:
-                cell = cells.load_cell(cells.cell_path(Path(out), name, m, s))
+                cell = cells.load_cell(cells.cell_path(Path(out), name, m, s),
+                                       info["fingerprints"][m])
                 if cell is not None:
                     found.append(cell)
                 else:

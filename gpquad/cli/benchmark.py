@@ -1,7 +1,7 @@
 """`gpquad benchmark`: the head-to-head identification benchmark from the command line.
 
     gpquad benchmark [SCENARIO ... | CONFIG.toml] [--peers zero,ols,sindy,operon] [--seeds N]
-                     [--out DIR] [--jobs J] [--horizons 1,7,30]
+                     [--out DIR] [--jobs J] [--horizons 1,7,30] [--skip-gpquad]
 
 Writes DIR/benchmark.md (tables), DIR/results.json (aggregate, settings, provenance),
 DIR/figures/<scenario>.png and DIR/cells/ (one file per finished cell; rerunning the same
@@ -92,7 +92,8 @@ def _cmd_benchmark(args) -> int:
 
     names, peer_names, horizons = check_arguments(args)
     out = Path(args.out)
-    info = run_benchmark(names, peer_names, args.seeds, out, jobs=args.jobs, horizons_s=horizons)
+    info = run_benchmark(names, peer_names, args.seeds, out, jobs=args.jobs, horizons_s=horizons,
+                         with_gpquad=not args.skip_gpquad)
     write_report(out, info)
     print((out / "benchmark.md").read_text())
     print(f"tables: {out / 'benchmark.md'}; JSON: {out / 'results.json'}; figures: "
@@ -112,4 +113,6 @@ def register(subparsers) -> None:
                    help="benchmark folder (default results/benchmark); the same command resumes")
     b.add_argument("--jobs", type=int, default=1, help="parallel cells (default 1)")
     b.add_argument("--horizons", default="1,7,30", help="prediction horizons in s (default 1,7,30)")
+    b.add_argument("--skip-gpquad", action="store_true",
+                   help="run the peers only (gpquad's finished cells in --out are still reported)")
     b.set_defaults(func=_cmd_benchmark)
