@@ -144,4 +144,4 @@ def test_changed_engine_config_recomputes_only_gpquad_cells(tiny):
     assert changed == ["tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json"]
     cell = json.loads((out / "cells/tiny/gpquad/seed1.json").read_text())
     assert cell["settings"]["evolution"]["iterations"] == 2
-    assert cell["fingerprint"] == info["fingerprints"]["gpquad"]
+    assert cell["fingerprint"] == info["fingerprints"]["tiny"]["gpquad"]

@@ -1,6 +1,7 @@
 """Scenario registry: the rotorpy scenarios through a stand-in generator module, and their
 skip when the generator or rotorpy is missing."""
 
+import dataclasses
 import sys
 import types
 
@@ -14,35 +15,63 @@ from gpquad.study.config import SimulatorConfig
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
 
+#: vehicle b's roll loop differs from vehicle a's (the median model's 10.3 u_R(t-1) - 4.15 p)
+OTHER_ROLL = "20.0*u_R(t-1) - 8.0*p"
+
+
 def _fake_module(tmp_path, calls):
-    """Stands in for gpquad.benchmark.rotorpy_flights (written on another branch)."""
+    """Stands in for gpquad.benchmark.rotorpy_flights: two vehicles a and b whose roll
+    equations differ, 2 training, 1 validation and 1 test flight each."""
     def ensure_flights(mode, noisy, cache_dir):
         calls.append((mode, noisy, str(cache_dir)))
-        paths = {}
-        for part, seeds in (("train", (1, 2)), ("validation", (3,)), ("test", (4,))):
-            paths[part] = [write_flight_file(simulate(SimulatorConfig(duration_s=20.0, seed=s),
-                                                      INPUTS), tmp_path / f"{part}{s}.parquet")
-                           for s in seeds]
-        return {**paths, "input_names": INPUTS, "config": {"format": "generic", "trim": "mean",
+        paths, flights = {"train": [], "validation": [], "test": []}, []
+        for vehicle in ("a", "b"):
+            sim = SimulatorConfig(duration_s=20.0)
+            if vehicle == "b":
+                sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": OTHER_ROLL})
+            for part, seeds in (("train", (1, 2)), ("validation", (3,)), ("test", (4,))):
+                for s in seeds:
+                    path = write_flight_file(simulate(dataclasses.replace(sim, seed=s), INPUTS),
+                                             tmp_path / f"{vehicle}_{part}{s}.parquet")
+                    paths[part].append(path)
+                    flights.append({"path": str(path), "vehicle": vehicle, "role": part,
+                                    "seed": s})
+        return {**paths, "input_names": INPUTS, "config": {"format": "generic", "trim": "none",
                                                           "inputs": list(INPUTS)},
-                "vehicles": ["a", "b"], "seeds": [1, 2, 3, 4]}
+                "vehicles": ["a", "b"], "seeds": [1, 2, 3, 4], "flights": flights}
 
     module = types.ModuleType("gpquad.benchmark.rotorpy_flights")
     module.ensure_flights = ensure_flights
     return module
 
 
-def test_rotorpy_scenario_reads_the_generators_flights(tmp_path, monkeypatch):
+def test_rotorpy_scenario_is_fitted_per_vehicle(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setitem(sys.modules, "gpquad.benchmark.rotorpy_flights",
                         _fake_module(tmp_path, calls))
     sc = scenarios.build_scenario("rotorpy-angle-noisy", tmp_path / "cache")
     assert calls == [("angle", True, str(tmp_path / "cache"))]
     assert sc.name == "rotorpy-angle-noisy" and sc.truth is None
-    assert len(sc.fit.train) == 2 and len(sc.fit.validation) == 1
-    assert sc.fit.n_samples == 1500 and sc.test.n_samples == 500
-    assert sc.test.validation == [(0, 500)] and sc.test.trim == sc.fit.trim
-    assert sc.source["vehicles"] == ["a", "b"]
+    assert list(sc.groups) == ["a", "b"]
+    for g in sc.groups.values():
+        assert len(g.fit.train) == 2 and len(g.fit.validation) == 1
+        assert g.fit.n_samples == 1500 and g.test.n_samples == 500
+        assert g.test.validation == [(0, 500)] and g.test.trim == g.fit.trim
+    assert sc.test.n_samples == 1000 and sc.group_offsets() == {"a": (0, 500), "b": (500, 1000)}
+    assert sc.source["vehicles"] == ["a", "b"] and sc.source["fitted"] == "per vehicle"
+
+    # OLS holds both vehicles' equations exactly, so fitted per vehicle and flown on each
+    # vehicle's own test flight it reproduces the data; one model of both vehicles cannot.
+    from gpquad.benchmark import cells, evaluate
+
+    simulate, _, record = cells._fit("ols", sc, 0, tmp_path)
+    assert set(record["equations"]) == {"a", "b"}
+    per_vehicle = evaluate.score(simulate, sc.test, sc.measured, (2.0,))["2s"]
+    pooled = dataclasses.replace(sc, groups={})
+    simulate, _, _ = cells._fit("ols", pooled, 0, tmp_path)
+    one_model = evaluate.score(simulate, sc.test, sc.measured, (2.0,))["2s"]
+    assert per_vehicle["windows"] == one_model["windows"] > 0
+    assert per_vehicle["rse"]["p"] < 1e-12 < 1e-4 < one_model["rse"]["p"]
 
 
 def test_rotorpy_scenario_is_skipped_when_generator_or_rotorpy_missing(tmp_path, monkeypatch):

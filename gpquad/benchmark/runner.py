@@ -88,7 +88,6 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
     run_methods = methods if with_gpquad else use_peers
     if not run_methods:
         raise GpquadError("nothing to run: no gpquad and no installed peer", field="--peers")
-    fingerprints = {m: settings_fingerprint(method_settings(m, engine_file)) for m in methods}
     built, skipped = {}, {}
     for name in names:
         t0 = time.perf_counter()
@@ -105,10 +104,15 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         log(f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
             f"and {sc.test.summary()['validation_samples']} test samples "
             f"({time.perf_counter() - t0:.1f} s to build)")
+    # a cell is reused only if made with the same method settings on the same flights
+    fingerprints = {n: {m: settings_fingerprint({"method": method_settings(m, engine_file),
+                                                 "scenario": sc.source}) for m in methods}
+                    for n, sc in built.items()}
     todo = [(sc, m, s) for sc in built.values() for m in run_methods
             for s in seeds_of(m, n_seeds)]
     missing = [(sc, m, s) for sc, m, s in todo
-               if cells.load_cell(cells.cell_path(out, sc.name, m, s), fingerprints[m]) is None]
+               if cells.load_cell(cells.cell_path(out, sc.name, m, s),
+                                  fingerprints[sc.name][m]) is None]
     from gpquad.benchmark.evaluate import figure_data
 
     info = {"fingerprint": settings_fingerprint(settings), "settings": settings,
@@ -132,7 +136,7 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
         for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_dir, horizons_s,
-                                                     fingerprints[m])
+                                                     fingerprints[sc.name][m])
                              for sc, m, s in missing):
             h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")
                       is not None), None)
@@ -153,7 +157,7 @@ def collect(out, info: dict) -> list[dict]:
         for m in info["methods"]:
             for s in info["seeds"][m]:
                 cell = cells.load_cell(cells.cell_path(Path(out), name, m, s),
-                                       info["fingerprints"][m])
+                                       info["fingerprints"][name][m])
                 if cell is not None:
                     found.append(cell)
                 else:

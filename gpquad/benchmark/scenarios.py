@@ -11,7 +11,10 @@ held-out flights that every method is scored on (same trim as `fit`).
   noisy: simulator.measurement_noise = NOISE on every flight (training and test);
 - rotorpy-angle, rotorpy-angle-noisy, rotorpy-rate: flights made by
   `gpquad.benchmark.rotorpy_flights.ensure_flights` (cached), skipped when it or rotorpy
-  is missing;
+  is missing. Two vehicles whose attitude loops differ (crazyflie: kp_att 310, kd_att 57;
+  hummingbird: 544, 46.6), so no one lumped model describes both: each method is fitted
+  per vehicle (`groups`) and each vehicle's model flies that vehicle's test flight; the
+  scenario's RSE is taken over the windows of both;
 - px4-s250, px4-aquaquad: the real logs of `experiments/px4_*.toml`, first 70 % of the
   flight time trains, the last 30 % tests; only measured states are scored;
 - a user's TOML: its training part trains, its held-out part (data.validation_fraction of
@@ -55,6 +58,21 @@ class Scenario:
     truth: dict[str, str] | None          # known equations (raw inputs), or None
     measured: dict[str, bool]             # u..r: scored only when measured
     source: dict                          # what the flights are (recorded with results)
+    #: Sub-scenarios fitted separately (one per vehicle), or empty. When given, `test` is
+    #: their test flights concatenated in this order and `fit` their training flights
+    #: (for summaries only: every method is fitted per group).
+    groups: dict[str, Scenario] = dataclasses.field(default_factory=dict)
+
+    def group_offsets(self) -> dict[str, tuple[int, int]]:
+        """Sample range [a, b) of each group's test flights in `test`."""
+        out, a = {}, 0
+        for name, g in self.groups.items():
+            out[name] = (a, a + g.test.n_samples)
+            a += g.test.n_samples
+        if a != self.test.n_samples:
+            raise GpquadError(f"scenario {self.name}: the groups' test flights ({a} samples) "
+                              f"are not the scenario's ({self.test.n_samples})")
+        return out
 
 
 def repo_root() -> Path:
@@ -169,12 +187,23 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
         return flights
 
     data = made["config"]
-    return make_scenario(name, read(made["train"]), read(made["test"]),
-                         validation=read(made.get("validation", [])),
-                         trim=data.get("trim", "none"), trim_values=data.get("trim_values"),
-                         source={"kind": "rotorpy", "mode": mode, "noisy": noisy,
-                                 "vehicles": made.get("vehicles"), "seeds": made.get("seeds"),
-                                 "config": data})
+    trim = dict(trim=data.get("trim", "none"), trim_values=data.get("trim_values"))
+    groups, roles = {}, {"train": [], "test": [], "validation": []}
+    for vehicle in made["vehicles"]:
+        paths = {role: [f["path"] for f in made["flights"]
+                        if f["vehicle"] == vehicle and f["role"] == role] for role in roles}
+        flights = {role: read(ps) for role, ps in paths.items()}
+        for role in roles:
+            roles[role] += flights[role]
+        groups[vehicle] = make_scenario(f"{name}/{vehicle}", flights["train"], flights["test"],
+                                        validation=flights["validation"], **trim)
+    source = {"kind": "rotorpy", "mode": mode, "noisy": noisy, "vehicles": made.get("vehicles"),
+              "seeds": made.get("seeds"), "config": data, "fitted": "per vehicle"}
+    pooled = make_scenario(name, roles["train"], roles["test"], validation=roles["validation"],
+                           source=source, **trim)
+    pooled = dataclasses.replace(pooled, groups=groups)
+    pooled.group_offsets()  # the test flights are the groups' in order
+    return pooled
 
 
 def user_scenario(path: Path) -> Scenario:
