@@ -134,6 +134,16 @@ class EvolutionConfig:
     # error with forward-mode sensitivities (at most gradient_steps evaluations).
     constant_fit: str = "nelder-mead"
     gradient_steps: int = 20
+    # Not in the paper: a growing horizon for the gauss-newton fit. Each fit also starts at
+    # these short horizons (steps, ascending) on windows spread over the training data, each
+    # fit starting from the last, and then fits the full windows; the better of that and the
+    # direct fit is kept. A stiff loop such as 544 (u_R - phi) - 47 p sits in a narrow basin
+    # of the long-window error that short windows lead into. [] = off.
+    fit_horizons: tuple[int, ...] = ()
+    # Not in the paper: one climber starts from the linear model in every allowed variable,
+    # constants fitted through the integrator, cut to the terms that contribute most
+    # (gpquad.engine.evolve.linear_seed); needs constant_fit = "gauss-newton".
+    linear_seed: bool = False
     # Not in the paper: how the final equation is chosen. "prune" = the best climber, pruned
     # by prune_tolerance if > 0; "bic" = pruned while the training BIC of the integrated
     # state does not grow, then the lowest validation BIC among it and the front's climbers.
@@ -242,6 +252,13 @@ def validate(cfg: Config, source: str = "config") -> Config:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
     if ev.gradient_steps < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
+    if ev.linear_seed and ev.constant_fit != "gauss-newton":
+        raise GpquadError('the linear seed is fitted by Levenberg-Marquardt: set constant_fit = '
+                          '"gauss-newton"', source=source, field="evolution.linear_seed")
+    if any(not 1 <= h < ev.window_steps for h in ev.fit_horizons) or \
+            list(ev.fit_horizons) != sorted(set(ev.fit_horizons)):
+        raise GpquadError(f"give ascending step counts between 1 and window_steps - 1 "
+                          f"({ev.window_steps - 1})", source=source, field="evolution.fit_horizons")
     if ev.simplify_tolerance < 0 or ev.local_search_evals < 0 or ev.prune_tolerance < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
     if ev.metric not in METRICS:

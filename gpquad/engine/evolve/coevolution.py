@@ -15,7 +15,8 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.linear_seed import linear_seed, variable_scales
 from gpquad.engine.evolve.local_search import (
     fit_constants,
     improve_constants,
@@ -24,7 +25,7 @@ from gpquad.engine.evolve.local_search import (
 )
 from gpquad.engine.evolve.selection import mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.term_search import best_index, improve_terms
-from gpquad.engine.evolve.windows import WindowSpace, tile
+from gpquad.engine.evolve.windows import WindowSpace, spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -55,6 +56,14 @@ class RunState:
     inserted: int
     rng_state: dict
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
+
+#: Steps of data each short-horizon fit flies (fit_horizons): windows are spread over the
+#: training data up to this many steps in all.
+SHORT_WINDOW_STEPS = 4000
+#: Training windows (spread over the data) on which the linear seed is fitted.
+SEED_WINDOWS = 24
+#: Growing horizon (steps) of the linear seed's fit when fit_horizons is off.
+SEED_HORIZONS = (2, 10)
 
 
 def measured_variables(dataset, exclude=()) -> tuple[int, ...] | None:
@@ -101,18 +110,45 @@ class Coevolution:
                                        measured_variables(dataset, cfg.exclude_leaves))
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
+        self.short_windows = self.windows_for(cfg.fit_horizons)
 
     # ----------------------------------------------------------------- state
     def init_state(self, seed) -> RunState:
         rng = np.random.default_rng(seed)
         cfg = self.cfg
         models = [random_tree(rng, self.params) for _ in range(cfg.n_models)]
+        if cfg.linear_seed:
+            seeded = self.linear_seed()
+            if seeded is not None:
+                models[0] = seeded
         tests = self.space.random(rng, cfg.n_tests)
         suite = self.space.starts(self.space.random(rng, cfg.suite_size))
         errors = self.evaluator.mean_errors(models, suite)
         return RunState(target=self.target, iteration=0, models=models, model_errors=errors,
                         tests=tests, suite=suite, suite_age=np.arange(cfg.suite_size),
                         inserted=cfg.suite_size, rng_state=rng.bit_generator.state)
+
+    def windows_for(self, horizons) -> list[tuple[np.ndarray, int]]:
+        """Short windows spread over the training data for each horizon (steps)."""
+        return [(spread(tile(self.dataset.train, h, self.cfg.max_delay)[0],
+                        SHORT_WINDOW_STEPS // h), h) for h in horizons]
+
+    def linear_seed(self) -> Tree | None:
+        """The linear output-error climber (gpquad.engine.evolve.linear_seed), fitted with a
+        growing horizon (fit_horizons, or SEED_HORIZONS when that is off)."""
+        cfg = self.cfg
+        fit = self.gradient_fitter(cfg.gradient_steps,
+                                   short_windows=self.short_windows
+                                   or self.windows_for(SEED_HORIZONS))
+        starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
+        if fit is None or len(starts) == 0:
+            return None
+        variables = (self.params.variables if self.params.variables is not None
+                     else range(self.params.n_variables))
+        variables = list(variables)
+        scales = variable_scales(self.dataset.arrays, variables, self.dataset.train)
+        return linear_seed(variables, len(self.dataset.input_names), scales, fit,
+                           spread(starts, SEED_WINDOWS), steps, cfg.max_depth)
 
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:
@@ -192,18 +228,21 @@ class Coevolution:
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
 
-    def gradient_fitter(self, steps: int, ev: Evaluator | None = None):
+    def gradient_fitter(self, steps: int, ev: Evaluator | None = None, short_windows=None):
         """fit(tree, error, starts, n_steps) by Levenberg-Marquardt, or None (Nelder-Mead).
-        Errors are those of `ev` (default: the run's evaluator)."""
+        Errors are those of `ev` (default: the run's evaluator); short_windows (default the
+        fit_horizons' windows) start each fit on a growing horizon."""
         if self.cfg.constant_fit != "gauss-newton":
             return None
         ev = self.evaluator if ev is None else ev
+        short_windows = self.short_windows if short_windows is None else short_windows
 
         def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
             def error_of(t: Tree) -> float:
                 return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
 
-            return gauss_newton_constants(ev, tree, error, starts, n_steps, error_of, steps)
+            return continued_constants(ev, tree, error, starts, n_steps, error_of, steps,
+                                       short_windows)
 
         return fit
 

@@ -74,3 +74,34 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
     if fitted_error < error:
         return fitted, fitted_error
     return model, error
+
+
+def continued_constants(ev: Evaluator, model: Tree, error: float, starts, n_steps: int,
+                        error_of, max_steps: int, short_windows) -> tuple[Tree, float]:
+    """LM fit with a growing horizon: the direct fit on (starts, n_steps), and a fit that
+    starts on each (short_starts, short_steps) of `short_windows` in turn (each from the
+    last result) before the full windows; the better of the two (by error_of), if better
+    than `error`.
+
+    Short windows are nearly the one-step problem, whose error has one basin for a model
+    linear in its constants; the long-window error of a stiff closed loop has many, and a
+    fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
+    """
+    best, best_error = gauss_newton_constants(ev, model, error, starts, n_steps, error_of,
+                                              max_steps)
+    if not short_windows:
+        return best, best_error
+    tree = model
+    for short_starts, short_steps in short_windows:
+        tree, _ = gauss_newton_constants(ev, tree, np.inf, short_starts, short_steps,
+                                         lambda t: 0.0, max_steps)
+    if tree is model:
+        return best, best_error
+    tree_error = float(error_of(tree))
+    if not np.isfinite(tree_error):
+        return best, best_error
+    tree, tree_error = gauss_newton_constants(ev, tree, tree_error, starts, n_steps, error_of,
+                                              max_steps)
+    if tree_error < best_error:
+        return tree, tree_error
+    return best, best_error

@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.term_search import with_term_coefficients
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
 
@@ -49,6 +50,14 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     model = fold_constants(model)
     model, err = fit(model, mse_of(ev_mse, model, starts, n_steps), starts, n_steps)
     score = bic(err, n, model.size)
+    # One gain per additive term first: a coupling written p*r (truth 0.9 p r) next to a
+    # substitute term gets its coefficient, and the substitute's can fall to zero and go.
+    per_term = with_term_coefficients(model)
+    if per_term.size > model.size:
+        per_term, per_err = fit(per_term, mse_of(ev_mse, per_term, starts, n_steps), starts,
+                                n_steps)
+        if bic(per_err, n, per_term.size) < score:
+            model, score = per_term, bic(per_err, n, per_term.size)
     changed = True
     while changed and model.size > 1:
         changed = False

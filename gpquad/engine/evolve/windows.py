@@ -65,3 +65,13 @@ def tile(ranges, n_steps: int, max_delay: int) -> tuple[np.ndarray, int]:
             starts.append(s)
             s += steps
     return np.array(starts, dtype=np.int64), steps
+
+
+def spread(starts: np.ndarray, n: int) -> np.ndarray:
+    """At most n of `starts`, evenly spaced over them (deterministic), so that a fit on
+    short windows costs a bounded number of steps whatever the flight's length."""
+    starts = np.asarray(starts, dtype=np.int64)
+    if n >= len(starts):
+        return starts
+    pick = np.unique(np.linspace(0, len(starts) - 1, max(n, 1)).round().astype(np.int64))
+    return starts[pick]

@@ -1,0 +1,143 @@
+"""Stiff closed loops: the growing-horizon fit, the linear seed, and one gain per term.
+
+The truth here is an angle-mode attitude loop like rotorpy's hummingbird (kp_att 544,
+kd_att 46.6): p_dot = 544 (u_R - phi) - 46.6 p. Its long-window integrated error has
+several basins; Levenberg-Marquardt from small constants stops in a wrong one, which is
+what the growing horizon and the linear seed are for.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gpquad.data.dataset import build_dataset
+from gpquad.data.simulator import simulate
+from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import continued_constants, gauss_newton_constants
+from gpquad.engine.evolve.linear_seed import coefficients_of, linear_tree
+from gpquad.engine.evolve.term_search import term_candidates, with_term_coefficients
+from gpquad.engine.evolve.windows import spread, tile
+from gpquad.engine.kernels.tree_eval import eval_on_samples
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.engine.tree.random_stream import RandomStream
+from gpquad.engine.tree.variation import random_tree
+from gpquad.errors import GpquadError
+from gpquad.study.config import Config, EvolutionConfig, SimulatorConfig, validate
+
+INPUTS = ("u_P", "u_R", "u_Y", "u_T")
+STIFF = "544.0*(u_R - phi) - 46.6*p"
+
+
+@pytest.fixture(scope="module")
+def stiff_dataset():
+    sim = SimulatorConfig(duration_s=90.0, seed=3)
+    sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": STIFF})
+    return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")
+
+
+def _tree(text):
+    expr, delays = parse_equation(text, INPUTS)
+    return from_sympy(expr, delays, INPUTS)
+
+
+def test_growing_horizon_finds_the_stiff_loop_where_a_direct_fit_does_not(stiff_dataset):
+    ds = stiff_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    starts, _ = tile(ds.train, 250, 5)
+
+    def error_of(t):
+        return float(ev.mean_errors([t], starts)[0])
+
+    start = _tree("0.001*phi + 0.001*p + 0.001*u_R")
+    e0 = error_of(start)
+    direct, direct_error = gauss_newton_constants(ev, start, e0, starts, 250, error_of, 30)
+    short = [(spread(tile(ds.train, h, 5)[0], 4000 // h), h) for h in (2, 10)]
+    grown, grown_error = continued_constants(ev, start, e0, starts, 250, error_of, 30, short)
+    consts = sorted(grown.values[grown.codes == 4])
+    # the loop's constants (-544 phi, -46.6 p, +544 u_R) to 0.1 %, error at round-off
+    assert consts == pytest.approx([-544.0, -46.6, 544.0], rel=1e-3)
+    assert grown_error < 1e-12 * e0
+    # the direct fit from the same start stays in another basin (the reason for the option)
+    assert direct_error > 1e3 * grown_error
+    # without short windows the continued fit is the direct fit
+    same, same_error = continued_constants(ev, start, e0, starts, 250, error_of, 30, [])
+    assert same_error == direct_error and np.array_equal(same.values, direct.values)
+
+
+def test_linear_seed_starts_a_climber_in_the_loops_basin(stiff_dataset):
+    ev_cfg = EvolutionConfig(constant_fit="gauss-newton", linear_seed=True, window_steps=250,
+                             n_models=4, exclude_leaves=("psi",))
+    co = Coevolution(stiff_dataset, "p_dot", ev_cfg)
+    seeded = co.linear_seed()
+    assert seeded is not None and seeded.depth <= ev_cfg.max_depth
+    coefs, constant = coefficients_of(seeded)
+    names = [int(c) - 5 for c in seeded.codes if c >= 5]
+    by_name = dict(zip(names, coefs, strict=True))
+    # phi (0), p (6), u_R (9 + 1): the loop; every other variable's gain is small
+    assert by_name[0] == pytest.approx(-544.0, rel=0.01)
+    assert by_name[6] == pytest.approx(-46.6, rel=0.01)
+    assert by_name[10] == pytest.approx(544.0, rel=0.01)
+    assert 2 not in by_name  # psi is excluded
+    state = co.init_state(1)
+    assert state.models[0].codes.tolist() == seeded.codes.tolist()
+    # no random draw: the other climbers are those of a run without the seed
+    plain = Coevolution(stiff_dataset, "p_dot", dataclasses.replace(ev_cfg, linear_seed=False))
+    other = plain.init_state(1)
+    assert [m.codes.tolist() for m in state.models[1:]] == \
+        [m.codes.tolist() for m in other.models[1:]]
+
+
+def test_linear_tree_round_trips_its_coefficients():
+    tree = linear_tree([0, 6, 10], np.array([1.5, -2.0, 3.25]), 0.5, np.zeros(4, dtype=int))
+    coefs, constant = coefficients_of(tree)
+    assert coefs.tolist() == [1.5, -2.0, 3.25] and constant == 0.5
+    assert tree.depth == 3  # balanced: 4 summands need two levels of + (root depth 0)
+
+
+def _evaluate(tree: Tree, table: np.ndarray) -> np.ndarray:
+    samples = np.arange(5, len(table), dtype=np.int64)
+    return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
+                           np.ascontiguousarray(table[:, :9]),
+                           np.ascontiguousarray(table[:, 9:]), samples)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_one_gain_per_term_is_the_same_function(seed):
+    """with_term_coefficients only regroups and adds unit gains: same values everywhere."""
+    rng = np.random.default_rng(seed)
+    co_cfg = EvolutionConfig()
+    from gpquad.engine.evolve.coevolution import variation_params
+
+    tree = random_tree(RandomStream(rng), variation_params(co_cfg, 4))
+    table = rng.normal(size=(40, 13))
+    regrouped = with_term_coefficients(tree)
+    a, b = _evaluate(tree, table), _evaluate(regrouped, table)
+    finite = np.isfinite(a) & (np.abs(a) < 1e8)
+    assert np.allclose(a[finite], b[finite], rtol=1e-9, atol=1e-9)
+
+
+def test_term_candidates_give_every_term_a_gain():
+    model = _tree("p*r - 3.5*q - 8.5*u_P")
+    flat = with_term_coefficients(model)
+    assert flat.size == model.size + 2  # one gain, for p*r
+    candidates = term_candidates(flat, list(range(13)), 5)
+    # a candidate adding c q r keeps p*r's own gain, so LM can move each term separately
+    assert all(c.depth <= 5 for c in candidates) and len(candidates) > 100
+
+
+@pytest.mark.parametrize("fields, field", [
+    ({"linear_seed": True}, "evolution.linear_seed"),  # needs gauss-newton
+    ({"constant_fit": "gauss-newton", "fit_horizons": (10, 2)}, "evolution.fit_horizons"),
+    ({"constant_fit": "gauss-newton", "fit_horizons": (0,)}, "evolution.fit_horizons"),
+    ({"constant_fit": "gauss-newton", "fit_horizons": (750,)}, "evolution.fit_horizons"),
+])
+def test_bad_stiff_loop_settings_are_refused(fields, field):
+    cfg = Config(evolution=dataclasses.replace(EvolutionConfig(), **fields))
+    with pytest.raises(GpquadError, match=field.replace(".", r"\.")):
+        validate(cfg, "x.toml")
