@@ -112,6 +112,9 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     assert (out2 / "figures" / "tiny.png").is_file()
     text = (out2 / "benchmark.md").read_text()
     assert "| gpquad | 1s |" in text and "| zero | 2s |" in text
+    summary = text[text.index("## Summary"):text.index("## Per state")]
+    assert "| tiny | gpquad |" in summary and "| tiny | zero |" in summary
+    assert "/6, " in summary  # exact equations of each gpquad seed (the truth is known)
     saved = json.loads((out2 / "results.json").read_text())
     assert saved["benchmark"]["engine_config"].endswith("quickstart.toml")
 

@@ -42,13 +42,15 @@ def aggregate(cells: list[dict]) -> dict:
                     "diverged": int(sum(m["diverged"] for m in ms)),
                     "rse": {s: _stats([m["rse"].get(s) for m in ms]) for s in SCORED_STATES},
                     "mean": _stats([m["mean"] for m in ms])}
-            recovery = None
+            recovery, exact_per_seed = None, None
             if group[0].get("recovery"):
                 recovery = {t: int(sum(bool(c["recovery"].get(t)) for c in group))
                             for t in TARGET_NAMES if t in group[0]["recovery"]}
+                exact_per_seed = [int(sum(bool(v) for v in c["recovery"].values()))
+                                  for c in group]
             result[scenario][method] = {
                 "seeds": [c["seed"] for c in group], "version": group[0].get("version"),
-                "horizons": horizons, "recovery": recovery,
+                "horizons": horizons, "recovery": recovery, "exact_per_seed": exact_per_seed,
                 "cost": {"fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
                          "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
                          "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group])}}
@@ -62,6 +64,37 @@ def _num(stats, spread: bool = False) -> str:
     if spread and stats["n"] > 1 and stats["max"] > stats["min"]:
         text += f" ({stats['min']:.3g}-{stats['max']:.3g})"
     return text
+
+
+def summary_markdown(agg: dict) -> str:
+    """One compact table of every scenario: mean RSE per horizon (mean over seeds, min-max),
+    diverged windows, exact equations per seed (where the truth is known) and fit time."""
+    horizons = sorted({h for ms in agg.values() for m in ms.values() for h in m["horizons"]},
+                      key=lambda h: float(h.rstrip("s")))
+    head = ["scenario", "method"] + [f"mean RSE {h}" for h in horizons] + ["exact equations",
+                                                                            "fit s"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for scenario, methods in agg.items():
+        for method, m in methods.items():
+            cells = [scenario, method]
+            for h in horizons:
+                hm = m["horizons"].get(h)
+                if not hm or not hm["windows"]:
+                    cells.append("")
+                    continue
+                text = _num(hm["mean"], spread=True)
+                if hm["diverged"]:
+                    text += f" ({hm['diverged']}/{hm['windows'] * len(m['seeds'])} div.)"
+                cells.append(text)
+            rec = "-"
+            if m["recovery"]:
+                n = len(m["seeds"])
+                per_seed = m.get("exact_per_seed")
+                rec = (", ".join(f"{k}/6" for k in per_seed) if per_seed
+                       else f"{sum(m['recovery'].values())}/{6 * n}")
+            cells += [rec, _num(m["cost"]["fit_time_s"])]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def markdown(agg: dict) -> str:

@@ -81,6 +81,7 @@ def write_report(out: Path, info: dict) -> dict:
         head += [f"Skipped: {why}" for why in info["skipped_scenarios"].values()]
         head += [f"Skipped peer {p}: {why}" for p, why in info["skipped_peers"].items()]
         head.append("")
+    head += ["## Summary", "", table.summary_markdown(agg), "## Per state", ""]
     atomic_write_text(out / "benchmark.md", "\n".join(head) + table.markdown(agg))
     for name in info["scenarios"]:
         scenario_figure(name, figures["figures"].get(name), found, out)
