@@ -3,9 +3,9 @@
 gpquad and operon are fitted with seeds 1..N; zero, OLS and SINDy are deterministic and
 are fitted once (seed 0). Each cell is saved when done (`gpquad.benchmark.cells`); a
 rerun with the same --out skips finished cells whose method settings are unchanged (each
-cell records a fingerprint of its method's settings: gpquad's engine config and version,
-a peer's settings and package version), so changing the engine config recomputes only
-gpquad's cells. Cells do not depend on each other or on the order they finish, so --jobs 2
+cell records a fingerprint of its method's settings: gpquad's engine config, version and
+a hash of its sources, a peer's settings and package version), so changing the engine
+recomputes only gpquad's cells. Cells do not depend on each other or on the order they finish, so --jobs 2
 gives the same table as --jobs 1.
 """
 
@@ -44,12 +44,25 @@ def settings_fingerprint(settings: dict) -> str:
     return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def source_hash() -> str:
+    """Hash of the gpquad sources that a gpquad cell's result depends on (engine, data,
+    models, study): a changed engine recomputes gpquad's cells, whatever the version says."""
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for package in ("engine", "data", "models", "study"):
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
 def method_settings(method: str, engine_file: Path) -> dict:
     """What a method's cells depend on besides the scenario and seed."""
     if method == "gpquad":
         from gpquad import __version__
 
-        return {"engine_text": engine_file.read_text(), "gpquad": __version__}
+        return {"engine_text": engine_file.read_text(), "gpquad": __version__,
+                "sources": source_hash()}
     return {"settings": peers.PEER_SETTINGS.get(method), "version": peers.package_version(method),
             "max_lag": MAX_LAG}
 

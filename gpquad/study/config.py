@@ -146,7 +146,8 @@ class EvolutionConfig:
     linear_seed: bool = False
     # Not in the paper: how the final equation is chosen. "prune" = the best climber, pruned
     # by prune_tolerance if > 0; "bic" = pruned while the training BIC of the integrated
-    # state does not grow, then the lowest validation BIC among it and the front's climbers.
+    # state does not grow, then the lowest BIC (training and validation windows) among it and
+    # the front's climbers.
     final_selection: str = "prune"
     # Not in the paper: after the local search, try adding c*x_i or c*x_i*x_j to the best
     # climber (constants re-fitted); keep the best if the error drops by > term_min_gain.

@@ -7,7 +7,7 @@ q_dot = k (u_P - theta) - c q with k ~ 500) they settle in a wrong basin, such a
 starts instead from the linear model in every allowed variable, c0 + sum c_i x_i, with its
 constants fitted through the integrator (Levenberg-Marquardt, with the growing horizon of
 `fit_horizons` when set), cut to the `max_terms` terms that contribute most
-(|c_i| x SD of x_i) so that it fits the depth limit, and re-fitted. Evolution, term
+(|c_i| x SD of x_i) so that it leaves room under the depth limit for product terms, and re-fitted. Evolution, term
 insertion and the final BIC selection then add the nonlinear terms and remove what the data
 do not support. No random draw is made, so runs stay reproducible.
 """
@@ -51,8 +51,13 @@ def variable_scales(arrays, variables, ranges) -> np.ndarray:
     return table[:, list(variables)].std(axis=0)
 
 
+#: Terms the seed keeps: 7 and a constant are a balanced sum three + deep, which leaves
+#: room (at depth 5) for product terms such as c q r that term insertion adds.
+MAX_TERMS = 7
+
+
 def linear_seed(variables, n_inputs: int, scales: np.ndarray, fit, starts, n_steps: int,
-                max_depth: int) -> Tree | None:
+                max_depth: int, max_terms: int = MAX_TERMS) -> Tree | None:
     """The fitted linear climber, or None when no fit is finite.
 
     fit(tree, error, starts, n_steps) -> (tree, error) fits all constants (accepting any
@@ -66,7 +71,7 @@ def linear_seed(variables, n_inputs: int, scales: np.ndarray, fit, starts, n_ste
         return None
     coefs, constant = coefficients_of(full)
     order = np.argsort(-np.abs(coefs) * scales, kind="stable")
-    keep = len(variables)
+    keep = min(len(variables), max_terms)
     while keep > 1 and tree_depth(linear_tree(variables[:keep], coefs[:keep], 0.0,
                                               delays).codes) > max_depth:
         keep -= 1

@@ -42,8 +42,8 @@ def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
     return float(ev_mse.window_errors([tree], starts, n_steps=n_steps).mean())
 
 
-def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit
-                 ) -> Tree:
+def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit,
+                 regain_fit=None) -> Tree:
     """Replace subtrees by constants (largest first, constants re-fitted by
     fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow."""
     n = len(starts) * n_steps
@@ -54,8 +54,8 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     # substitute term gets its coefficient, and the substitute's can fall to zero and go.
     per_term = with_term_coefficients(model)
     if per_term.size > model.size:
-        per_term, per_err = fit(per_term, mse_of(ev_mse, per_term, starts, n_steps), starts,
-                                n_steps)
+        per_term, per_err = (regain_fit or fit)(per_term, mse_of(ev_mse, per_term, starts,
+                                                                 n_steps), starts, n_steps)
         if bic(per_err, n, per_term.size) < score:
             model, score = per_term, bic(per_err, n, per_term.size)
     changed = True

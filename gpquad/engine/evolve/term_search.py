@@ -14,6 +14,7 @@ import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.linear_seed import balanced_sum
+from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
 
@@ -66,9 +67,26 @@ def gained_terms(model: Tree) -> list[list[tuple[int, float]]]:
     return terms
 
 
-def term_candidates(model: Tree, variables, max_depth: int) -> list[Tree]:
+def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
+    """The model with new gains and no new term: c * model (c starts at 1: a structure
+    found without its gain, such as u_Y - r for a rate loop 16 (u_Y - r), gets one), and one
+    gain per additive term (p*r written without its 0.9 gets a coefficient)."""
+    out = []
+    scaled = [MUL, CONST] + model.codes.tolist()
+    if tree_depth(scaled) <= max_depth:
+        out.append(Tree.from_lists(scaled, [0.0, 1.0] + model.values.tolist(), model.delays))
+    per_term = with_term_coefficients(model)
+    if tree_depth(per_term.codes) <= max_depth and per_term.size > model.size:
+        out.append(per_term)
+    return out
+
+
+def term_candidates(model: Tree, variables, max_depth: int, contributions=None) -> list[Tree]:
     """1 * model, and model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every
-    allowed variable (an int n: the first n) and pair, within max_depth."""
+    allowed variable (an int n: the first n) and pair, within max_depth. A model too deep
+    to take a new term makes room: with `contributions` (one per additive term of
+    gained_terms(model)), its least contributing terms are dropped until the new one fits,
+    so that a substitute can be exchanged for the right term."""
     variables = list(range(variables)) if isinstance(variables, int) else list(variables)
 
     def term(*names):
@@ -82,22 +100,18 @@ def term_candidates(model: Tree, variables, max_depth: int) -> list[Tree]:
     # Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error only
     # with both of its terms, so one-term insertion alone never finds it.
     additions += [[term(i), term(j)] for k, i in enumerate(variables) for j in variables[k + 1:]]
-    out = []
-    # The whole model scaled, c * model (c starts at 1): a structure found without its gain,
-    # such as u_Y - r for a rate loop 16 (u_Y - r), gets one.
-    scaled = [MUL, CONST] + model.codes.tolist()
-    if tree_depth(scaled) <= max_depth:
-        out.append(Tree.from_lists(scaled, [0.0, 1.0] + model.values.tolist(), model.delays))
-    # Every candidate is a balanced sum of the model's terms, each with its own gain, and the
-    # new terms: p*r written without its 0.9 gets a coefficient, and a substitute term
-    # (q*u_Y standing in for a missing q*r) can go to zero when the right term comes in.
+    out = regain_candidates(model, max_depth)
     base = gained_terms(model)
-    per_term = with_term_coefficients(model)
-    if tree_depth(per_term.codes) <= max_depth and per_term.size > model.size:
-        out.append(per_term)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
+    order = (np.argsort(contributions, kind="stable") if contributions is not None
+             else np.zeros(0, dtype=np.int64))
     for new in additions:
         prefix = balanced_sum(base + new)
+        dropped = 0
+        while tree_depth([c for c, _ in prefix]) > max_depth and dropped < len(order) - 1:
+            dropped += 1  # exchange the least contributing terms for the new ones
+            keep = sorted(order[dropped:].tolist())
+            prefix = balanced_sum([base[k] for k in keep] + new)
         if tree_depth([c for c, _ in prefix]) > max_depth:  # the model as it is, plus the terms
             prefix = head + (new[0] if len(new) == 1 else [(ADD, 0.0)] + new[0] + new[1])
         codes = [c for c, _ in prefix]
@@ -107,21 +121,41 @@ def term_candidates(model: Tree, variables, max_depth: int) -> list[Tree]:
 
 
 def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variables: int,
-                  max_depth: int, min_gain: float) -> tuple[Tree, float]:
+                  max_depth: int, min_gain: float, regain_fit=None) -> tuple[Tree, float]:
     """Best single-term insertion (constants fitted by fit(tree, error, starts, n_steps));
-    kept if its error < (1 - min_gain) * error."""
-    candidates = term_candidates(model, n_variables, max_depth)
+    kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
+    candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
+    sits in another basin of the long-window error, which a growing horizon leaves."""
+    n_regain = len(regain_candidates(model, max_depth))
+    candidates = term_candidates(model, n_variables, max_depth,
+                                 term_contributions(ev, model, suite))
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)
     best, best_error = model, error * (1.0 - min_gain)
-    for tree, err in zip(candidates, errors, strict=True):
-        fitted, fitted_error = fit(tree, float(err), suite, ev.n_steps)
+    for k, (tree, err) in enumerate(zip(candidates, errors, strict=True)):
+        use = regain_fit if (regain_fit is not None and k < n_regain) else fit
+        fitted, fitted_error = use(tree, float(err), suite, ev.n_steps)
         if fitted_error < best_error:
             best, best_error = fitted, fitted_error
     if best is model:
         return model, error
     return best, float(best_error)
+
+
+def term_contributions(ev: Evaluator, model: Tree, suite) -> np.ndarray:
+    """RMS value of each additive term of gained_terms(model) over the suite's samples."""
+    samples = np.ascontiguousarray((np.asarray(suite)[:, None]
+                                    + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64)
+    arrays = ev.arrays
+    out = []
+    for term in gained_terms(model):
+        tree = Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
+        values = eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
+                                 arrays.states, arrays.inputs, samples)
+        out.append(float(np.sqrt(np.mean(values ** 2))) if np.all(np.isfinite(values))
+                   else np.inf)
+    return np.array(out)
 
 
 def best_index(errors: np.ndarray) -> int:
