@@ -22,7 +22,8 @@ from gpquad.study.config import load_config, override
 from gpquad.study.runner import run_experiment
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
-NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True}
+NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True,
+       "linear_seed": True}
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +101,43 @@ def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):
     exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
     kept, kept_err = improve_terms(ev, exact, 0.0, STARTS, _fit(ev), 13, 5, 0.01)
     assert kept is exact and kept_err == 0.0
+
+
+def test_a_full_tree_exchanges_a_substitute_for_the_coupling(rigid_dataset, monkeypatch):
+    """Seen on the benchmark (rigid-body, seed 1): p_dot with q*u_Y(t-5) and r*u_P(t-5)
+    standing in for -0.9 q r, in a tree at the depth limit. Adding c q r needs a level more,
+    so term insertion must drop the least contributing terms to make room."""
+    from gpquad.engine.evolve import term_search
+    from gpquad.engine.evolve.linear_seed import balanced_sum
+    from gpquad.engine.evolve.term_search import term_contributions
+    from gpquad.engine.tree.encoding import Tree
+    from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
+
+    ds = rigid_dataset
+    names = ("phi", "theta", "psi", "u", "v", "w", "p", "q", "r") + ds.input_names
+    var = {n: VAR_BASE + i for i, n in enumerate(names)}
+
+    def term(c, *xs):
+        body = [(var[xs[0]], 0.0)] if len(xs) == 1 else [(MUL, 0.0), (var[xs[0]], 0.0),
+                                                         (var[xs[1]], 0.0)]
+        return [(MUL, 0.0), (CONST, c)] + body
+
+    # the products first: a ninth summand puts them one level deeper, beyond the limit
+    prefix = balanced_sum([term(0.454, "q", "u_Y"), term(1.42, "r", "u_P"), term(-4.0, "p"),
+                           term(-0.047, "phi"), term(8.97, "u_R"), term(-0.005, "v"),
+                           term(0.01, "theta"), [(CONST, -0.008)]])
+    model = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], [5, 2, 5, 0])
+    assert model.depth == 5
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    err = ev.mean_errors([model], STARTS)[0]
+    found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert found_err < 1e-8 * err
+    assert "q*r" in str(_sym(found, ds))
+    assert len(term_contributions(ev, model, STARTS)) == 8
+    # without making room (no contributions), the same search cannot reach the truth
+    monkeypatch.setattr(term_search, "term_contributions", lambda *a: None)
+    _, stuck_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert stuck_err > 1e3 * found_err
 
 
 def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
