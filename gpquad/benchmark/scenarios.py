@@ -162,7 +162,8 @@ def _from_log(name: str, path: Path) -> Scenario:
     train, test = time_split(load_flights(cfg), TRAIN_FRACTION)
     return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
                          validation_fraction=cfg.data.validation_fraction,
-                         source={"kind": "log", "config": str(path), "files": list(cfg.data.files),
+                         source={"kind": "log", "config": str(path), "config_text":
+                                 Path(path).read_text(), "files": list(cfg.data.files),
                                  "split": f"first {TRAIN_FRACTION:.0%} of the samples train"})
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.evaluator import Evaluator, exact_mean
 from gpquad.engine.evolve.gradient_fit import continued_constants
 from gpquad.engine.evolve.linear_seed import linear_seed, variable_scales
 from gpquad.engine.evolve.local_search import (
@@ -196,7 +196,7 @@ class Coevolution:
         out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs,
                               samples)
         out = out[np.isfinite(out)]
-        return float(out.mean()) if out.size else 0.0
+        return float(exact_mean(out)) if out.size else 0.0
 
     def simplify_phase(self, state: RunState, rng: RandomStream) -> None:
         """Replace a random subtree of each model by a constant, re-converge constants only,
@@ -237,7 +237,7 @@ class Coevolution:
 
         def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
             def error_of(t: Tree) -> float:
-                return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
+                return float(exact_mean(ev.window_errors([t], starts, n_steps=n_steps)))
 
             return continued_constants(ev, tree, error, starts, n_steps, error_of, steps,
                                        short_windows)
@@ -306,7 +306,7 @@ class Coevolution:
         starts, steps = tile(ranges, self.cfg.window_steps, self.cfg.max_delay)
         if len(starts) == 0:
             return np.full(len(trees), np.nan)
-        return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
+        return exact_mean(self.evaluator.window_errors(trees, starts, n_steps=steps), axis=1)
 
     def training_errors(self, state: RunState) -> np.ndarray:
         """Each climber's error over the whole training data (NaN: no window fits)."""
@@ -327,9 +327,10 @@ class Coevolution:
             starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
             samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
             # The allowance is a fraction of the error of the best constant model.
-            mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
+            mean_acc = float(exact_mean(self.dataset.arrays.acc[samples, self.evaluator.target]))
             trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
-            scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
+            scale = float(exact_mean(self.evaluator.window_errors([trivial], starts,
+                                                                  n_steps=steps)))
             model, error = prune(self.evaluator, model, starts, steps,
                                  self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
                                  lambda t, a, b: self.subtree_mean(t, a, b, samples),
