@@ -1,6 +1,6 @@
 """End to end: recover the median model's six equations from noise-free simulated data.
 
-Budget: experiments/quickstart.toml (6 iterations of 600 + 80 generations, 250-step
+Budget: experiments/quickstart.toml (3 iterations of 600 + 80 generations, 250-step
 windows, local search on). benchmarks/recovery.py measures the pass rate over seeds.
 """
 
