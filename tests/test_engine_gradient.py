@@ -17,7 +17,7 @@ from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
 from gpquad.engine.evolve.selection import bic, mse_of, prune_by_bic, select_by_bic
-from gpquad.engine.evolve.term_search import improve_terms, term_candidates
+from gpquad.engine.evolve.term_search import improve_terms, regain_candidates, term_candidates
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
@@ -94,7 +94,8 @@ def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):
     ds = rigid_dataset
     ev = Evaluator(ds, "p_dot", 250, "mse")
     model = _tree("8.0*u_R(t-2) - 3.0*p", ds)
-    assert len(term_candidates(model, 13, 5)) == 1 + 13 + 91 + 78
+    assert len(term_candidates(model, 13, 5)) == 13 + 91 + 78
+    assert len(regain_candidates(model, 5)) == 1  # c * model; its terms have gains already
     assert term_candidates(model, 13, 2) == []  # no room under the depth limit
     err = ev.mean_errors([model], STARTS)[0]
     found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.evolve.evaluator import Evaluator, exact_mean
+from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
 from gpquad.engine.evolve.linear_seed import linear_seed, variable_scales
 from gpquad.engine.evolve.local_search import (
@@ -111,6 +111,8 @@ class Coevolution:
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
         self.short_windows = self.windows_for(cfg.fit_horizons)
+        # the growing horizon of the seed and of the gain refits (fit_horizons' if set)
+        self.regain_windows = self.short_windows or self.windows_for(SEED_HORIZONS)
 
     # ----------------------------------------------------------------- state
     def init_state(self, seed) -> RunState:
@@ -196,7 +198,7 @@ class Coevolution:
         out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs,
                               samples)
         out = out[np.isfinite(out)]
-        return float(exact_mean(out)) if out.size else 0.0
+        return float(out.mean()) if out.size else 0.0
 
     def simplify_phase(self, state: RunState, rng: RandomStream) -> None:
         """Replace a random subtree of each model by a constant, re-converge constants only,
@@ -237,7 +239,7 @@ class Coevolution:
 
         def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
             def error_of(t: Tree) -> float:
-                return float(exact_mean(ev.window_errors([t], starts, n_steps=n_steps)))
+                return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
 
             return continued_constants(ev, tree, error, starts, n_steps, error_of, steps,
                                        short_windows)
@@ -282,10 +284,7 @@ class Coevolution:
     def regain_fitter(self, steps: int, ev: Evaluator | None = None):
         """The LM fit with a growing horizon (SEED_HORIZONS unless fit_horizons is set),
         for the few candidates whose gains start far from their values; None without LM."""
-        if self.cfg.constant_fit != "gauss-newton":
-            return None
-        return self.gradient_fitter(steps, ev, short_windows=self.short_windows
-                                    or self.windows_for(SEED_HORIZONS))
+        return self.gradient_fitter(steps, ev, short_windows=self.regain_windows)
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""
@@ -306,7 +305,7 @@ class Coevolution:
         starts, steps = tile(ranges, self.cfg.window_steps, self.cfg.max_delay)
         if len(starts) == 0:
             return np.full(len(trees), np.nan)
-        return exact_mean(self.evaluator.window_errors(trees, starts, n_steps=steps), axis=1)
+        return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
 
     def training_errors(self, state: RunState) -> np.ndarray:
         """Each climber's error over the whole training data (NaN: no window fits)."""
@@ -327,10 +326,9 @@ class Coevolution:
             starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
             samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
             # The allowance is a fraction of the error of the best constant model.
-            mean_acc = float(exact_mean(self.dataset.arrays.acc[samples, self.evaluator.target]))
+            mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
             trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
-            scale = float(exact_mean(self.evaluator.window_errors([trivial], starts,
-                                                                  n_steps=steps)))
+            scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
             model, error = prune(self.evaluator, model, starts, steps,
                                  self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
                                  lambda t, a, b: self.subtree_mean(t, a, b, samples),

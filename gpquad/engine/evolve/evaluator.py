@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from gpquad.data.dataset import Dataset
@@ -54,25 +52,4 @@ class Evaluator:
 
     def mean_errors(self, trees: list[Tree], starts, bounds=None) -> np.ndarray:
         """Fitness of each tree: mean over windows of the per-window error."""
-        return exact_mean(self.window_errors(trees, starts, bounds), axis=1)
-
-
-def exact_mean(values, axis=None):
-    """Mean by exactly rounded summation (math.fsum), whatever the memory alignment.
-
-    numpy's SIMD reductions sum in an order that depends on where the array lies in
-    memory, so the same errors could average to values one ulp apart in two runs; an error
-    or a pruning constant one ulp off then changes later choices, and a run would not be
-    bit-identical to itself. axis None: a float; axis 1: one mean per row.
-    """
-    a = np.asarray(values, dtype=float)
-    if axis is None:
-        return _fsum(a.ravel()) / a.size if a.size else math.nan
-    return np.array([_fsum(row) / row.size if row.size else math.nan for row in a])
-
-
-def _fsum(x: np.ndarray) -> float:
-    try:
-        return math.fsum(x.tolist())
-    except ValueError:  # +inf and -inf together
-        return math.nan
+        return self.window_errors(trees, starts, bounds).mean(axis=1)

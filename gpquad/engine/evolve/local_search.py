@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from gpquad.engine.evolve.evaluator import Evaluator, exact_mean
+from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 
@@ -88,7 +88,7 @@ def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, ev
     from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
 
     def error_of(tree: Tree) -> float:
-        return float(exact_mean(ev.window_errors([tree], starts, n_steps=n_steps)))
+        return float(ev.window_errors([tree], starts, n_steps=n_steps).mean())
 
     def refit(tree: Tree, err: float) -> tuple[Tree, float]:
         if fit is not None:

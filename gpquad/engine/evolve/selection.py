@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from gpquad.engine.evolve.evaluator import Evaluator, exact_mean
+from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.term_search import with_term_coefficients
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
@@ -39,7 +39,7 @@ def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
     """Mean squared integrated-state error of `tree` on the windows (ev_mse.squared)."""
     if len(starts) == 0:
         return math.nan
-    return float(exact_mean(ev_mse.window_errors([tree], starts, n_steps=n_steps)))
+    return float(ev_mse.window_errors([tree], starts, n_steps=n_steps).mean())
 
 
 def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit,

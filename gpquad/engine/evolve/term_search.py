@@ -82,8 +82,8 @@ def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
 
 
 def term_candidates(model: Tree, variables, max_depth: int, contributions=None) -> list[Tree]:
-    """1 * model, and model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every
-    allowed variable (an int n: the first n) and pair, within max_depth. A model too deep
+    """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
+    (an int n: the first n) and pair, within max_depth. A model too deep
     to take a new term makes room: with `contributions` (one per additive term of
     gained_terms(model)), its least contributing terms are dropped until the new one fits,
     so that a substitute can be exchanged for the right term."""
@@ -100,7 +100,7 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None) 
     # Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error only
     # with both of its terms, so one-term insertion alone never finds it.
     additions += [[term(i), term(j)] for k, i in enumerate(variables) for j in variables[k + 1:]]
-    out = regain_candidates(model, max_depth)
+    out = []
     base = gained_terms(model)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
     order = (np.argsort(contributions, kind="stable") if contributions is not None
@@ -122,19 +122,19 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None) 
 
 def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variables: int,
                   max_depth: int, min_gain: float, regain_fit=None) -> tuple[Tree, float]:
-    """Best single-term insertion (constants fitted by fit(tree, error, starts, n_steps));
+    """Best of the regain candidates and the single-term insertions (constants fitted by fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves."""
-    n_regain = len(regain_candidates(model, max_depth))
-    candidates = term_candidates(model, n_variables, max_depth,
-                                 term_contributions(ev, model, suite))
+    regain = regain_candidates(model, max_depth)
+    candidates = regain + term_candidates(model, n_variables, max_depth,
+                                          term_contributions(ev, model, suite))
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)
     best, best_error = model, error * (1.0 - min_gain)
     for k, (tree, err) in enumerate(zip(candidates, errors, strict=True)):
-        use = regain_fit if (regain_fit is not None and k < n_regain) else fit
+        use = regain_fit if (regain_fit is not None and k < len(regain)) else fit
         fitted, fitted_error = use(tree, float(err), suite, ev.n_steps)
         if fitted_error < best_error:
             best, best_error = fitted, fitted_error
