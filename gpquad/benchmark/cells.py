@@ -71,7 +71,7 @@ def _fit(method: str, scenario, seed: int, engine_dir: Path):
                 out[mask] = fitted[g][0](starts[mask] - a, steps)
         return out
 
-    keys = ("equations", "equations_raw_inputs", "n_parameters")
+    keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit")
     record = {k: {g: f[2][k] for g, f in fitted.items()} for k in keys
               if k in next(iter(fitted.values()))[2]}
     record["settings"] = next(iter(fitted.values()))[2]["settings"]
@@ -93,7 +93,7 @@ def _fit_one(method: str, scenario, seed: int, engine_dir: Path):
                   "equations_raw_inputs": {t: e.text(raw=True)
                                            for t, e in model.equations.items()},
                   "settings": {"engine_config": source, "evolution": cfg.to_dict()["evolution"]},
-                  "recovery": _recovery_gpquad(model, scenario)}
+                  "recovery": _recovery_gpquad(model, scenario), "joint_fit": model.joint_fit}
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
     peer, fit_time = peers.fit_peer(method, scenario.fit, seed)
     record = {"equations": peer.equations, "settings": peer.settings,

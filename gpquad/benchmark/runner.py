@@ -5,8 +5,8 @@ are fitted once (seed 0). Each cell is saved when done (`gpquad.benchmark.cells`
 rerun with the same --out skips finished cells whose method settings are unchanged (each
 cell records a fingerprint of its method's settings: gpquad's engine config, version and
 a hash of its sources, a peer's settings and package version), so changing the engine
-recomputes only gpquad's cells. Cells do not depend on each other or on the order they finish, so --jobs 2
-gives the same table as --jobs 1.
+recomputes only gpquad's cells. Cells do not depend on each other or on the order they
+finish, so --jobs 2 gives the same table as --jobs 1.
 """
 
 from __future__ import annotations
@@ -49,8 +49,9 @@ def source_hash() -> str:
     models, study): a changed engine recomputes gpquad's cells, whatever the version says."""
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for package in ("engine", "data", "models", "study"):
-        for path in sorted((root / package).rglob("*.py")):
+    for package in ("engine", "data", "models", "study", "benchmark/engine.py"):
+        for path in sorted((root / package).rglob("*.py")) if (root / package).is_dir() \
+                else [root / package]:
             digest.update(path.relative_to(root).as_posix().encode())
             digest.update(path.read_bytes())
     return digest.hexdigest()[:16]

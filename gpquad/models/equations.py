@@ -115,6 +115,8 @@ class DiscoveredModel:
     seed: int
     config: dict
     interrupted: bool = False
+    #: The joint refit's report (gpquad.models.joint_fit), or None when none was made.
+    joint_fit: dict | None = None
 
     def to_dict(self) -> dict:
         out = {
@@ -128,6 +130,8 @@ class DiscoveredModel:
         }
         if self.interrupted:
             out["interrupted"] = True
+        if self.joint_fit is not None:
+            out["joint_fit"] = self.joint_fit
         return out
 
     @classmethod
@@ -136,7 +140,7 @@ class DiscoveredModel:
         eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
-                   d.get("config", {}), bool(d.get("interrupted", False)))
+                   d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:

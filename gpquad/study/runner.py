@@ -16,6 +16,7 @@ from gpquad.engine.evolve.coevolution import Coevolution, RunState
 from gpquad.engine.variables import TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.joint_fit import finish_model, joint_fit_summary
 from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.loop import evolve, final_equation
@@ -198,6 +199,9 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
         raise
     finally:
         history.close()
+    model = finish_model(model, dataset, ev)
+    if model.joint_fit is not None:
+        report.say(joint_fit_summary(model.joint_fit))
     write_model(run_dir, model)
     info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=time.time() - started,
                 target_time_s=timings)

@@ -16,6 +16,7 @@ import numpy as np
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.leaves import measured_variables
 from gpquad.engine.evolve.linear_seed import linear_seed, variable_scales
 from gpquad.engine.evolve.local_search import (
     fit_constants,
@@ -38,7 +39,7 @@ from gpquad.engine.tree.variation import (
     random_tree,
     replace_with_constant,
 )
-from gpquad.engine.variables import N_STATE, STATE_NAMES
+from gpquad.engine.variables import N_STATE
 from gpquad.study.config import EvolutionConfig
 
 
@@ -64,19 +65,6 @@ SHORT_WINDOW_STEPS = 4000
 SEED_WINDOWS = 24
 #: Growing horizon (steps) of the linear seed's fit when fit_horizons is off.
 SEED_HORIZONS = (2, 10)
-
-
-def measured_variables(dataset, exclude=()) -> tuple[int, ...] | None:
-    """Leaf variables a model may read: every input and every state the data measures, less
-    the names in `exclude` (None: all). A log without, say, horizontal velocity keeps u and v
-    out of its equations."""
-    names = list(STATE_NAMES) + list(dataset.input_names)
-    left_out = [i for i, name in enumerate(names)
-                if name in exclude or (name in ("u", "v", "w", "p", "q", "r")
-                                       and dataset.unmeasured(name))]
-    if not left_out:
-        return None
-    return tuple(i for i in range(len(names)) if i not in left_out)
 
 
 def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
@@ -107,7 +95,8 @@ class Coevolution:
         self.target = target
         self.cfg = cfg
         self.params = variation_params(cfg, len(dataset.input_names),
-                                       measured_variables(dataset, cfg.exclude_leaves))
+                                       measured_variables(dataset, cfg.exclude_leaves,
+                                                          cfg.keep_tracked))
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
         self.short_windows = self.windows_for(cfg.fit_horizons)

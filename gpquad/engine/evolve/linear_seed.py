@@ -7,9 +7,9 @@ q_dot = k (u_P - theta) - c q with k ~ 500) they settle in a wrong basin, such a
 starts instead from the linear model in every allowed variable, c0 + sum c_i x_i, with its
 constants fitted through the integrator (Levenberg-Marquardt, with the growing horizon of
 `fit_horizons` when set), cut to the `max_terms` terms that contribute most
-(|c_i| x SD of x_i) so that it leaves room under the depth limit for product terms, and re-fitted. Evolution, term
-insertion and the final BIC selection then add the nonlinear terms and remove what the data
-do not support. No random draw is made, so runs stay reproducible.
+(|c_i| x SD of x_i) so that it leaves room under the depth limit for product terms, and
+re-fitted. Evolution, term insertion and the final BIC selection then add the nonlinear
+terms and remove what the data do not support. No random draw is made, so runs stay reproducible.
 """
 
 from __future__ import annotations

@@ -122,7 +122,8 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None) 
 
 def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variables: int,
                   max_depth: int, min_gain: float, regain_fit=None) -> tuple[Tree, float]:
-    """Best of the regain candidates and the single-term insertions (constants fitted by fit(tree, error, starts, n_steps));
+    """Best of the regain candidates and the single-term insertions (constants fitted by
+    fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves."""
