@@ -32,6 +32,7 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.models import scoring
 from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.joint_fit import finish_model
 from gpquad.study.config import Config, load_folder_config
 from gpquad.study.runner import write_model
 from gpquad.study.seeding import ASSEMBLY_CHILD, assembly_seed
@@ -106,9 +107,11 @@ def members(runs: dict[str, list[RunResult]], cfg: Config) -> list[dict[str, int
 
 
 def model_of(choice: dict[str, int], runs, dataset: Dataset, cfg: Config) -> DiscoveredModel:
+    """The full model of the chosen repetitions (jointly refitted if evolution.joint_fit)."""
     eqs = {t: runs[t][k].equation for t, k in choice.items()}
-    return DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                           cfg.to_dict())
+    model = DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
+                            cfg.to_dict())
+    return finish_model(model, dataset, cfg.evolution)
 
 
 def noise_sd(dataset: Dataset, fraction: float) -> np.ndarray:

@@ -1,0 +1,144 @@
+"""Joint refit of a full model (gpquad.models.joint_fit) and tracked leaves
+(gpquad.engine.evolve.leaves), on flights of the median model whose truth is known."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gpquad.data.dataset import build_dataset
+from gpquad.engine.evolve.leaves import measured_variables, tracked_states
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
+from gpquad.models import joint_fit
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.study.config import EvolutionConfig, SimulatorConfig
+
+TRUTH = dict(SimulatorConfig().equations)
+
+
+@pytest.fixture(scope="module")
+def raw_dataset(short_flight):
+    """The 60 s flight with raw inputs (no trim), so the truth's constants apply as written."""
+    return build_dataset([short_flight], validation_fraction=0.25, trim="none")
+
+
+def model_of(equations: dict[str, str], dataset) -> DiscoveredModel:
+    eqs = {}
+    for target, text in equations.items():
+        expr, delays = parse_equation(text, dataset.input_names)
+        eqs[target] = Equation(target, from_sympy(expr, delays, dataset.input_names),
+                               dataset.input_names, np.nan, np.nan, dict(dataset.trim))
+    return DiscoveredModel(eqs, dataset.input_names, dict(dataset.trim), dataset.dt, 1, {})
+
+
+def _consts(tree):
+    from gpquad.engine.tree.operators import CONST
+
+    return sorted(float(v) for v in tree.values[tree.codes == CONST])
+
+
+def test_perturbed_constants_come_back_to_the_truth(raw_dataset):
+    """Per-equation errors that the full model integrates (a pitch gain 8 % low, a drag
+    30 % high, a thrust gain 3 % high) are undone by the joint refit, to 0.5 %."""
+    wrong = dict(TRUTH, q_dot="-9.0*u_P - 3.3*q", a_x="10.0*theta - 0.78*u",
+                 a_z="29.0*u_T(t-5) - w - 9.81")
+    refitted, report = joint_fit.joint_refit(model_of(wrong, raw_dataset), raw_dataset)
+    assert report["accepted"] and report["judged_on"] == "validation"
+    assert report["error_after"] < 1e-4 * report["error_before"]
+    truth = model_of(TRUTH, raw_dataset)
+    for target in TARGET_NAMES:
+        np.testing.assert_allclose(_consts(refitted.equations[target].tree),
+                                   _consts(truth.equations[target].tree), rtol=5e-3, atol=1e-3)
+
+
+def test_a_refit_that_does_not_help_is_not_kept(raw_dataset, monkeypatch):
+    """The validation check can fail: a least-squares result that is worse on the validation
+    windows leaves the model as it was."""
+    model = model_of(TRUTH, raw_dataset)
+
+    class Worse:
+        def __init__(self, x):
+            self.x, self.nfev, self.cost = x * 1.05, 1, 0.0
+
+    monkeypatch.setattr(joint_fit, "least_squares", lambda fun, x, **kw: Worse(x))
+    kept, report = joint_fit.joint_refit(model, raw_dataset)
+    assert not report["accepted"]
+    assert report["error_after"] > report["error_before"]
+    assert kept is model
+    assert "not kept" in joint_fit.joint_fit_summary(report)
+
+
+def test_unmeasured_states_keep_their_equations(raw_dataset):
+    """With u and v unmeasured (a log without horizontal velocity), a_x and a_y are not
+    refitted and u, v are not in the objective."""
+    info = [dict(f, measured={**f.get("measured", {}), "u": "not logged", "v": "not logged"})
+            for f in raw_dataset.flight_info]
+    dataset = dataclasses.replace(raw_dataset, flight_info=info)
+    wrong = dict(TRUTH, a_x="10.0*theta - 0.9*u", q_dot="-9.0*u_P - 3.3*q")
+    refitted, report = joint_fit.joint_refit(model_of(wrong, dataset), dataset)
+    assert report["states"] == ["w", "p", "q", "r"]
+    assert _consts(refitted.equations["a_x"].tree) == [-0.9, 10.0]
+    assert report["accepted"]
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3],
+                               rtol=5e-3)
+
+
+def test_finish_model_only_with_the_option_and_six_equations(raw_dataset, tmp_path):
+    model = model_of(TRUTH, raw_dataset)
+    off = EvolutionConfig()
+    assert joint_fit.finish_model(model, raw_dataset, off) is model
+    on = dataclasses.replace(off, joint_fit=True)
+    five = dataclasses.replace(model, equations={t: e for t, e in model.equations.items()
+                                                 if t != "r_dot"})
+    assert joint_fit.finish_model(five, raw_dataset, on) is five
+    done = joint_fit.finish_model(model, raw_dataset, on)
+    assert done.joint_fit["constants"] == 13 and done.joint_fit["judged_on"] == "validation"
+    again = DiscoveredModel.from_dict(done.to_dict())  # the report is kept in model.json
+    assert again.joint_fit == done.joint_fit
+
+
+def with_inputs(dataset, column: int, values: np.ndarray):
+    inputs = dataset.arrays.inputs.copy()
+    inputs[:, column] = values
+    arrays = dataset.arrays._replace(inputs=inputs)
+    return dataclasses.replace(dataset, arrays=arrays)
+
+
+def test_tracked_heading_is_detected_and_untracked_is_not(raw_dataset):
+    """psi stays allowed when u_Y is its set-point (psi lagging u_Y plus a little noise),
+    not when u_Y is a rate command (the median model's) or independent of psi."""
+    psi = raw_dataset.arrays.states[:, STATE_NAMES.index("psi")]
+    y = raw_dataset.input_names.index("u_Y")
+    assert tracked_states(raw_dataset, ["psi"]) == {}  # rate-level input
+    rng = np.random.default_rng(3)
+    setpoint = np.roll(psi, -3) + 0.3 * psi.std() * rng.standard_normal(len(psi))
+    angle = with_inputs(raw_dataset, y, setpoint)
+    assert tracked_states(angle, ["psi", "phi"]) == {"psi": "u_Y"}
+    scaled = with_inputs(raw_dataset, y, 20.0 * setpoint)  # correlated, other units
+    assert tracked_states(scaled, ["psi"]) == {}
+    allowed = measured_variables(angle, ("psi",), keep_tracked=True)
+    assert allowed is None  # nothing left out
+    left_out = measured_variables(angle, ("psi",), keep_tracked=False)
+    assert STATE_NAMES.index("psi") not in left_out
+
+
+def test_sweep_full_models_are_refitted_when_configured(raw_dataset):
+    """`gpquad sweep` assembles its full models through the same step."""
+    from types import SimpleNamespace
+
+    from gpquad.study.assemble import model_of as assembled
+    from gpquad.study.config import Config
+
+    eqs = model_of(dict(TRUTH, q_dot="-9.0*u_P - 3.3*q"), raw_dataset).equations
+    runs = {t: [SimpleNamespace(equation=e)] for t, e in eqs.items()}
+    choice = {t: 0 for t in runs}
+    cfg = Config()
+    plain = assembled(choice, runs, raw_dataset, cfg)
+    assert plain.joint_fit is None and plain.equations == eqs
+    on = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution, joint_fit=True))
+    refitted = assembled(choice, runs, raw_dataset, on)
+    assert refitted.joint_fit["accepted"]
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3],
+                               rtol=5e-3)
+
