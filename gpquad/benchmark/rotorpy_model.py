@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from gpquad.engine.kernels.quaternion import rotation_matrix
 from gpquad.engine.numba_config import njit
 
 #: Indices into the scalar parameter array of `vehicle_arrays`.
@@ -72,16 +73,7 @@ def hover_rotor_speed(params: dict) -> float:
 def quat_matrix(q, out):
     """Rotation matrix of quaternion q (x, y, z, w), normalised first (as scipy does)."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    x, y, z, w = q[0] / n, q[1] / n, q[2] / n, q[3] / n
-    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[0, 1] = 2.0 * (x * y - z * w)
-    out[0, 2] = 2.0 * (x * z + y * w)
-    out[1, 0] = 2.0 * (x * y + z * w)
-    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[1, 2] = 2.0 * (y * z - x * w)
-    out[2, 0] = 2.0 * (x * z - y * w)
-    out[2, 1] = 2.0 * (y * z + x * w)
-    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    rotation_matrix(q[3] / n, q[0] / n, q[1] / n, q[2] / n, out)
 
 
 @njit

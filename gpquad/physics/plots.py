@@ -52,14 +52,7 @@ def regression_figure(x: np.ndarray, y: np.ndarray, fitted: np.ndarray, xlabel: 
     ax.plot(x, y, ".", ms=2, alpha=0.4, label="measured")
     order = np.argsort(x)
     ax.plot(x[order], fitted[order], "-", lw=1.2, color="tab:red", label="fit")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(plt, fig, ax, xlabel, ylabel, title, path)
 
 
 def series_figure(t: np.ndarray, measured: np.ndarray, predicted: dict, ylabel: str,
@@ -70,7 +63,12 @@ def series_figure(t: np.ndarray, measured: np.ndarray, predicted: dict, ylabel: 
     ax.plot(t, measured, lw=0.8, color="k", label="measured")
     for name, values in predicted.items():
         ax.plot(t, values, lw=0.8, label=name)
-    ax.set_xlabel("time (s)")
+    return _finish(plt, fig, ax, "time (s)", ylabel, title, path)
+
+
+def _finish(plt, fig, ax, xlabel: str, ylabel: str, title: str, path: Path) -> Path:
+    """Labels, title and legend of a one-axes figure; saved to path and closed."""
+    ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8)
