@@ -148,3 +148,16 @@ def test_changed_engine_config_recomputes_only_gpquad_cells(tiny):
     cell = json.loads((out / "cells/tiny/gpquad/seed1.json").read_text())
     assert cell["settings"]["evolution"]["iterations"] == 2
     assert cell["fingerprint"] == info["fingerprints"]["tiny"]["gpquad"]
+
+
+def test_a_comment_in_the_engine_config_recomputes_nothing(tiny):
+    """The fingerprint holds the parsed settings, not the file's text."""
+    out = tiny / "run5"
+    shutil.copytree(tiny / "run1", out)
+    engine = tiny / "engine3"
+    engine.mkdir()
+    (engine / "quickstart.toml").write_text("# a note on the settings\n" + TINY_ENGINE)
+    before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
+    run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
+                  engine_dir=engine, log=lambda s: None)
+    assert {c: c.read_bytes() for c in before} == before

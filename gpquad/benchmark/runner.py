@@ -61,8 +61,11 @@ def method_settings(method: str, engine_file: Path) -> dict:
     """What a method's cells depend on besides the scenario and seed."""
     if method == "gpquad":
         from gpquad import __version__
+        from gpquad.benchmark.engine import engine_config
 
-        return {"engine_text": engine_file.read_text(), "gpquad": __version__,
+        # the parsed settings, not the file's text: a comment does not recompute the cells
+        evolution = engine_config(engine_file.parent, 0)[0].to_dict()["evolution"]
+        return {"engine": evolution, "engine_file": engine_file.name, "gpquad": __version__,
                 "sources": source_hash()}
     return {"settings": peers.PEER_SETTINGS.get(method), "version": peers.package_version(method),
             "max_lag": MAX_LAG}
