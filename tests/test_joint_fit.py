@@ -142,3 +142,15 @@ def test_sweep_full_models_are_refitted_when_configured(raw_dataset):
     np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3],
                                rtol=5e-3)
 
+
+
+def test_significant_drop_needs_more_than_the_windows_spread():
+    rng = np.random.default_rng(0)
+    before = 1.0 + rng.random(12)
+    assert joint_fit.significant_drop(before, 0.5 * before)  # every window halves
+    mixed = before + 0.3 * rng.standard_normal(12)  # some better, some worse
+    mixed -= (mixed.sum() - before.sum() + 0.05) / 12  # total 0.05 lower
+    assert mixed.sum() < before.sum()
+    assert not joint_fit.significant_drop(before, mixed)
+    assert joint_fit.significant_drop([1.0], [0.9]) and not joint_fit.significant_drop([1.0],
+                                                                                        [1.1])

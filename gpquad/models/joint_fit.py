@@ -18,8 +18,13 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 40 % worse). Structures are not changed.
 
 The refit is kept only if it lowers the same error on the validation windows (or, with
-no validation data, on the training windows) at the longest horizon; the report says
-which, with both errors. No random draw: the result is a function of model and data.
+no validation data, on the training windows) at the longest horizon, by more than the
+windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors); the
+report says which windows, with both errors. A marginal drop is not enough because the
+refit moves every constant: where one equation has a wrong term, the refit shifts the
+others' constants to make up for it (measured on rigid-body, seed 3: a_y kept a
+substitute term, the refit lowered the validation error by 11 % and moved the exact
+0.7 p q of r_dot to 0.741). No random draw: the result is a function of model and data.
 Equations whose state the log does not measure keep their constants.
 """
 
@@ -46,6 +51,9 @@ EVALS_PER_CONSTANT = 12
 #: A residual entry is clipped to this many state SDs, so that a window that diverges
 #: while a constant is perturbed gives a large, finite error rather than NaN.
 RESIDUAL_CLIP = 1e3
+#: The refit is kept when the paired drop of the judged windows' errors is this many
+#: standard errors above zero (a one-sided test at about 2.5 %).
+SIGNIFICANCE = 2.0
 
 
 def _slots(model) -> list[tuple[str, np.ndarray]]:
@@ -92,6 +100,20 @@ class FullModelError:
         r = self.residuals(model)
         return float(r @ r)
 
+    def window_errors(self, model) -> np.ndarray:
+        """Each window's share of `error` (W,): they sum to it."""
+        r = self.residuals(model).reshape(len(self.starts), -1)
+        return (r * r).sum(axis=1)
+
+
+def significant_drop(before: np.ndarray, after: np.ndarray) -> bool:
+    """True when the windows' errors dropped by more than their spread explains: the mean
+    paired drop exceeds SIGNIFICANCE standard errors (one window: it must drop)."""
+    drop = np.asarray(before) - np.asarray(after)
+    if drop.size < 2:
+        return bool(drop.sum() > 0)
+    return bool(drop.mean() > SIGNIFICANCE * drop.std(ddof=1) / np.sqrt(drop.size))
+
 
 def _windows(dataset, ranges, seconds: float, history: int, limit: int | None):
     steps = max(1, int(round(seconds / dataset.dt)))
@@ -107,7 +129,8 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
 
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
-    "constants", "evaluations", "time_s"}.
+    "constants", "evaluations" (LM steps' residual evaluations, not counting the
+    finite-difference Jacobians), "time_s"}.
     """
     t0 = time.perf_counter()
     states = [i for i, s in enumerate(SCORED_STATES) if not dataset.unmeasured(s)]
@@ -131,7 +154,8 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
                       time_s=time.perf_counter() - t0)
         return model, report
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
-    before = judge.error(model)
+    before_w = judge.window_errors(model)
+    before = float(before_w.sum())
     x = x0.copy()
     objectives = []
     for seconds in horizons_s:
@@ -151,8 +175,9 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
         if np.all(np.isfinite(fit.x)) and fit.cost <= 0.5 * float(r0 @ r0):
             x = fit.x
     refitted = with_constants(model, slots, x)
-    after = judge.error(refitted)
-    accepted = bool(after < before)
+    after_w = judge.window_errors(refitted)
+    after = float(after_w.sum())
+    accepted = significant_drop(before_w, after_w)
     report.update(accepted=accepted, judged_on=judged_on, error_before=before,
                   error_after=after, time_s=time.perf_counter() - t0)
     return (refitted if accepted else model), report
