@@ -195,3 +195,20 @@ def test_bad_engine_settings_name_their_field(field, value):
         override(bad)
     assert err.value.field == f"evolution.{field}"
 
+
+
+def test_constants_that_only_act_together_are_held_fixed():
+    """c1 + (c2 + x) and c1 * (c2 * x): equal or proportional Jacobian columns. The fit frees
+    one constant of each such group (LM would drift along the line by round-off); the check
+    can fail: independent columns are all kept."""
+    from gpquad.engine.evolve.gradient_fit import identifiable
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((50, 3))
+    jac = np.column_stack([np.ones(50), np.ones(50), x[:, 0], 2.0 * x[:, 0], x[:, 1]])
+    free = identifiable(jac)
+    assert len(free) == 3 and 4 in free
+    assert {0, 1} & set(free.tolist()) and not {0, 1} <= set(free.tolist())
+    assert {2, 3} & set(free.tolist()) and not {2, 3} <= set(free.tolist())
+    assert identifiable(x).tolist() == [0, 1, 2]
+    assert identifiable(np.column_stack([np.zeros(50), x[:, 0]])).tolist() == [1]

@@ -13,12 +13,17 @@ so the fitted tree is kept only if `error_of` (the engine's own fitness) improve
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.kernels.sensitivity import window_residuals
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
+
+#: A constant is held fixed when its Jacobian column is this close to a combination of the
+#: others (relative pivot of the pivoted QR, unit-norm columns).
+IDENTIFIABLE_RTOL = 1e-9
 
 
 def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
@@ -32,6 +37,28 @@ def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
                                 ev.arrays, starts, int(n_steps), res, jac)
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
+
+
+def identifiable(jac: np.ndarray, rtol: float = IDENTIFIABLE_RTOL) -> np.ndarray:
+    """Columns of a Jacobian whose constants the residuals can tell apart: a maximal set of
+    linearly independent columns (pivoted QR of the unit-norm columns, pivots above rtol x
+    the largest), in ascending order.
+
+    A tree can hold constants that only act together (c1 + (c2 + x), or c1 * (c2 * x)):
+    their columns are equal or proportional, the least-squares problem is singular along
+    a line, and LM drifts along it by round-off. Measured before this check: the constant
+    term of median-noisy's p_dot came out as two cancelling constants of size 6e9 and 4e11
+    whose sum, the only thing the data fixes, then differed at 1e-5 between two runs of the
+    same seed. The others are held fixed at their current values.
+    """
+    norms = np.sqrt((jac * jac).sum(axis=0))
+    live = np.flatnonzero(norms > 0)
+    if live.size == 0:
+        return live
+    _, r, pivots = qr(jac[:, live] / norms[live], mode="economic", pivoting=True)
+    diag = np.abs(np.diag(r))
+    rank = int(np.count_nonzero(diag > rtol * diag[0]))
+    return np.sort(live[pivots[:rank]])
 
 
 def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_steps: int,
@@ -59,17 +86,28 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
         return cache[key]
 
     x0 = model.values[slots].copy()
-    res0, _, _ = evaluate(x0)
-    if not np.all(np.isfinite(res0)) or res0.size < slots.size:
+    res0, jac0, _ = evaluate(x0)
+    if not np.all(np.isfinite(res0)) or res0.size < slots.size or \
+            not np.all(np.isfinite(jac0)):
         return model, error
+    free = identifiable(jac0)
+    if free.size == 0:
+        return model, error
+
+    def full(x_free):
+        x = x0.copy()
+        x[free] = x_free
+        return x
+
     try:
-        fit = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
+        fit = least_squares(lambda x: evaluate(full(x))[0], x0[free],
+                            jac=lambda x: evaluate(full(x))[1][:, free],
                             method="lm", max_nfev=max_steps, x_scale="jac")
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - non-finite steps
         return model, error
-    if not np.all(np.isfinite(fit.x)) or np.array_equal(fit.x, x0):
+    if not np.all(np.isfinite(fit.x)) or np.array_equal(fit.x, x0[free]):
         return model, error
-    fitted = with_values(fit.x)
+    fitted = with_values(full(fit.x))
     fitted_error = float(error_of(fitted))
     if fitted_error < error:
         return fitted, fitted_error
