@@ -1,7 +1,6 @@
 """Gradient constants, BIC selection and term insertion: values, determinism, resume, config."""
 
 import dataclasses
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -155,16 +154,12 @@ def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
                         str(tmp_path / name)], check=True, capture_output=True)
     assert (tmp_path / "a" / "model.json").read_bytes() == \
         (tmp_path / "b" / "model.json").read_bytes()
-    # Within one long-lived process the equations and errors are the same too; constants
-    # of an ill-conditioned pair (c x - c y, x ~ y) were seen to differ at 1e-13 relative
-    # after other tests had run in the process (cause not found; see the closing note).
+    # Within one long-lived process (after whatever tests ran before) the bytes are the same
+    # too. They were not while LM could drift along constants that only act together
+    # (gradient_fit.identifiable): round-off decided where they ended.
     run_experiment(cfg, tmp_path / "c", progress=False)
-    a = json.loads((tmp_path / "a" / "model.json").read_text())["targets"]
-    c = json.loads((tmp_path / "c" / "model.json").read_text())["targets"]
-    assert {t: (e["expr"], e["delays"]) for t, e in a.items()} == \
-        {t: (e["expr"], e["delays"]) for t, e in c.items()}
-    for t in a:
-        assert c[t]["error"] == pytest.approx(a[t]["error"], rel=1e-9)
+    assert (tmp_path / "c" / "model.json").read_bytes() == \
+        (tmp_path / "a" / "model.json").read_bytes()
     dataset = load_dataset(cfg)
     engine = Coevolution(dataset, "p_dot", cfg.evolution)
     state = engine.init_state(np.random.SeedSequence(3))
