@@ -94,6 +94,7 @@ def test_finish_model_only_with_the_option_and_six_equations(raw_dataset, tmp_pa
     assert joint_fit.finish_model(five, raw_dataset, on) is five
     done = joint_fit.finish_model(model, raw_dataset, on)
     assert done.joint_fit["constants"] == 13 and done.joint_fit["judged_on"] == "validation"
+    assert done.joint_fit["rollouts"] > 13  # the Jacobians (13 rollouts each) are counted
     again = DiscoveredModel.from_dict(done.to_dict())  # the report is kept in model.json
     assert again.joint_fit == done.joint_fit
 

@@ -40,13 +40,14 @@ from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
-from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES
+from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 
 #: Window lengths of the growing horizon (s); the last one also decides acceptance.
 JOINT_HORIZONS_S = (1.0, 10.0)
 #: At most this many windows per horizon (evenly spread over the training data).
 MAX_WINDOWS = 120
-#: Residual evaluations per horizon, as a multiple of (constants + 1).
+#: LM's budget per horizon: residual evaluations (scipy's max_nfev, which for "lm" does not
+#: count the n rollouts of each finite-difference Jacobian) as a multiple of (constants + 1).
 EVALS_PER_CONSTANT = 12
 #: A residual entry is clipped to this many state SDs, so that a window that diverges
 #: while a constant is perturbed gives a large, finite error rather than NaN.
@@ -57,8 +58,7 @@ SIGNIFICANCE = 2.0
 
 
 def _slots(model) -> list[tuple[str, np.ndarray]]:
-    """(target, indices of its CONST nodes) for each modelled target whose state is
-    measured by the model's data."""
+    """(target, indices of its CONST nodes) for each target the model has an equation for."""
     return [(t, np.flatnonzero(model.equations[t].tree.codes == CONST))
             for t in TARGET_NAMES if t in model.equations]
 
@@ -82,11 +82,8 @@ class FullModelError:
         self.dataset, self.starts, self.steps = dataset, starts, steps
         self.cols = [SCORED_INDEX[i] for i in states]
         idx = starts[:, None] + np.arange(1, steps + 1)[None, :]
-        data = dataset.arrays.states[idx][:, :, self.cols]  # (W, steps, S)
-        self.data = data
-        spread_ = ((data - data.reshape(-1, len(self.cols)).mean(axis=0)) ** 2).reshape(
-            -1, len(self.cols)).sum(axis=0)
-        self.scale = 1.0 / np.sqrt(np.maximum(spread_, 1e-300))
+        self.data = dataset.arrays.states[idx][:, :, self.cols]  # (W, steps, S)
+        self.scale = 1.0 / np.sqrt(np.maximum(rse_denominator(self.data), 1e-300))
 
     def residuals(self, model) -> np.ndarray:
         pred = model.simulate(self.dataset, self.starts, self.steps)[:, 1:, :][:, :, self.cols]
@@ -129,8 +126,8 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
 
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
-    "constants", "evaluations" (LM steps' residual evaluations, not counting the
-    finite-difference Jacobians), "time_s"}.
+    "constants", "rollouts" (full-model flights over the training windows, Jacobians
+    included), "time_s"}.
     """
     t0 = time.perf_counter()
     states = [i for i, s in enumerate(SCORED_STATES) if not dataset.unmeasured(s)]
@@ -142,7 +139,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     history = max(int(e.tree.delays.max()) for e in model.equations.values())
     report = {"accepted": False, "horizon_s": float(horizons_s[-1]),
               "states": [SCORED_STATES[i] for i in states], "constants": int(x0.size),
-              "evaluations": 0}
+              "rollouts": 0}
     judge_ranges, judged_on = dataset.validation, "validation"
     judge_starts, judge_steps = _windows(dataset, judge_ranges, horizons_s[-1], history, None)
     if len(judge_starts) == 0:
@@ -165,12 +162,12 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
         objectives.append(FullModelError(dataset, starts, steps, states))
 
         def residuals(v, objectives=tuple(objectives)):
+            report["rollouts"] += 1
             m = with_constants(model, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
         fit = least_squares(residuals, x, method="lm", x_scale="jac",
                             max_nfev=EVALS_PER_CONSTANT * (x.size + 1))
-        report["evaluations"] += int(fit.nfev)
         r0 = residuals(x)
         if np.all(np.isfinite(fit.x)) and fit.cost <= 0.5 * float(r0 @ r0):
             x = fit.x
@@ -196,7 +193,7 @@ def joint_fit_summary(report: dict) -> str:
     """One line for the user: what the joint refit did."""
     if report.get("error_before") is None:
         return "joint refit: not made (no measured state or no window fits)"
-    verdict = "kept" if report["accepted"] else "not kept (no better)"
+    verdict = "kept" if report["accepted"] else "not kept (not significantly better)"
     return (f"joint refit of {report['constants']} constants on full-model rollouts: "
             f"{verdict}; {report['judged_on']} error (sum of the RSE of "
             f"{', '.join(report['states'])} over {report['horizon_s']:g} s windows) "

@@ -42,6 +42,12 @@ def validation_windows(dataset: Dataset, horizon_steps: int, max_delay: int = 0
     return starts, steps
 
 
+def rse_denominator(data: np.ndarray) -> np.ndarray:
+    """RSE's denominator: sum of squared deviations from the mean, per last-axis column."""
+    flat = data.reshape(-1, data.shape[-1])
+    return ((flat - flat.mean(axis=0)) ** 2).sum(axis=0)
+
+
 def rse(pred: np.ndarray, data: np.ndarray) -> np.ndarray:
     """RSE per scored state (6,) of predicted vs recorded states (W, n + 1, 9).
 
@@ -49,7 +55,7 @@ def rse(pred: np.ndarray, data: np.ndarray) -> np.ndarray:
     """
     p = pred[:, 1:, SCORED_INDEX]
     d = data[:, 1:, SCORED_INDEX]
-    den = ((d - d.reshape(-1, 6).mean(axis=0)) ** 2).reshape(-1, 6).sum(axis=0)
+    den = rse_denominator(d)
     with np.errstate(over="ignore", invalid="ignore"):
         num = ((p - d) ** 2).reshape(-1, 6).sum(axis=0)
     num = np.where(np.isfinite(num), num, np.inf)

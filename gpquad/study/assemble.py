@@ -201,10 +201,18 @@ def assemble_sweep(out, cfg: Config, dataset: Dataset, runs: int) -> Path:
     targets = [t for t in TARGET_NAMES if t in cfg.evolution.targets]
     results = load_runs(out, targets, runs, dataset.input_names, dataset.trim)
     best_choice = {t: pick_best(results[t], sw.selection).repetition for t in targets}
-    best = model_of(best_choice, results, dataset, cfg)
+    made: dict[tuple, DiscoveredModel] = {}  # a choice made twice (bootstrap) is refitted once
+
+    def model_for(choice):
+        key = tuple(sorted(choice.items()))
+        if key not in made:
+            made[key] = model_of(choice, results, dataset, cfg)
+        return made[key]
+
+    best = model_for(best_choice)
     write_model(out, best)
     chosen = members(results, cfg)
-    fulls = [model_of(c, results, dataset, cfg) for c in chosen]
+    fulls = [model_for(c) for c in chosen]
     best_metrics = evaluate(best, dataset, cfg, _root_child(cfg.seed, BEST_NOISE_CHILD))
     full_metrics = []
     for k, m in enumerate(fulls):

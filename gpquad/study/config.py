@@ -156,12 +156,13 @@ class EvolutionConfig:
     # heading, which the body-frame dynamics do not depend on and a model can overfit to).
     exclude_leaves: tuple[str, ...] = ()
     # Not in the paper: a name of exclude_leaves stays allowed when an input tracks it (an
-    # angle set-point: the input explains >= half of the state's variance, correlation >= 0.6;
-    # gpquad.engine.variables.tracked_states), e.g. psi when u_Y is a heading set-point.
+    # angle set-point: the input explains >= 30 % of the state's variance, correlation >= 0.6;
+    # gpquad.engine.evolve.leaves), e.g. psi when u_Y is a heading set-point.
     keep_tracked: bool = False
     term_min_gain: float = 0.01
     # Not in the paper: after the six equations, refit all their constants jointly on
-    # full-model rollouts, kept if the validation error drops (gpquad.models.joint_fit).
+    # full-model rollouts, kept if the validation error drops significantly
+    # (gpquad.models.joint_fit).
     joint_fit: bool = False
 
 
