@@ -13,6 +13,7 @@ import numpy as np
 import sympy as sp
 
 from gpquad.benchmark.rollout import MAX_LAG, lagged_inputs, lagged_names
+from gpquad.engine.taps import base_input
 from gpquad.engine.tree.export import parse_equation
 from gpquad.engine.variables import STATE_NAMES, target_index
 
@@ -28,8 +29,8 @@ def _symbols(input_names) -> dict[str, sp.Symbol]:
 def truth_terms(truth: str, input_names) -> dict[str, float]:
     """{term: coefficient} of a truth equation in lagged-feature names (raw inputs)."""
     expr, delays = parse_equation(truth, tuple(input_names))
-    reps = {sp.Symbol(n, real=True): sp.Symbol(f"{n}_l{delays.get(n, 0)}", real=True)
-            for n in input_names}
+    reps = {sp.Symbol(n, real=True): sp.Symbol(f"{base_input(n)}_l{delays.get(n, 0)}", real=True)
+            for n in set(input_names) | set(delays)}
     return _terms(sp.expand(expr.xreplace(reps)))
 
 

@@ -76,6 +76,11 @@ def model_plant(model, form: str = "simplified") -> Plant:
     zero: the quickstart's q_dot tree (-100.85 / (34.02 / u_P) - q) / 0.3025 is
     -3.31 q - 9.80 u_P as an equation, but the tree gives q_dot = -333 rad/s^2 whenever
     |u_P - trim| < 1e-6, which noise around hover hits now and then."""
+    tapped = [t for t, e in model.equations.items() if len(e.leaf_names) > len(e.input_names)]
+    if tapped:
+        raise GpquadError(f"equations {tapped} read an input at several delays (input_taps > 1);"
+                          " control design takes one delay per input: identify the model "
+                          "with evolution.input_taps = 1", field="evolution.input_taps")
     if form == "tree":
         trees = {t: e.tree for t, e in model.equations.items()}
     else:

@@ -14,6 +14,7 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.integrator import integrate_step
 from gpquad.engine.kernels.quaternion import euler_from_quat, quat_mul
+from gpquad.engine.taps import MAX_TAPS, tap_names
 from gpquad.engine.tree.export import parse_equation, symbols_for
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, terminal_names
 from gpquad.errors import GpquadError
@@ -27,7 +28,9 @@ class TruthModel:
         self.input_names = tuple(input_names)
         self.exprs: dict[str, sp.Expr] = {}
         self.delays: dict[str, dict[str, int]] = {}
-        syms = list(symbols_for(self.input_names).values())
+        # an input written at several delays is one leaf per delay (gpquad.engine.taps)
+        self._leaves = tap_names(self.input_names, MAX_TAPS)
+        syms = list(symbols_for(self._leaves).values())
         self._funcs = {}
         for target, text in equations.items():
             if target not in TARGET_NAMES:
@@ -46,8 +49,9 @@ class TruthModel:
             func = self._funcs.get(target)
             if func is None:
                 continue
-            delayed = [inputs[max(t - self.delays[target].get(n, 0), 0), j]
-                       for j, n in enumerate(self.input_names)]
+            n_in = len(self.input_names)
+            delayed = [inputs[max(t - self.delays[target].get(n, 0), 0), j % n_in]
+                       for j, n in enumerate(self._leaves)]
             acc[k] = func(*state, *delayed)
         return acc
 

@@ -33,9 +33,10 @@ def term_contributions(eq: Equation, dataset: Dataset, raw: bool = True) -> list
     values = {}
     for k, name in enumerate(STATE_NAMES):
         values[name] = dataset.arrays.states[idx, k]
-    for j, name in enumerate(eq.input_names):
-        column = dataset.arrays.inputs[idx - delays[name], j]
-        values[name] = column + (dataset.trim.get(name, 0.0) if raw else 0.0)
+    n_in = len(eq.input_names)
+    for j, name in enumerate(eq.leaf_names):  # inputs, then their taps
+        column = dataset.arrays.inputs[idx - delays[name], j % n_in]
+        values[name] = column + (dataset.trim.get(eq.input_names[j % n_in], 0.0) if raw else 0.0)
     target_rms = float(np.sqrt(np.mean(dataset.arrays.acc[idx, target_index(eq.target)] ** 2)))
     rows = []
     for term in sp.Add.make_args(expr):

@@ -19,6 +19,7 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.flight_arrays import FlightArrays
 from gpquad.engine.kernels.quaternion import quat_from_euler, rotation_matrix
+from gpquad.engine.taps import base_input, tap_index, tap_names, taps_of, tile_inputs
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
 from gpquad.engine.tree.operators import CONST
@@ -41,36 +42,60 @@ class Equation:
     candidates: list[dict] = field(default_factory=list)
 
     @property
+    def leaf_names(self) -> tuple[str, ...]:
+        """Names of the input leaves: the inputs, then their taps (gpquad.engine.taps)."""
+        return tap_names(self.input_names, taps_of(len(self.tree.delays), len(self.input_names)))
+
+    @property
     def delays(self) -> dict[str, int]:
-        return {n: int(d) for n, d in zip(self.input_names, self.tree.delays, strict=True)}
+        return {n: int(d) for n, d in zip(self.leaf_names, self.tree.delays, strict=True)}
 
     def used_delays(self) -> dict[str, int]:
-        """Delays of the inputs that appear in the equation."""
+        """Delays of the inputs (and taps) that appear in the equation."""
         used = self.tree.used_inputs()
         return {n: d for i, (n, d) in enumerate(self.delays.items()) if i in used}
 
     def sympy(self) -> sp.Expr:
-        """Simplified sympy expression in the model's variables."""
-        return simplify(to_sympy(self.tree, self.input_names))
+        """Simplified sympy expression in the model's variables (taps of one input at the
+        same delay are one variable: the first of them)."""
+        expr = to_sympy(self.tree, self.leaf_names)
+        first: dict[tuple[str, int], sp.Symbol] = {}
+        reps = {}
+        for name, d in self.delays.items():
+            key = (base_input(name), d)
+            sym = sp.Symbol(name, real=True)
+            if key in first:
+                reps[sym] = first[key]
+            else:
+                first[key] = sym
+        return simplify(expr.xreplace(reps) if reps else expr)
 
     def sympy_raw(self) -> sp.Expr:
         """The same equation in the raw (not trim-subtracted) inputs."""
         expr = self.sympy()
-        reps = {sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(n, 0.0)
-                for n in self.input_names if self.trim.get(n, 0.0)}
+        reps = {sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(base_input(n), 0.0)
+                for n in self.leaf_names if self.trim.get(base_input(n), 0.0)}
         return simplify(expr.xreplace(reps)) if reps else expr
 
     def latex(self, digits: int = 3, raw: bool = False) -> str:
         lhs = TARGET_LATEX[target_index(self.target)]
         expr = self.sympy_raw() if raw else self.sympy()
-        return f"{lhs} = {to_latex(expr, self.delays, self.input_names, digits)}"
+        return f"{lhs} = {to_latex(expr, self.delays, self.leaf_names, digits)}"
+
+    def shown_inputs(self) -> dict[sp.Symbol, sp.Symbol]:
+        """Input symbols -> their display symbols: u_T (t-5), u_R__tap1 at delay 0 -> u_R."""
+        out = {}
+        for n, d in self.delays.items():
+            base = base_input(n)
+            if d or base != n:
+                out[sp.Symbol(n, real=True)] = sp.Symbol(f"{base}(t-{d})" if d else base,
+                                                         real=True)
+        return out
 
     def text(self, digits: int = 3, raw: bool = False) -> str:
         """One line, delayed inputs written u_T(t-5), constants rounded for display."""
         expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits)
-        shown = {sp.Symbol(n, real=True): sp.Symbol(f"{n}(t-{d})", real=True)
-                 for n, d in self.delays.items() if d}
-        return f"{self.target} = {expr.xreplace(shown)}"
+        return f"{self.target} = {expr.xreplace(self.shown_inputs())}"
 
     def summary(self) -> dict:
         """A short JSON record: expression, delays used, training error, size."""
@@ -95,7 +120,8 @@ class Equation:
 
     @classmethod
     def from_dict(cls, target: str, d: dict, input_names, trim) -> Equation:
-        delays = [int(d["delays"].get(n, 0)) for n in input_names]
+        taps = 1 + max((tap_index(n) for n in d["delays"]), default=0)
+        delays = [int(d["delays"].get(n, 0)) for n in tap_names(input_names, taps)]
         tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
         def number(x):
             return np.nan if x is None else float(x)
@@ -236,7 +262,10 @@ class DiscoveredModel:
         from gpquad.engine.kernels.fitness import rollout
 
         capacity = max(e.tree.size for e in self.equations.values())
-        n_in = len(self.input_names)
+        n_in = max(len(e.tree.delays) for e in self.equations.values())  # every tap
+        taps = taps_of(n_in, len(self.input_names))
+        if taps > 1:
+            arrays = arrays._replace(inputs=tile_inputs(arrays.inputs, taps))
         codes = np.zeros((6, capacity), dtype=np.int64)
         values = np.zeros((6, capacity))
         sizes = np.ones(6, dtype=np.int64)
@@ -248,11 +277,12 @@ class DiscoveredModel:
             codes[k, : eq.tree.size] = eq.tree.codes
             values[k, : eq.tree.size] = eq.tree.values
             sizes[k] = eq.tree.size
-            delays[k] = eq.tree.delays
+            delays[k, : len(eq.tree.delays)] = eq.tree.delays
             modelled[k] = True
         if not missing_from_data:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
-        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
+        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(
+            np.tile(input_noise, (1, 1, taps)))  # each tap reads the same perturbed input
         return rollout(codes, values, sizes, delays, modelled, arrays,
                        np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
 

@@ -35,9 +35,7 @@ SCORED_STATES = ("u", "v", "w", "p", "q", "r")
 # ------------------------------------------------------------------ structures
 def _delayed(expr: sp.Expr, eq: Equation) -> sp.Expr:
     """Inputs renamed with their delays (u_T -> u_T(t-5)), so that delays are structure."""
-    reps = {sp.Symbol(n, real=True): sp.Symbol(f"{n}(t-{d})", real=True)
-            for n, d in eq.delays.items() if d}
-    return expr.xreplace(reps)
+    return expr.xreplace(eq.shown_inputs())
 
 
 def terms(eq: Equation) -> list[tuple[str, sp.Expr]]:
@@ -67,7 +65,7 @@ def _short(key: str, width: int = 28) -> str:
 def _equation_latex(eq: Equation, shared: set[str], digits: int = 3) -> str:
     parts = []
     for key, term in terms(eq):
-        tex = to_latex(term, eq.delays, eq.input_names, digits)
+        tex = to_latex(term, eq.delays, eq.leaf_names, digits)
         sign = "-" if tex.startswith("-") else "+"
         body = tex[1:].strip() if sign == "-" else tex
         if key in shared:

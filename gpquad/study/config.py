@@ -10,6 +10,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gpquad.engine.taps import MAX_TAPS
 from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.study.config_names import validate_names
@@ -164,6 +165,10 @@ class EvolutionConfig:
     # full-model rollouts, kept if the validation error drops significantly
     # (gpquad.models.joint_fit).
     joint_fit: bool = False
+    # Not in the paper: taps per input: an equation may read each input at up to this many
+    # evolvable delays, e.g. 110 u_R(t-1) - 70 u_R(t-3) for a lagging motor
+    # (gpquad.engine.taps). 1 = the paper's one delay per input and equation.
+    input_taps: int = 1
 
 
 @dataclass(frozen=True)
@@ -259,6 +264,10 @@ def validate(cfg: Config, source: str = "config") -> Config:
                               field=f"evolution.exclude_leaves[{i}]")
     if not 0.0 <= ev.term_min_gain < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
+    if not 1 <= ev.input_taps <= min(MAX_TAPS, ev.max_delay + 1):
+        raise GpquadError(f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
+                          f"({ev.max_delay + 1}): each tap needs its own delay", source=source,
+                          field="evolution.input_taps")
     if ev.gradient_steps < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
     if ev.linear_seed and ev.constant_fit != "gauss-newton":

@@ -28,6 +28,7 @@ from gpquad.engine.evolve.selection import mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.term_search import best_index, improve_terms
 from gpquad.engine.evolve.windows import WindowSpace, spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
+from gpquad.engine.taps import initial_delays, with_taps
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.tree.random_stream import RandomStream
@@ -68,8 +69,10 @@ SEED_HORIZONS = (2, 10)
 
 
 def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
+    """n_inputs: every tap of every input (gpquad.engine.taps)."""
     return VariationParams(
         n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
+        taps=cfg.input_taps,
         max_depth=cfg.max_depth,
         p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
         const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
@@ -91,7 +94,8 @@ class Coevolution:
     """Coevolutionary identification of one target's equation."""
 
     def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
-        self.dataset = dataset
+        # with input taps, the kernels see every input once per tap (gpquad.engine.taps)
+        self.dataset = dataset = with_taps(dataset, cfg.input_taps)
         self.target = target
         self.cfg = cfg
         self.params = variation_params(cfg, len(dataset.input_names),
@@ -136,8 +140,10 @@ class Coevolution:
                      else range(self.params.n_variables))
         variables = list(variables)
         scales = variable_scales(self.dataset.arrays, variables, self.dataset.train)
-        return linear_seed(variables, len(self.dataset.input_names), scales, fit,
-                           spread(starts, SEED_WINDOWS), steps, cfg.max_depth)
+        delays = np.minimum(initial_delays(len(self.dataset.input_names) // cfg.input_taps,
+                                           cfg.input_taps), cfg.max_delay)
+        return linear_seed(variables, delays, scales, fit, spread(starts, SEED_WINDOWS), steps,
+                           cfg.max_depth)
 
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpquad.engine.taps import base_input
 from gpquad.engine.variables import STATE_NAMES
 
 TRACK_EXPLAINED = 0.3
@@ -60,7 +61,7 @@ def measured_variables(dataset, exclude=(), keep_tracked: bool = False
     if keep_tracked:
         exclude = [n for n in exclude if n not in tracked_states(dataset, exclude)]
     left_out = [i for i, name in enumerate(names)
-                if name in exclude or (name in ("u", "v", "w", "p", "q", "r")
+                if base_input(name) in exclude or (name in ("u", "v", "w", "p", "q", "r")
                                        and dataset.unmeasured(name))]
     if not left_out:
         return None

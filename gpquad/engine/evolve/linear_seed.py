@@ -56,15 +56,16 @@ def variable_scales(arrays, variables, ranges) -> np.ndarray:
 MAX_TERMS = 7
 
 
-def linear_seed(variables, n_inputs: int, scales: np.ndarray, fit, starts, n_steps: int,
+def linear_seed(variables, delays: np.ndarray, scales: np.ndarray, fit, starts, n_steps: int,
                 max_depth: int, max_terms: int = MAX_TERMS) -> Tree | None:
     """The fitted linear climber, or None when no fit is finite.
 
+    delays: the input delays of the seed (zeros; tap k of an input at k, gpquad.engine.taps).
     fit(tree, error, starts, n_steps) -> (tree, error) fits all constants (accepting any
     finite result when error is inf).
     """
     variables = list(variables)
-    delays = np.zeros(n_inputs, dtype=np.int64)
+    delays = np.asarray(delays, dtype=np.int64)
     full, error = fit(linear_tree(variables, np.zeros(len(variables)), 0.0, delays), np.inf,
                       starts, n_steps)
     if not np.isfinite(error):

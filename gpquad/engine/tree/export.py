@@ -13,6 +13,7 @@ import numpy as np
 import sympy as sp
 from sympy.parsing.sympy_parser import parse_expr
 
+from gpquad.engine.taps import MAX_TAPS, base_input, tap_index, tap_name, tap_names
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, OPERATOR_BY_CODE, VAR_BASE
 from gpquad.engine.variables import STATE_LATEX, STATE_NAMES, input_latex, terminal_names
@@ -69,8 +70,8 @@ def round_constants(expr: sp.Expr, digits: int = 3) -> sp.Expr:
 def to_latex(expr: sp.Expr, delays: dict[str, int], input_names, digits: int = 3) -> str:
     """LaTeX of an expression, inputs written with their delays (u_{T-5})."""
     names = {sp.Symbol(n, real=True): STATE_LATEX[i] for i, n in enumerate(STATE_NAMES)}
-    for name in input_names:
-        names[sp.Symbol(name, real=True)] = input_latex(name, delays.get(name, 0))
+    for name in input_names:  # taps (u_R__tap1) are written as their input
+        names[sp.Symbol(name, real=True)] = input_latex(base_input(name), delays.get(name, 0))
     return sp.latex(round_constants(expr, digits), symbol_names=names)
 
 
@@ -79,29 +80,35 @@ def expr_string(expr: sp.Expr) -> str:
     return sp.sstr(expr, full_prec=True)
 
 
-_DELAY_RE = re.compile(r"\b([A-Za-z_][A-Za-z0-9_]*)\s*\(\s*t\s*-\s*(\d+)\s*\)")
+#: A name, with its delay when written name(t-k).
+_NAME_RE = re.compile(r"\b([A-Za-z_][A-Za-z0-9_]*)(?:\s*\(\s*t\s*-\s*(\d+)\s*\))?")
 
 
 def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple[sp.Expr, dict]:
     """Parse '10.3*u_R(t-1) - 4.15*p' into (sympy expr, {'u_R': 1}).
 
-    Inputs may be written name(t-k) for a delay of k samples; each input may carry
-    only one delay per equation. Unknown names are errors.
+    Inputs may be written name(t-k) for a delay of k samples. An input written at several
+    delays (u_R(t-1) - u_R(t-3)) takes one tap per delay (gpquad.engine.taps): the first
+    delay is the input's own symbol, the next ones u_R__tap1, ... Unknown names are errors.
     """
     delays: dict[str, int] = {}
 
-    def strip(match):
-        name, k = match.group(1), int(match.group(2))
+    def leaf(match):
+        name, k = match.group(1), match.group(2)
         if name not in input_names:
-            raise GpquadError(f"'{name}(t-{k})': only inputs {list(input_names)} take a delay",
-                              source=source)
-        if delays.get(name, k) != k:
-            raise GpquadError(f"input {name} appears with two different delays", source=source)
-        delays[name] = k
-        return name
+            if k is not None:
+                raise GpquadError(f"'{name}(t-{k})': only inputs {list(input_names)} take a "
+                                  "delay", source=source)
+            return name
+        k = int(k or 0)
+        for tap in range(MAX_TAPS):
+            if delays.setdefault(tap_name(name, tap), k) == k:
+                return tap_name(name, tap)
+        raise GpquadError(f"input {name} appears with more than {MAX_TAPS} delays",
+                          source=source)
 
-    plain = _DELAY_RE.sub(strip, text)
-    syms = symbols_for(input_names)
+    plain = _NAME_RE.sub(leaf, text)
+    syms = symbols_for(tap_names(input_names, MAX_TAPS))
     # Only numbers and our symbols: any other name (even a sympy function) is an unknown symbol.
     namespace = {"Integer": sp.Integer, "Float": sp.Float, "Rational": sp.Rational,
                  "Symbol": sp.Symbol}
@@ -115,13 +122,15 @@ def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple
     unknown = {str(s) for s in expr.free_symbols} - set(syms)
     if unknown:
         raise GpquadError(f"unknown names {sorted(unknown)} in '{text}'; variables are "
-                          f"{list(syms)}", source=source)
+                          f"{list(terminal_names(input_names))}", source=source)
     return expr, delays
 
 
 def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
-    """Encode a sympy expression of + - * / (integer powers allowed) as a Tree."""
-    index = {name: VAR_BASE + i for i, name in enumerate(terminal_names(input_names))}
+    """Encode a sympy expression of + - * / (integer powers allowed) as a Tree; `delays`
+    may hold taps (u_R__tap1, gpquad.engine.taps), which widen the tree's delay slots."""
+    leaves = tap_names(input_names, 1 + max((tap_index(n) for n in delays), default=0))
+    index = {name: VAR_BASE + i for i, name in enumerate(terminal_names(leaves))}
     codes: list[int] = []
     values: list[float] = []
 
@@ -162,7 +171,7 @@ def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
             raise GpquadError(f"'{e}' uses an operation outside + - * / and integer powers")
 
     emit(sp.sympify(expr))
-    delay_array = np.array([int(delays.get(n, 0)) for n in input_names], dtype=np.int64)
+    delay_array = np.array([int(delays.get(n, 0)) for n in leaves], dtype=np.int64)
     return Tree.from_lists(codes, values, delay_array)
 
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gpquad.engine.taps import initial_delays
 from gpquad.engine.tree.encoding import Tree, node_depths, subtree_end
 from gpquad.engine.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
 from gpquad.engine.tree.random_stream import RandomStream, as_stream
@@ -32,6 +33,8 @@ class VariationParams:
     p_const_perturb: float = 0.5
     p_delay: float = 0.1
     max_delay: int = 5
+    #: Taps per input (gpquad.engine.taps): n_inputs counts every tap of every input.
+    taps: int = 1
 
 
 def random_leaf(rng: RandomStream, params: VariationParams):
@@ -65,12 +68,15 @@ def random_subtree(rng, params: VariationParams, max_depth: int):
 
 
 def random_tree(rng, params: VariationParams) -> Tree:
-    """A new model: a random tree whose root is an operator when depth allows, delays all 0."""
+    """A new model: a random tree whose root is an operator when depth allows; delays 0
+    (tap k of an input at delay k, gpquad.engine.taps.initial_delays)."""
     rng = as_stream(rng)
+    delays = np.minimum(initial_delays(params.n_inputs // params.taps, params.taps),
+                        params.max_delay)
     while True:
         codes, values = random_subtree(rng, params, params.max_depth)
         if len(codes) > 1 or params.max_depth == 0:
-            return Tree.from_lists(codes, values, np.zeros(params.n_inputs, dtype=np.int64))
+            return Tree.from_lists(codes, values, delays)
 
 
 def macro_mutation(rng, codes, values, params: VariationParams):

@@ -1,0 +1,73 @@
+"""Input taps: an equation may read one input at several delays (`evolution.input_taps`).
+
+The paper gives each input one evolvable delay per equation. A vehicle whose moments lag
+its commands (a motor time constant of two samples, a filtered log) is a low-order filter
+of the input history, which one delayed sample cannot express but a few can:
+p_dot = 110 u_R(t-1) - 70 u_R(t-3) - 40 p. With K taps every input appears K times among
+the leaves, each copy ("tap") with its own evolvable delay; the kernels see K copies of
+the input columns (`tile_inputs`), so nothing in them changes. Tap 0 keeps the input's own
+name; tap k >= 1 is named `<input>__tap<k>` inside the engine and in model.json's
+"delays", and is written `<input>(t-d)` in every equation text, like tap 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+
+#: Taps an equation may have per input (config bound).
+MAX_TAPS = 4
+_TAP = "__tap"
+_TAP_RE = re.compile(r"^(.*)__tap(\d+)$")
+
+
+def tap_name(name: str, k: int) -> str:
+    """The leaf name of tap k of input `name` (tap 0 is the input itself)."""
+    return name if k == 0 else f"{name}{_TAP}{k}"
+
+
+def tap_names(input_names, taps: int) -> tuple[str, ...]:
+    """Leaf names of `taps` taps of every input: all inputs' tap 0, then tap 1, ..."""
+    return tuple(tap_name(n, k) for k in range(taps) for n in input_names)
+
+
+def base_input(name: str) -> str:
+    """The input a tap reads: u_R__tap2 -> u_R (other names unchanged)."""
+    m = _TAP_RE.match(name)
+    return m.group(1) if m else name
+
+
+def tap_index(name: str) -> int:
+    """k of a tap name (0 for a plain name)."""
+    m = _TAP_RE.match(name)
+    return int(m.group(2)) if m else 0
+
+
+def taps_of(n_delays: int, n_inputs: int) -> int:
+    """Taps of a tree with `n_delays` delay slots over `n_inputs` inputs."""
+    return max(1, n_delays // n_inputs) if n_inputs else 1
+
+
+def tile_inputs(inputs: np.ndarray, taps: int) -> np.ndarray:
+    """(N, taps * n_inputs): the input columns repeated, one block per tap."""
+    if taps == 1:
+        return inputs
+    return np.ascontiguousarray(np.tile(inputs, (1, taps)))
+
+
+def with_taps(dataset, taps: int):
+    """The dataset as the engine's kernels see it: inputs tiled, tap names."""
+    if taps == 1:
+        return dataset
+    arrays = dataset.arrays._replace(inputs=tile_inputs(dataset.arrays.inputs, taps))
+    trim = {tap_name(n, k): v for k in range(taps) for n, v in dataset.trim.items()}
+    return dataclasses.replace(dataset, arrays=arrays,
+                               input_names=tap_names(dataset.input_names, taps), trim=trim)
+
+
+def initial_delays(n_inputs: int, taps: int) -> np.ndarray:
+    """Delays of a fresh tree: tap k of every input at delay k (0, 1, 2, ...), so that
+    the taps start as distinct samples of the input history; evolution moves them."""
+    return np.repeat(np.arange(taps, dtype=np.int64), n_inputs)
