@@ -1,0 +1,152 @@
+"""Input taps (evolution.input_taps): one input at several delays in one equation.
+
+The truth used end to end is a lagging roll loop p_dot = -3 p + 20 u_R(t-1) - 12 u_R(t-3):
+a one-delay-per-input equation cannot express it, a two-tap equation can, exactly.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gpquad.control.plant import model_plant
+from gpquad.data.dataset import build_dataset
+from gpquad.data.simulator import simulate
+from gpquad.engine.evolve.leaves import measured_variables
+from gpquad.engine.taps import (
+    base_input,
+    initial_delays,
+    tap_index,
+    tap_names,
+    taps_of,
+    tile_inputs,
+    with_taps,
+)
+from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.errors import GpquadError
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.study.config import Config, EvolutionConfig, SimulatorConfig, validate
+from gpquad.study.runner import identify
+
+INPUTS = ("u_P", "u_R", "u_Y", "u_T")
+LAGGING = "-3.0*p + 20.0*u_R(t-1) - 12.0*u_R(t-3)"
+
+
+def _equation(text: str, target: str = "p_dot") -> Equation:
+    expr, delays = parse_equation(text, INPUTS)
+    return Equation(target, from_sympy(expr, delays, INPUTS), INPUTS, 0.0, 0.0)
+
+
+def test_tap_names_and_tiling():
+    assert tap_names(("a", "b"), 3) == ("a", "b", "a__tap1", "b__tap1", "a__tap2", "b__tap2")
+    assert [base_input(n) for n in tap_names(("u_R",), 3)] == ["u_R"] * 3
+    assert [tap_index(n) for n in tap_names(("u_R",), 3)] == [0, 1, 2]
+    assert base_input("u__tap") == "u__tap" and tap_index("u_T") == 0
+    assert taps_of(12, 4) == 3 and taps_of(4, 4) == 1 and taps_of(0, 0) == 1
+    x = np.arange(6.0).reshape(3, 2)
+    tiled = tile_inputs(x, 3)
+    assert tiled.shape == (3, 6)
+    assert all(np.array_equal(tiled[:, 2 * k:2 * k + 2], x) for k in range(3))
+    assert tile_inputs(x, 1) is x
+    assert initial_delays(2, 3).tolist() == [0, 0, 1, 1, 2, 2]
+
+
+def test_an_input_at_several_delays_parses_and_prints_back():
+    eq = _equation(LAGGING)
+    assert eq.leaf_names == tap_names(INPUTS, 2)
+    assert eq.delays["u_R"] == 1 and eq.delays["u_R__tap1"] == 3
+    assert eq.text() == "p_dot = -3.0*p + 20.0*u_R(t-1) - 12.0*u_R(t-3)"
+    # the printed text parses to the same tree
+    again = _equation(eq.text().split(" = ", 1)[1])
+    assert np.array_equal(again.tree.codes, eq.tree.codes)
+    assert np.array_equal(again.tree.delays, eq.tree.delays)
+    assert r"u_{R-3}" in eq.latex()
+    # a plain input next to a delayed one is a tap at delay 0
+    eq0 = _equation("2.0*u_R - u_R(t-2)")
+    assert eq0.text() == "p_dot = 2.0*u_R - 1.0*u_R(t-2)"
+    with pytest.raises(GpquadError, match="more than 4 delays"):
+        parse_equation("u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4)", INPUTS)
+
+
+def test_taps_at_the_same_delay_are_one_variable():
+    eq = _equation(LAGGING)
+    delays = eq.tree.delays.copy()
+    delays[len(INPUTS) + 1] = 1  # the tap moves onto the input's own delay
+    merged = dataclasses.replace(eq, tree=dataclasses.replace(eq.tree, delays=delays))
+    assert merged.text() == "p_dot = -3.0*p + 8.0*u_R(t-1)"
+
+
+def test_tapped_model_round_trips_through_model_json_and_flies_like_numpy():
+    eq = _equation(LAGGING)
+    model = DiscoveredModel({"p_dot": eq}, INPUTS, {}, 0.04, 1, {})
+    back = DiscoveredModel.from_dict(model.to_dict())
+    assert back.text() == model.text()
+    assert np.array_equal(back.equations["p_dot"].tree.delays, eq.tree.delays)
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(60, 4))
+    flown = back.fly(u).rates[:, 0]
+    # plain-numpy reference: Euler on p, inputs before the first row held at the first row
+    p = np.zeros(60)
+    for k in range(59):
+        u1, u3 = u[max(k - 1, 0), 1], u[max(k - 3, 0), 1]
+        p[k + 1] = p[k] + 0.04 * (-3.0 * p[k] + 20.0 * u1 - 12.0 * u3)
+    np.testing.assert_allclose(flown, p, rtol=1e-12, atol=1e-12)
+
+
+def test_untapped_models_keep_the_paper_layout():
+    eq = _equation("-4.15*p + 10.3*u_R(t-1)")
+    assert eq.leaf_names == INPUTS
+    assert eq.to_dict()["delays"] == {"u_P": 0, "u_R": 1, "u_Y": 0, "u_T": 0}
+
+
+def test_config_bounds_on_input_taps():
+    with pytest.raises(GpquadError, match="input_taps"):
+        validate(Config(evolution=EvolutionConfig(input_taps=0)))
+    with pytest.raises(GpquadError, match=r"max_delay \+ 1 \(2\)"):
+        validate(Config(evolution=EvolutionConfig(input_taps=3, max_delay=1)))
+    validate(Config(evolution=EvolutionConfig(input_taps=4)))
+
+
+def test_control_design_refuses_a_tapped_model():
+    model = DiscoveredModel({"p_dot": _equation(LAGGING)}, INPUTS, {}, 0.04, 1, {})
+    with pytest.raises(GpquadError, match="input_taps"):
+        model_plant(model)
+
+
+@pytest.fixture(scope="module")
+def lagging_dataset():
+    sim = SimulatorConfig(duration_s=120.0, seed=4)
+    sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": LAGGING})
+    return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")
+
+
+def test_excluded_inputs_stay_out_with_every_tap(lagging_dataset):
+    tapped = with_taps(lagging_dataset, 2)
+    allowed = measured_variables(tapped, ("u_T",))
+    names = ("phi", "theta", "psi", "u", "v", "w", "p", "q", "r") + tapped.input_names
+    assert {names[i] for i in allowed} >= {"u_R", "u_R__tap1"}
+    assert not {"u_T", "u_T__tap1"} & {names[i] for i in allowed}
+
+
+def _identify(dataset, taps: int) -> Equation:
+    ev = EvolutionConfig(targets=("p_dot",), iterations=2, n_models=4, n_tests=4,
+                         suite_size=4, window_steps=100, test_offset_max=50,
+                         local_search="delays+constants", constant_fit="gauss-newton",
+                         linear_seed=True, final_selection="bic", input_taps=taps,
+                         exclude_leaves=("psi",))
+    return identify(dataset, "p_dot", Config(seed=2, evolution=ev))[0]
+
+
+def test_two_taps_recover_a_lagging_loop_that_one_delay_cannot(lagging_dataset):
+    one = _identify(lagging_dataset, 1)
+    two = _identify(lagging_dataset, 2)
+    used = two.used_delays()
+    assert sorted(d for n, d in used.items() if base_input(n) == "u_R") == [1, 3]
+    terms = {str(k): float(v) for k, v in two.sympy().as_coefficients_dict().items()}
+    r1 = next(n for n, d in used.items() if d == 1)
+    r3 = next(n for n, d in used.items() if d == 3)
+    assert terms[r1] == pytest.approx(20.0, rel=1e-3)
+    assert terms[r3] == pytest.approx(-12.0, rel=1e-3)
+    assert terms["p"] == pytest.approx(-3.0, rel=1e-3)
+    # one delay per input cannot fly the lag: its validation error is far larger
+    assert one.validation_error > 1e3 * two.validation_error
