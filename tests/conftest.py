@@ -42,3 +42,11 @@ def median_dataset(median_flight):
     cfg = Config(data=DataConfig(trim="mean"))
     return build_dataset([median_flight], validation_fraction=cfg.data.validation_fraction,
                          trim="mean")
+
+
+def truth_dataset(equations: dict[str, str], duration_s: float, seed: int):
+    """A dataset of the reference simulator with some of its equations replaced (raw
+    inputs, no trim, the last 20 % for validation)."""
+    sim = SimulatorConfig(duration_s=duration_s, seed=seed)
+    sim = dataclasses.replace(sim, equations={**sim.equations, **equations})
+    return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")

@@ -10,11 +10,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import truth_dataset
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gpquad.data.dataset import build_dataset
-from gpquad.data.simulator import simulate
 from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants, gauss_newton_constants
@@ -27,7 +26,7 @@ from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import random_tree
 from gpquad.errors import GpquadError
-from gpquad.study.config import Config, EvolutionConfig, SimulatorConfig, validate
+from gpquad.study.config import Config, EvolutionConfig, validate
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 STIFF = "544.0*(u_R - phi) - 46.6*p"
@@ -35,9 +34,7 @@ STIFF = "544.0*(u_R - phi) - 46.6*p"
 
 @pytest.fixture(scope="module")
 def stiff_dataset():
-    sim = SimulatorConfig(duration_s=90.0, seed=3)
-    sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": STIFF})
-    return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")
+    return truth_dataset({"p_dot": STIFF}, duration_s=90.0, seed=3)
 
 
 def _tree(text):

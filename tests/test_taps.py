@@ -8,10 +8,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import truth_dataset
 
 from gpquad.control.plant import model_plant
-from gpquad.data.dataset import build_dataset
-from gpquad.data.simulator import simulate
 from gpquad.engine.evolve.leaves import measured_variables
 from gpquad.engine.taps import (
     base_input,
@@ -25,7 +24,7 @@ from gpquad.engine.taps import (
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.study.config import Config, EvolutionConfig, SimulatorConfig, validate
+from gpquad.study.config import Config, EvolutionConfig, validate
 from gpquad.study.runner import identify
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
@@ -115,9 +114,7 @@ def test_control_design_refuses_a_tapped_model():
 
 @pytest.fixture(scope="module")
 def lagging_dataset():
-    sim = SimulatorConfig(duration_s=120.0, seed=4)
-    sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": LAGGING})
-    return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")
+    return truth_dataset({"p_dot": LAGGING}, duration_s=120.0, seed=4)
 
 
 def test_excluded_inputs_stay_out_with_every_tap(lagging_dataset):
