@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_engine import tiny_config
 
 from gpquad.data.dataset import build_dataset
@@ -207,3 +209,24 @@ def test_constants_that_only_act_together_are_held_fixed():
     assert {2, 3} & set(free.tolist()) and not {2, 3} <= set(free.tolist())
     assert identifiable(x).tolist() == [0, 1, 2]
     assert identifiable(np.column_stack([np.zeros(50), x[:, 0]])).tolist() == [1]
+
+
+@settings(max_examples=60)
+@given(st.integers(0, 2 ** 31 - 1), st.integers(1, 9), st.floats(-16, 0))
+def test_identifiable_shortcut_gives_the_pivoted_qr_answer(seed, n, log_gap):
+    """The Gram-matrix shortcut of `identifiable` (well-conditioned: every column) against
+    the pivoted QR alone, on random Jacobians with a column made nearly dependent by
+    10**log_gap (from exact copies to independent)."""
+    from scipy.linalg import qr
+
+    from gpquad.engine.evolve.gradient_fit import IDENTIFIABLE_RTOL, identifiable
+
+    rng = np.random.default_rng(seed)
+    jac = rng.standard_normal((200, n)) * rng.uniform(0.1, 10.0, n)
+    if n > 1:
+        jac[:, -1] = jac[:, 0] * 3.0 + 10.0 ** log_gap * rng.standard_normal(200)
+    unit = jac / np.sqrt((jac * jac).sum(axis=0))
+    _, r, piv = qr(unit, mode="economic", pivoting=True)
+    diag = np.abs(np.diag(r))
+    reference = np.sort(piv[: int(np.count_nonzero(diag > IDENTIFIABLE_RTOL * diag[0]))])
+    assert identifiable(jac).tolist() == reference.tolist()

@@ -12,6 +12,7 @@ from conftest import truth_dataset
 
 from gpquad.control.plant import model_plant
 from gpquad.engine.evolve.leaves import measured_variables
+from gpquad.engine.evolve.term_search import term_candidates
 from gpquad.engine.taps import (
     base_input,
     initial_delays,
@@ -21,6 +22,7 @@ from gpquad.engine.taps import (
     tile_inputs,
     with_taps,
 )
+from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
@@ -147,3 +149,37 @@ def test_two_taps_recover_a_lagging_loop_that_one_delay_cannot(lagging_dataset):
     assert terms["p"] == pytest.approx(-3.0, rel=1e-3)
     # one delay per input cannot fly the lag: its validation error is far larger
     assert one.validation_error > 1e3 * two.validation_error
+
+
+def test_an_equation_reading_one_tap_takes_the_papers_layout():
+    # r_dot = 2 u_Y(t-2) read through tap 2 of u_Y (the others unread, at other delays)
+    codes = [2, 4, 5 + 9 + 2 * 4 + 2]  # MUL CONST u_Y__tap2
+    tree = Tree.from_lists(codes, [0.0, 2.0, 0.0], [0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2])
+    eq = Equation("r_dot", tree, INPUTS, 0.0, 0.0)
+    assert eq.text() == "r_dot = 2.0*u_Y(t-2)"
+    assert eq.used_delays() == {"u_Y": 2}
+    assert eq.tree.codes.tolist() == [2, 4, 5 + 9 + 2]
+    # the same function: the relabelled tree flies as the original
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(40, 4))
+    raw = DiscoveredModel({"r_dot": eq}, INPUTS, {}, 0.04, 1, {})
+    ref = _equation("2.0*u_Y(t-2)", "r_dot")
+    np.testing.assert_array_equal(raw.fly(u).rates,
+                                  DiscoveredModel({"r_dot": ref}, INPUTS, {}, 0.04, 1, {})
+                                  .fly(u).rates)
+
+
+def test_taps_enter_term_insertion_alone_or_beside_their_own_input():
+    n_in, taps = 4, 4
+    variables = [0, 1, 3, 4, 5, 6, 7, 8] + list(range(9, 9 + n_in * taps))
+    extra = {9 + k * n_in + j: 9 + j for k in range(1, taps) for j in range(n_in)}
+    model = Tree.from_lists([4], [0.0], np.zeros(n_in * taps, dtype=np.int64))
+    restricted = term_candidates(model, variables, 5, None, extra)
+    assert len(restricted) == 192 and len(term_candidates(model, variables, 5)) == 600
+    for cand in restricted:
+        leaves = [int(c) - 5 for c in cand.codes if c >= 5]
+        tapped = [v for v in leaves if v in extra]
+        if len(leaves) == 2 and tapped:  # a product or a pair with a tap
+            a, b = leaves
+            assert cand.codes.tolist().count(2) == 2  # two terms, not one product
+            assert extra.get(a, a) == extra.get(b, b)

@@ -17,6 +17,10 @@ import re
 
 import numpy as np
 
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.operators import VAR_BASE
+from gpquad.engine.variables import N_STATE
+
 #: Taps an equation may have per input (config bound).
 MAX_TAPS = 4
 _TAP = "__tap"
@@ -71,3 +75,33 @@ def initial_delays(n_inputs: int, taps: int) -> np.ndarray:
     """Delays of a fresh tree: tap k of every input at delay k (0, 1, 2, ...), so that
     the taps start as distinct samples of the input history; evolution moves them."""
     return np.repeat(np.arange(taps, dtype=np.int64), n_inputs)
+
+
+def canonical_taps(tree, n_inputs: int):
+    """The same equation with its taps renumbered: for each input, the taps the tree reads
+    come first, in ascending delay (tap 0 = the smallest delay), then the unread ones.
+
+    Evolution may leave an equation reading only tap 2 of u_Y; renumbered, it reads u_Y
+    itself, so a one-delay equation has the paper's layout whatever the taps, and two
+    equations with the same terms have the same tree slots. Exact (a relabelling)."""
+    n_slots = len(tree.delays)
+    taps = taps_of(n_slots, n_inputs)
+    if taps == 1:
+        return tree
+    codes = np.asarray(tree.codes)
+    used = {int(c) - VAR_BASE - N_STATE for c in codes if c >= VAR_BASE + N_STATE}
+    new_slot = np.arange(n_slots)
+    for j in range(n_inputs):
+        slots = [k * n_inputs + j for k in range(taps)]
+        order = sorted(slots, key=lambda s: (s not in used, tree.delays[s] if s in used else 0,
+                                             s))
+        for k, s in enumerate(order):
+            new_slot[s] = k * n_inputs + j
+    if np.array_equal(new_slot, np.arange(n_slots)):
+        return tree
+    new_codes = codes.copy()
+    leaf = codes >= VAR_BASE + N_STATE
+    new_codes[leaf] = VAR_BASE + N_STATE + new_slot[codes[leaf] - VAR_BASE - N_STATE]
+    delays = np.empty(n_slots, dtype=np.int64)
+    delays[new_slot] = tree.delays
+    return Tree(new_codes, tree.values, delays)

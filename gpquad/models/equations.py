@@ -19,7 +19,14 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.flight_arrays import FlightArrays
 from gpquad.engine.kernels.quaternion import quat_from_euler, rotation_matrix
-from gpquad.engine.taps import base_input, tap_index, tap_names, taps_of, tile_inputs
+from gpquad.engine.taps import (
+    base_input,
+    canonical_taps,
+    tap_index,
+    tap_names,
+    taps_of,
+    tile_inputs,
+)
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
 from gpquad.engine.tree.operators import CONST
@@ -40,6 +47,10 @@ class Equation:
     trim: dict[str, float] = field(default_factory=dict)
     #: Simpler or other alternatives: the run's size/error Pareto front, as JSON records.
     candidates: list[dict] = field(default_factory=list)
+
+    def __post_init__(self):
+        # taps in a canonical order: the read ones first, by delay (gpquad.engine.taps)
+        self.tree = canonical_taps(self.tree, len(self.input_names))
 
     @property
     def leaf_names(self) -> tuple[str, ...]:

@@ -274,7 +274,13 @@ class Coevolution:
             self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
             self.params.variables if self.params.variables is not None
             else self.params.n_variables, cfg.max_depth, cfg.term_min_gain,
-            self.regain_fitter(max(cfg.gradient_steps // 4, 1)))
+            self.regain_fitter(max(cfg.gradient_steps // 4, 1)), self.extra_taps())
+
+    def extra_taps(self) -> dict[int, int]:
+        """Variable index of every input tap k >= 1 -> the variable of its input (tap 0)."""
+        n_in = self.params.n_inputs // self.params.taps
+        return {N_STATE + k * n_in + j: N_STATE + j
+                for k in range(1, self.params.taps) for j in range(n_in)}
 
     def regain_fitter(self, steps: int, ev: Evaluator | None = None):
         """The LM fit with a growing horizon (SEED_HORIZONS unless fit_horizons is set),
