@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 from conftest import truth_dataset
 
+from gpquad.control.pid_kernel import plant_accelerations
 from gpquad.control.plant import model_plant
 from gpquad.engine.evolve.leaves import measured_variables
 from gpquad.engine.evolve.term_search import term_candidates
+from gpquad.engine.kernels.tree_eval import STACK_ROWS
 from gpquad.engine.taps import (
     base_input,
     initial_delays,
@@ -108,10 +110,23 @@ def test_config_bounds_on_input_taps():
     validate(Config(evolution=EvolutionConfig(input_taps=4)))
 
 
-def test_control_design_refuses_a_tapped_model():
-    model = DiscoveredModel({"p_dot": _equation(LAGGING)}, INPUTS, {}, 0.04, 1, {})
-    with pytest.raises(GpquadError, match="input_taps"):
-        model_plant(model)
+def test_control_plant_reads_every_tap():
+    model = DiscoveredModel({"p_dot": _equation(LAGGING)}, INPUTS, {"u_R": 0.5}, 0.04, 1, {})
+    for form in ("simplified", "tree"):
+        plant = model_plant(model, form)
+        assert plant.delays.shape == (6, 8)
+        state = np.zeros(9)
+        state[6] = 0.2
+        # inputs held: 20 u - 12 u = 8 (u_R - trim)
+        acc = plant.accelerations(state, np.array([0.0, 1.5, 0.0, 0.0]))
+        assert acc[3] == pytest.approx(-3.0 * 0.2 + 8.0 * 1.0, rel=1e-12)
+        # a varying history against numpy: -3 p + 20 (u(t-1) - trim) - 12 (u(t-3) - trim)
+        history = np.zeros((6, 4))
+        history[:, 1] = [0.1, 0.7, -0.4, 0.9, 0.3, -0.2]
+        out = np.empty(6)
+        plant_accelerations(*plant.arrays()[:5], state, history, 5, out, np.empty((17, 1)),
+                            np.empty((STACK_ROWS, 1)), np.empty(1))
+        assert out[3] == pytest.approx(-0.6 + 20.0 * (0.3 - 0.5) - 12.0 * (-0.4 - 0.5))
 
 
 @pytest.fixture(scope="module")

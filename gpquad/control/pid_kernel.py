@@ -41,13 +41,16 @@ N_GAINS = 13
 def plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc, features,
                         stack, pred):
     """acc (6,) from state (9,) and history (rows, n_in) of raw applied inputs; row is the
-    current step's row (the delayed input of delay d is history[row - d])."""
+    current step's row (the delayed input of delay d is history[row - d]). delays (6, K n_in)
+    may hold K taps per input (gpquad.engine.taps): slot s reads input s % n_in; features
+    has 9 + K n_in rows."""
     n_in = trim.shape[0]
     for i in range(9):
         features[i, 0] = state[i]
     for t in range(6):
-        for j in range(n_in):
-            features[9 + j, 0] = history[row - delays[t, j], j] - trim[j]
+        for s in range(delays.shape[1]):
+            j = s % n_in
+            features[9 + s, 0] = history[row - delays[t, s], j] - trim[j]
         eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
         acc[t] = pred[0]
 
@@ -61,7 +64,8 @@ def constant_input_accelerations(codes, values, sizes, delays, trim, state, inpu
         hist[r] = inputs
     acc = np.empty(6)
     plant_accelerations(codes, values, sizes, delays, trim, state, hist, hist.shape[0] - 1, acc,
-                        np.empty((9 + n_in, 1)), np.empty((STACK_ROWS, 1)), np.empty(1))
+                        np.empty((9 + delays.shape[1], 1)), np.empty((STACK_ROWS, 1)),
+                        np.empty(1))
     return acc
 
 
@@ -119,7 +123,7 @@ def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale,
     cmd = np.empty(4)
     integral = np.zeros(1)
     state = np.empty(9)
-    features = np.empty((9 + n_in, 1))
+    features = np.empty((9 + delays.shape[1], 1))
     stack = np.empty((STACK_ROWS, 1))
     pred = np.empty(1)
     wp = 0

@@ -28,7 +28,8 @@ AXIS_TARGET = {"roll": "p_dot", "pitch": "q_dot", "yaw": "r_dot", "thrust": "a_z
 
 @dataclass
 class Plant:
-    """codes (6, M), values (6, M), sizes (6,), delays (6, n_in), trim (n_in,), dt (s)."""
+    """codes (6, M), values (6, M), sizes (6,), delays (6, K n_in) for K taps per input,
+    trim (n_in,), dt (s)."""
 
     name: str
     input_names: tuple[str, ...]
@@ -50,19 +51,20 @@ class Plant:
 
 
 def plant_from_trees(name: str, trees: dict[str, Tree], input_names, trim, dt: float) -> Plant:
-    """A plant of one tree per target; a target without a tree has zero acceleration."""
-    n_in = len(input_names)
+    """A plant of one tree per target; a target without a tree has zero acceleration.
+    Trees may read several taps of an input (gpquad.engine.taps)."""
+    slots = max([len(input_names)] + [len(t.delays) for t in trees.values()])  # every tap
     capacity = max([t.size for t in trees.values()] + [1])
     codes = np.full((6, capacity), CONST, dtype=np.int64)
     values = np.zeros((6, capacity))
     sizes = np.ones(6, dtype=np.int64)
-    delays = np.zeros((6, n_in), dtype=np.int64)
+    delays = np.zeros((6, slots), dtype=np.int64)
     for target, tree in trees.items():
         k = target_index(target)
         codes[k, : tree.size] = tree.codes
         values[k, : tree.size] = tree.values
         sizes[k] = tree.size
-        delays[k] = tree.delays
+        delays[k, : len(tree.delays)] = tree.delays
     return Plant(name, tuple(input_names), codes, values, sizes, delays,
                  np.asarray(trim, dtype=float), float(dt))
 
@@ -76,11 +78,6 @@ def model_plant(model, form: str = "simplified") -> Plant:
     zero: the quickstart's q_dot tree (-100.85 / (34.02 / u_P) - q) / 0.3025 is
     -3.31 q - 9.80 u_P as an equation, but the tree gives q_dot = -333 rad/s^2 whenever
     |u_P - trim| < 1e-6, which noise around hover hits now and then."""
-    tapped = [t for t, e in model.equations.items() if len(e.leaf_names) > len(e.input_names)]
-    if tapped:
-        raise GpquadError(f"equations {tapped} read an input at several delays (input_taps > 1);"
-                          " control design takes one delay per input: identify the model "
-                          "with evolution.input_taps = 1", field="evolution.input_taps")
     if form == "tree":
         trees = {t: e.tree for t, e in model.equations.items()}
     else:
