@@ -51,7 +51,8 @@ def test_tap_names_and_tiling():
     assert tiled.shape == (3, 6)
     assert all(np.array_equal(tiled[:, 2 * k:2 * k + 2], x) for k in range(3))
     assert tile_inputs(x, 1) is x
-    assert initial_delays(2, 3).tolist() == [0, 0, 1, 1, 2, 2]
+    assert initial_delays(2, 3, 5).tolist() == [0, 0, 1, 1, 2, 2]
+    assert initial_delays(1, 3, 1).tolist() == [0, 1, 1]  # clipped at max_delay
 
 
 def test_an_input_at_several_delays_parses_and_prints_back():

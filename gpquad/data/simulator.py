@@ -14,7 +14,7 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.integrator import integrate_step
 from gpquad.engine.kernels.quaternion import euler_from_quat, quat_mul
-from gpquad.engine.taps import MAX_TAPS, tap_names
+from gpquad.engine.taps import tap_index, tap_names
 from gpquad.engine.tree.export import parse_equation, symbols_for
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, terminal_names
 from gpquad.errors import GpquadError
@@ -28,10 +28,6 @@ class TruthModel:
         self.input_names = tuple(input_names)
         self.exprs: dict[str, sp.Expr] = {}
         self.delays: dict[str, dict[str, int]] = {}
-        # an input written at several delays is one leaf per delay (gpquad.engine.taps)
-        self._leaves = tap_names(self.input_names, MAX_TAPS)
-        syms = list(symbols_for(self._leaves).values())
-        self._funcs = {}
         for target, text in equations.items():
             if target not in TARGET_NAMES:
                 raise GpquadError(f"unknown target '{target}'", field="simulator.equations")
@@ -39,17 +35,21 @@ class TruthModel:
                                           source=f"simulator.equations.{target}")
             self.exprs[target] = expr
             self.delays[target] = delays
-            self._funcs[target] = sp.lambdify(syms, expr, "math")
+        # an input written at several delays is one leaf per delay (gpquad.engine.taps)
+        taps = 1 + max((tap_index(n) for d in self.delays.values() for n in d), default=0)
+        self._leaves = tap_names(self.input_names, taps)
+        syms = list(symbols_for(self._leaves).values())
+        self._funcs = {t: sp.lambdify(syms, e, "math") for t, e in self.exprs.items()}
         self.max_delay = max([d for ds in self.delays.values() for d in ds.values()] + [0])
 
     def accelerations(self, state: np.ndarray, inputs: np.ndarray, t: int) -> np.ndarray:
         """The six accelerations at step t; state (9,), inputs (N, n_inputs) whole record."""
         acc = np.zeros(6)
+        n_in = len(self.input_names)
         for k, target in enumerate(TARGET_NAMES):
             func = self._funcs.get(target)
             if func is None:
                 continue
-            n_in = len(self.input_names)
             delayed = [inputs[max(t - self.delays[target].get(n, 0), 0), j % n_in]
                        for j, n in enumerate(self._leaves)]
             acc[k] = func(*state, *delayed)

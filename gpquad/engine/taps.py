@@ -4,8 +4,9 @@ The paper gives each input one evolvable delay per equation. A vehicle whose mom
 its commands (a motor time constant of two samples, a filtered log) is a low-order filter
 of the input history, which one delayed sample cannot express but a few can:
 p_dot = 110 u_R(t-1) - 70 u_R(t-3) - 40 p. With K taps every input appears K times among
-the leaves, each copy ("tap") with its own evolvable delay; the kernels see K copies of
-the input columns (`tile_inputs`), so nothing in them changes. Tap 0 keeps the input's own
+the leaves, each copy ("tap") with its own evolvable delay. The search's kernels see K
+copies of the input columns (`with_taps`, once per run); the rollout and PID kernels read
+leaf slot j from input column j % n_inputs. Tap 0 keeps the input's own
 name; tap k >= 1 is named `<input>__tap<k>` inside the engine and in model.json's
 "delays", and is written `<input>(t-d)` in every equation text, like tap 0.
 """
@@ -71,10 +72,10 @@ def with_taps(dataset, taps: int):
                                input_names=tap_names(dataset.input_names, taps), trim=trim)
 
 
-def initial_delays(n_inputs: int, taps: int) -> np.ndarray:
-    """Delays of a fresh tree: tap k of every input at delay k (0, 1, 2, ...), so that
+def initial_delays(n_inputs: int, taps: int, max_delay: int) -> np.ndarray:
+    """Delays of a fresh tree: tap k of every input at delay min(k, max_delay), so that
     the taps start as distinct samples of the input history; evolution moves them."""
-    return np.repeat(np.arange(taps, dtype=np.int64), n_inputs)
+    return np.minimum(np.repeat(np.arange(taps, dtype=np.int64), n_inputs), max_delay)
 
 
 def canonical_taps(tree, n_inputs: int):

@@ -25,7 +25,6 @@ from gpquad.engine.taps import (
     tap_index,
     tap_names,
     taps_of,
-    tile_inputs,
 )
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
@@ -274,9 +273,6 @@ class DiscoveredModel:
 
         capacity = max(e.tree.size for e in self.equations.values())
         n_in = max(len(e.tree.delays) for e in self.equations.values())  # every tap
-        taps = taps_of(n_in, len(self.input_names))
-        if taps > 1:
-            arrays = arrays._replace(inputs=tile_inputs(arrays.inputs, taps))
         codes = np.zeros((6, capacity), dtype=np.int64)
         values = np.zeros((6, capacity))
         sizes = np.ones(6, dtype=np.int64)
@@ -292,8 +288,7 @@ class DiscoveredModel:
             modelled[k] = True
         if not missing_from_data:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
-        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(
-            np.tile(input_noise, (1, 1, taps)))  # each tap reads the same perturbed input
+        noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
         return rollout(codes, values, sizes, delays, modelled, arrays,
                        np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
 

@@ -140,8 +140,8 @@ class Coevolution:
                      else range(self.params.n_variables))
         variables = list(variables)
         scales = variable_scales(self.dataset.arrays, variables, self.dataset.train)
-        delays = np.minimum(initial_delays(len(self.dataset.input_names) // cfg.input_taps,
-                                           cfg.input_taps), cfg.max_delay)
+        delays = initial_delays(len(self.dataset.input_names) // cfg.input_taps, cfg.input_taps,
+                                cfg.max_delay)
         return linear_seed(variables, delays, scales, fit, spread(starts, SEED_WINDOWS), steps,
                            cfg.max_depth)
 

@@ -209,7 +209,8 @@ def population_window_errors(codes, values, sizes, delays, target, flight, start
 def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, input_noise):
     """Fly a full model: integrate every state from each window start, all six accelerations.
 
-    codes (6, M), values (6, M), sizes (6,), delays (6, n_inputs): one tree per target;
+    codes (6, M), values (6, M), sizes (6,), delays (6, K n_inputs): one tree per target,
+    K taps per input (gpquad.engine.taps; leaf slot j reads input j % n_inputs);
     modelled (6,) bool: use the tree for this target, else the data's acceleration.
     input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
     Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
@@ -217,9 +218,10 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
+    n_slots = delays.shape[1]
     noisy = input_noise.shape[0] > 0
     out = np.empty((n, n_steps + 1, 9))
-    features = np.empty((9 + n_in, 1))
+    features = np.empty((9 + n_slots, 1))
     stack = np.empty((STACK_ROWS, 1))
     pred = np.empty(1)
     a = np.empty(6)
@@ -242,10 +244,11 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
             for t in range(6):
                 a[t] = acc[idx, t]
                 if modelled[t]:
-                    for j in range(n_in):
-                        u = inputs[idx - delays[t, j], j]
+                    for j in range(n_slots):
+                        c = j % n_in
+                        u = inputs[idx - delays[t, j], c]
                         if noisy and k - delays[t, j] >= 0:
-                            u += input_noise[lane, k - delays[t, j], j]
+                            u += input_noise[lane, k - delays[t, j], c]
                         features[9 + j, 0] = u
                     eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
                     a[t] = pred[0]

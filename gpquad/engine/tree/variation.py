@@ -71,8 +71,7 @@ def random_tree(rng, params: VariationParams) -> Tree:
     """A new model: a random tree whose root is an operator when depth allows; delays 0
     (tap k of an input at delay k, gpquad.engine.taps.initial_delays)."""
     rng = as_stream(rng)
-    delays = np.minimum(initial_delays(params.n_inputs // params.taps, params.taps),
-                        params.max_delay)
+    delays = initial_delays(params.n_inputs // params.taps, params.taps, params.max_delay)
     while True:
         codes, values = random_subtree(rng, params, params.max_depth)
         if len(codes) > 1 or params.max_depth == 0:
