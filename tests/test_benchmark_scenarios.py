@@ -94,3 +94,14 @@ def test_unknown_scenario_is_a_user_error(tmp_path):
 
     with pytest.raises(GpquadError, match="unknown scenario"):
         scenarios.build_scenario("median-loud", tmp_path)
+
+
+def test_every_rotorpy_scenario_asks_for_its_mode_and_noise(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setitem(sys.modules, "gpquad.benchmark.rotorpy_flights",
+                        _fake_module(tmp_path, calls))
+    for name in ("rotorpy-angle", "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy"):
+        assert name in scenarios.SCENARIOS
+        scenarios.build_scenario(name, tmp_path / "cache")
+    assert [c[:2] for c in calls] == [("angle", False), ("angle", True), ("rate", False),
+                                      ("rate", True)]

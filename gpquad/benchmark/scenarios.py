@@ -9,7 +9,7 @@ held-out flights that every method is scored on (same trim as `fit`).
   flight of simulator seed 0, test flights of seeds 1001 and 1002 (180 s each);
 - rigid-body, rigid-body-noisy: the same with `experiments/rigid_body.toml`'s [simulator];
   noisy: simulator.measurement_noise = NOISE on every flight (training and test);
-- rotorpy-angle, rotorpy-angle-noisy, rotorpy-rate: flights made by
+- rotorpy-angle, rotorpy-angle-noisy, rotorpy-rate, rotorpy-rate-noisy: flights made by
   `gpquad.benchmark.rotorpy_flights.ensure_flights` (cached), skipped when it or rotorpy
   is missing. Two vehicles whose attitude loops differ (crazyflie: kp_att 310, kd_att 57;
   hummingbird: 544, 46.6), so no one lumped model describes both: each method is fitted
@@ -41,9 +41,10 @@ TEST_SEEDS = (1001, 1002)
 TEST_DURATION_S = 180.0
 TRAIN_FRACTION = 0.7
 SCENARIOS = ("median", "median-noisy", "rigid-body", "rigid-body-noisy", "rotorpy-angle",
-             "rotorpy-angle-noisy", "rotorpy-rate", "px4-s250", "px4-aquaquad")
+             "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy", "px4-s250",
+             "px4-aquaquad")
 ROTORPY = {"rotorpy-angle": ("angle", False), "rotorpy-angle-noisy": ("angle", True),
-           "rotorpy-rate": ("rate", False)}
+           "rotorpy-rate": ("rate", False), "rotorpy-rate-noisy": ("rate", True)}
 
 
 class Skipped(Exception):
