@@ -7,7 +7,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import naive
-from gpquad.engine.tree.encoding import Tree, is_valid, node_depths, subtree_end, tree_depth
+from gpquad.engine.tree.encoding import (
+    Tree,
+    is_valid,
+    node_depths,
+    stack_rows,
+    subtree_end,
+    tree_depth,
+)
 from gpquad.engine.tree.export import from_sympy, parse_equation, to_latex, to_sympy
 from gpquad.engine.tree.operators import ADD, CONST, DIV, MUL, SUB, VAR_BASE
 from gpquad.engine.tree.variation import (
@@ -160,3 +167,16 @@ def test_division_by_an_identically_zero_subtree_exports_like_the_kernel():
                            [0] * 4)
     assert to_sympy(tree, INPUTS) == 1
     assert naive.eval_tree(tree.codes, tree.values, np.arange(13.0)) == 1.0
+
+
+def test_stack_rows_pads_trees_and_fills_empty_rows_with_zero():
+    a = Tree.from_lists([ADD, VAR_BASE, CONST], [0.0, 0.0, 2.0], [1, 2])
+    b = Tree.from_lists([VAR_BASE + 9], [0.0], [0, 3, 1, 4])  # a tree with 2 taps of 2 inputs
+    codes, values, sizes, delays = stack_rows({0: a, 2: b}, 4, min_slots=2)
+    assert codes.shape == values.shape == (4, 3) and delays.shape == (4, 4)
+    assert codes[0].tolist() == [ADD, VAR_BASE, CONST] and values[0, 2] == 2.0
+    assert codes[2, 0] == VAR_BASE + 9 and sizes.tolist() == [3, 1, 1, 1]
+    assert codes[1, 0] == CONST and values[1, 0] == 0.0  # no tree: the constant 0
+    assert delays[0].tolist() == [1, 2, 0, 0] and delays[2].tolist() == [0, 3, 1, 4]
+    assert delays[1].tolist() == [0, 0, 0, 0]
+    assert stack_rows({}, 6, min_slots=4)[3].shape == (6, 4)

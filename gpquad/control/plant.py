@@ -16,9 +16,8 @@ import numpy as np
 
 from gpquad.control.pid_kernel import constant_input_accelerations
 from gpquad.data.simulator import TruthModel
-from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import from_sympy
-from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
 
@@ -53,18 +52,8 @@ class Plant:
 def plant_from_trees(name: str, trees: dict[str, Tree], input_names, trim, dt: float) -> Plant:
     """A plant of one tree per target; a target without a tree has zero acceleration.
     Trees may read several taps of an input (gpquad.engine.taps)."""
-    slots = max([len(input_names)] + [len(t.delays) for t in trees.values()])  # every tap
-    capacity = max([t.size for t in trees.values()] + [1])
-    codes = np.full((6, capacity), CONST, dtype=np.int64)
-    values = np.zeros((6, capacity))
-    sizes = np.ones(6, dtype=np.int64)
-    delays = np.zeros((6, slots), dtype=np.int64)
-    for target, tree in trees.items():
-        k = target_index(target)
-        codes[k, : tree.size] = tree.codes
-        values[k, : tree.size] = tree.values
-        sizes[k] = tree.size
-        delays[k, : len(tree.delays)] = tree.delays
+    codes, values, sizes, delays = stack_rows(
+        {target_index(t): tree for t, tree in trees.items()}, 6, min_slots=len(input_names))
     return Plant(name, tuple(input_names), codes, values, sizes, delays,
                  np.asarray(trim, dtype=float), float(dt))
 

@@ -26,9 +26,8 @@ from gpquad.engine.taps import (
     tap_names,
     taps_of,
 )
-from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
-from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_LATEX, TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
 from gpquad.study.store import read_json
@@ -271,21 +270,10 @@ class DiscoveredModel:
         acceleration (missing_from_data) or zero."""
         from gpquad.engine.kernels.fitness import rollout
 
-        capacity = max(e.tree.size for e in self.equations.values())
-        n_in = max(len(e.tree.delays) for e in self.equations.values())  # every tap
-        codes = np.zeros((6, capacity), dtype=np.int64)
-        values = np.zeros((6, capacity))
-        sizes = np.ones(6, dtype=np.int64)
-        delays = np.zeros((6, n_in), dtype=np.int64)
+        codes, values, sizes, delays = stack_rows(
+            {target_index(t): e.tree for t, e in self.equations.items()}, 6)
         modelled = np.zeros(6, dtype=np.bool_)
-        codes[:, 0] = CONST  # a constant-0 placeholder where there is no equation
-        for t, eq in self.equations.items():
-            k = target_index(t)
-            codes[k, : eq.tree.size] = eq.tree.codes
-            values[k, : eq.tree.size] = eq.tree.values
-            sizes[k] = eq.tree.size
-            delays[k, : len(eq.tree.delays)] = eq.tree.delays
-            modelled[k] = True
+        modelled[[target_index(t) for t in self.equations]] = True
         if not missing_from_data:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)

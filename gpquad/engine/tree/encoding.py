@@ -52,6 +52,25 @@ class Tree:
         return {int(c) - VAR_BASE - 9 for c in self.codes if c >= VAR_BASE + 9}
 
 
+def stack_rows(trees: dict[int, "Tree"], n_rows: int, min_slots: int = 0):
+    """One tree per row for the kernels that take a tree per target: (codes, values, sizes,
+    delays) of shapes (n_rows, M), (n_rows, M), (n_rows,), (n_rows, K). A row without a tree
+    is the constant 0; delays are zero-padded to the widest tree (every input tap) or
+    min_slots."""
+    capacity = max([t.size for t in trees.values()] + [1])
+    slots = max([min_slots] + [len(t.delays) for t in trees.values()])
+    codes = np.full((n_rows, capacity), CONST, dtype=np.int64)
+    values = np.zeros((n_rows, capacity))
+    sizes = np.ones(n_rows, dtype=np.int64)
+    delays = np.zeros((n_rows, slots), dtype=np.int64)
+    for k, tree in trees.items():
+        codes[k, : tree.size] = tree.codes
+        values[k, : tree.size] = tree.values
+        sizes[k] = tree.size
+        delays[k, : len(tree.delays)] = tree.delays
+    return codes, values, sizes, delays
+
+
 def subtree_end(codes, start: int) -> int:
     """Index one past the subtree rooted at `start`."""
     need = 1
