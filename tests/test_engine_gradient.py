@@ -111,11 +111,11 @@ def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):
 def test_a_full_tree_exchanges_a_substitute_for_the_coupling(rigid_dataset, monkeypatch):
     """Seen on the benchmark (rigid-body, seed 1): p_dot with q*u_Y(t-5) and r*u_P(t-5)
     standing in for -0.9 q r, in a tree at the depth limit. Adding c q r needs a level more,
-    so term insertion must drop the least contributing terms to make room."""
+    even packed as the shallowest sum, so term insertion must drop the least contributing
+    terms to make room."""
     from gpquad.engine.evolve import term_search
-    from gpquad.engine.evolve.linear_seed import balanced_sum
-    from gpquad.engine.evolve.term_search import term_contributions
-    from gpquad.engine.tree.encoding import Tree
+    from gpquad.engine.evolve.term_search import gained_terms, term_contributions
+    from gpquad.engine.tree.encoding import Tree, shallow_sum, tree_depth
     from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
 
     ds = rigid_dataset
@@ -127,18 +127,21 @@ def test_a_full_tree_exchanges_a_substitute_for_the_coupling(rigid_dataset, monk
                                                          (var[xs[1]], 0.0)]
         return [(MUL, 0.0), (CONST, c)] + body
 
-    # the products first: a ninth summand puts them one level deeper, beyond the limit
-    prefix = balanced_sum([term(0.454, "q", "u_Y"), term(1.42, "r", "u_P"), term(-4.0, "p"),
-                           term(-0.047, "phi"), term(8.97, "u_R"), term(-0.005, "v"),
-                           term(0.01, "theta"), [(CONST, -0.008)]])
+    # six products and four linear terms fill a depth-5 sum exactly (Kraft: 6/8 + 4/16 = 1)
+    prefix = shallow_sum([term(0.454, "q", "u_Y"), term(1.42, "r", "u_P"), term(-4.0, "p"),
+                          term(0.01, "phi", "theta"), term(8.97, "u_R"), term(-0.005, "v", "w"),
+                          term(0.002, "u", "phi"), term(0.003, "theta", "w"),
+                          term(-0.047, "phi"), term(0.01, "theta")])
     model = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], [5, 2, 5, 0])
+    with_coupling = shallow_sum(gained_terms(model) + [term(1.0, "q", "r")])
+    assert tree_depth([c for c, _ in with_coupling]) == 6
     assert model.depth == 5
     ev = Evaluator(ds, "p_dot", 250, "mse")
     err = ev.mean_errors([model], STARTS)[0]
     found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
     assert found_err < 1e-8 * err
     assert "q*r" in str(_sym(found, ds))
-    assert len(term_contributions(ev, model, STARTS)) == 8
+    assert len(term_contributions(ev, model, STARTS)) == 10
     # without making room (no contributions), the same search cannot reach the truth
     monkeypatch.setattr(term_search, "term_contributions", lambda *a: None)
     _, stuck_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)

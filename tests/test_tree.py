@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import naive
@@ -180,3 +180,26 @@ def test_stack_rows_pads_trees_and_fills_empty_rows_with_zero():
     assert delays[0].tolist() == [1, 2, 0, 0] and delays[2].tolist() == [0, 3, 1, 4]
     assert delays[1].tolist() == [0, 0, 0, 0]
     assert stack_rows({}, 6, min_slots=4)[3].shape == (6, 4)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 4), min_size=1, max_size=20))
+def test_shallow_sum_is_the_sum_of_least_depth(term_depths):
+    """Every term once, and the least depth any sum of them can have: the smallest D with
+    sum 2**d_i <= 2**D (Kraft's inequality: a term of depth d sits at most D - d deep).
+    A balanced sum fails it: a product first and four constants make depth 5, not 3."""
+    from gpquad.engine.evolve.term_search import additive_terms
+    from gpquad.engine.tree.encoding import shallow_sum
+
+    def chain(depth, k):  # a term of the given depth: x_k * (x_k * (... * c))
+        return [(MUL, 0.0)] * depth + [(VAR_BASE + k, 0.0)] * depth + [(CONST, float(k))]
+
+    terms = [chain(d, k) for k, d in enumerate(term_depths)]
+    prefix = shallow_sum(terms)
+    codes = [c for c, _ in prefix]
+    assert is_valid(codes)
+    least = next(d for d in range(40) if sum(2 ** t for t in term_depths) <= 2 ** d)
+    assert tree_depth(codes) == least
+    found = sorted(tuple(c) for _, c, _ in additive_terms(np.array(codes),
+                                                          np.array([v for _, v in prefix])))
+    assert found == sorted(tuple(c for c, _ in t) for t in terms)

@@ -16,23 +16,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpquad.engine.tree.encoding import Tree, tree_depth
-from gpquad.engine.tree.operators import ADD, CONST, MUL, VAR_BASE
-
-
-def balanced_sum(terms: list[list[tuple[int, float]]]) -> list[tuple[int, float]]:
-    """Prefix (code, value) list of the sum of `terms` as a balanced tree of ADD nodes."""
-    if len(terms) == 1:
-        return terms[0]
-    half = (len(terms) + 1) // 2
-    return [(ADD, 0.0)] + balanced_sum(terms[:half]) + balanced_sum(terms[half:])
+from gpquad.engine.tree.encoding import Tree, shallow_sum, tree_depth
+from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
 
 
 def linear_tree(variables, coefficients, constant: float, delays) -> Tree:
-    """constant + sum coefficients[k] * x_variables[k] as a balanced tree."""
+    """constant + sum coefficients[k] * x_variables[k] as a shallow sum (shallow_sum)."""
     terms = [[(MUL, 0.0), (CONST, float(c)), (VAR_BASE + int(v), 0.0)]
              for v, c in zip(variables, coefficients, strict=True)]
-    prefix = balanced_sum(terms + [[(CONST, float(constant))]])
+    prefix = shallow_sum(terms + [[(CONST, float(constant))]])
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
 
 
@@ -51,8 +43,8 @@ def variable_scales(arrays, variables, ranges) -> np.ndarray:
     return table[:, list(variables)].std(axis=0)
 
 
-#: Terms the seed keeps: 7 and a constant are a balanced sum three + deep, which leaves
-#: room (at depth 5) for product terms such as c q r that term insertion adds.
+#: Terms the seed keeps: 7 linear terms and a constant fill under half of a depth-5 shallow
+#: sum, which leaves room for four product terms such as c q r that term insertion adds.
 MAX_TERMS = 7
 
 

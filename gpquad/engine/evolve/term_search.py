@@ -13,9 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.linear_seed import balanced_sum
 from gpquad.engine.kernels.tree_eval import eval_on_samples
-from gpquad.engine.tree.encoding import Tree, subtree_end, tree_depth
+from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
 
 
@@ -46,10 +45,10 @@ def gain_slot(codes) -> int | None:
 
 
 def with_term_coefficients(model: Tree) -> Tree:
-    """The model as a balanced sum of c_k * term_k, one constant per additive term (c_k
+    """The model as a shallow sum of c_k * term_k, one constant per additive term (c_k
     starts at the term's sign; a term that is a constant or already constant * subtree keeps
     its form). A coupling written p*r, whose gain the truth has as 0.9, gets one."""
-    prefix = balanced_sum(gained_terms(model))
+    prefix = shallow_sum(gained_terms(model))
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], model.delays)
 
 
@@ -116,12 +115,12 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
     order = (np.argsort(contributions, kind="stable") if contributions is not None
              else np.zeros(0, dtype=np.int64))
     for new in additions:
-        prefix = balanced_sum(base + new)
+        prefix = shallow_sum(base + new)
         dropped = 0
         while tree_depth([c for c, _ in prefix]) > max_depth and dropped < len(order) - 1:
             dropped += 1  # exchange the least contributing terms for the new ones
             keep = sorted(order[dropped:].tolist())
-            prefix = balanced_sum([base[k] for k in keep] + new)
+            prefix = shallow_sum([base[k] for k in keep] + new)
         if tree_depth([c for c, _ in prefix]) > max_depth:  # the model as it is, plus the terms
             prefix = head + (new[0] if len(new) == 1 else [(ADD, 0.0)] + new[0] + new[1])
         codes = [c for c, _ in prefix]

@@ -6,11 +6,12 @@ delay per control input. Depth counts edges: a single leaf has depth 0, so a
 depth-5 tree has at most 63 nodes.
 """
 
+import heapq
 from dataclasses import dataclass
 
 import numpy as np
 
-from gpquad.engine.tree.operators import CONST, N_OPERATORS, VAR_BASE
+from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, VAR_BASE
 
 
 def max_nodes(max_depth: int) -> int:
@@ -106,3 +107,22 @@ def is_valid(codes) -> bool:
             return False
         need += (2 if c < N_OPERATORS else 0) - 1
     return need == 0
+
+
+def shallow_sum(terms: list[list[tuple[int, float]]]) -> list[tuple[int, float]]:
+    """Prefix (code, value) list of the sum of `terms` as the tree of ADD nodes of least
+    depth: the two shallowest subtrees are joined first (ties: the earlier first), so that a
+    product term (3 levels) sits higher than a constant (1 level). Under max_depth 5 that holds
+    8 products, or 16 linear terms, or 4 products and 8 linear terms, where a balanced sum of
+    n terms puts every term at depth ceil(log2 n) and holds 8 terms of any kind."""
+    if not terms:
+        raise ValueError("a sum needs at least one term")
+    heap = [(tree_depth([c for c, _ in t]), k, t) for k, t in enumerate(terms)]
+    heapq.heapify(heap)
+    order = len(terms)
+    while len(heap) > 1:
+        depth_a, _, a = heapq.heappop(heap)
+        depth_b, _, b = heapq.heappop(heap)
+        heapq.heappush(heap, (max(depth_a, depth_b) + 1, order, [(ADD, 0.0)] + a + b))
+        order += 1
+    return heap[0][2]
