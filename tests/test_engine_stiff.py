@@ -72,8 +72,8 @@ def test_linear_seed_starts_a_climber_in_the_loops_basin(stiff_dataset):
     co = Coevolution(stiff_dataset, "p_dot", ev_cfg)
     seeded = co.linear_seed()
     assert seeded is not None and seeded.depth <= ev_cfg.max_depth
-    coefs, constant = coefficients_of(seeded)
-    names = [int(c) - 5 for c in seeded.codes if c >= 5]
+    names = sorted({int(c) - 5 for c in seeded.codes if c >= 5})
+    coefs, constant = coefficients_of(seeded, names)
     by_name = dict(zip(names, coefs, strict=True))
     # phi (0), p (6), u_R (9 + 1): the loop; every other variable's gain is small
     assert by_name[0] == pytest.approx(-544.0, rel=0.01)
@@ -91,9 +91,16 @@ def test_linear_seed_starts_a_climber_in_the_loops_basin(stiff_dataset):
 
 def test_linear_tree_round_trips_its_coefficients():
     tree = linear_tree([0, 6, 10], np.array([1.5, -2.0, 3.25]), 0.5, np.zeros(4, dtype=int))
-    coefs, constant = coefficients_of(tree)
+    coefs, constant = coefficients_of(tree, [0, 6, 10])
     assert coefs.tolist() == [1.5, -2.0, 3.25] and constant == 0.5
-    assert tree.depth == 3  # balanced: 4 summands need two levels of + (root depth 0)
+    assert coefficients_of(tree, [10, 0])[0].tolist() == [3.25, 1.5]
+    # the shallow sum reorders its terms: the constant and the first term come last
+    four = linear_tree([0, 6, 10, 12], np.array([1.5, -2.0, 3.25, 7.0]), 0.5,
+                       np.zeros(4, dtype=int))
+    assert [int(c) - 5 for c in four.codes if c >= 5] == [6, 10, 12, 0]
+    coefs, constant = coefficients_of(four, [0, 6, 10, 12])
+    assert coefs.tolist() == [1.5, -2.0, 3.25, 7.0] and constant == 0.5
+    assert tree.depth == 3  # 4 summands need two levels of + (root depth 0)
 
 
 def _evaluate(tree: Tree, table: np.ndarray) -> np.ndarray:

@@ -28,12 +28,15 @@ def linear_tree(variables, coefficients, constant: float, delays) -> Tree:
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
 
 
-def coefficients_of(tree: Tree) -> tuple[np.ndarray, float]:
-    """(c_i in variable order, constant) of a tree made by linear_tree."""
+def coefficients_of(tree: Tree, variables) -> tuple[np.ndarray, float]:
+    """(c_i in the order of `variables`, constant) of a tree made by linear_tree (its
+    shallow sum holds the terms in another order)."""
     codes, values = tree.codes, tree.values
-    coefs = [values[k + 1] for k in range(len(codes) - 2)
-             if codes[k] == MUL and codes[k + 1] == CONST and codes[k + 2] >= VAR_BASE]
-    return np.array(coefs), float(values[len(codes) - 1])
+    gains = {int(codes[k + 2]) - VAR_BASE: float(values[k + 1]) for k in range(len(codes) - 2)
+             if codes[k] == MUL and codes[k + 1] == CONST and codes[k + 2] >= VAR_BASE}
+    constant = sum(float(values[k]) for k in range(len(codes))
+                   if codes[k] == CONST and (k == 0 or codes[k - 1] != MUL))
+    return np.array([gains.get(int(v), 0.0) for v in variables]), constant
 
 
 def variable_scales(arrays, variables, ranges) -> np.ndarray:
@@ -62,7 +65,7 @@ def linear_seed(variables, delays: np.ndarray, scales: np.ndarray, fit, starts, 
                       starts, n_steps)
     if not np.isfinite(error):
         return None
-    coefs, constant = coefficients_of(full)
+    coefs, constant = coefficients_of(full, variables)
     order = np.argsort(-np.abs(coefs) * scales, kind="stable")
     keep = min(len(variables), max_terms)
     while keep > 1 and tree_depth(linear_tree(variables[:keep], coefs[:keep], 0.0,
