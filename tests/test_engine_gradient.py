@@ -148,6 +148,40 @@ def test_a_full_tree_exchanges_a_substitute_for_the_coupling(rigid_dataset, monk
     assert stuck_err > 1e3 * found_err
 
 
+def test_a_product_of_sums_is_multiplied_out_to_make_room(rigid_dataset, monkeypatch):
+    """Seen on the benchmark (rotorpy-angle crazyflie a_z, seed 2): a climber written as a
+    product of sums at the depth limit is one additive term, so no term could be added or
+    exchanged. Multiplied out (gpquad.engine.tree.polynomial) it is 18 monomials, of which
+    the least contributing make room for the missing c q r."""
+    from gpquad.engine.evolve import term_search
+    from gpquad.engine.tree.encoding import Tree, shallow_sum
+    from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
+
+    ds = rigid_dataset
+    names = ("phi", "theta", "psi", "u", "v", "w", "p", "q", "r") + ds.input_names
+
+    def term(c, x):
+        return [(MUL, 0.0), (CONST, c), (VAR_BASE + names.index(x), 0.0)]
+
+    # (9 u_R(t-2) - 4 p + 0.001 (phi + theta + r + u)) * (1 + 0.001 (v + w))
+    first = shallow_sum([term(9.0, "u_R"), term(-4.0, "p"), term(0.001, "phi"),
+                         term(0.001, "theta"), term(0.001, "r"), term(0.001, "u")])
+    second = shallow_sum([[(CONST, 1.0)], term(0.001, "v"), term(0.001, "w")])
+    prefix = [(MUL, 0.0)] + first + second
+    model = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], [5, 2, 5, 0])
+    assert model.depth == 5
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    err = ev.mean_errors([model], STARTS)[0]
+    assert len(term_search.model_terms(model)) == 18
+    found, found_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert found_err < 1e-8 * err
+    assert "q*r" in str(_sym(found, ds))
+    # kept as one product, the same search finds nothing to add
+    monkeypatch.setattr(term_search, "expand", lambda *a: None)
+    stuck, stuck_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert stuck is model and stuck_err == err
+
+
 def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
     cfg = tiny_config(**NEW)
     # Two invocations (fresh processes, as `gpquad run` is used) give the same bytes.

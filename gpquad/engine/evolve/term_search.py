@@ -16,6 +16,7 @@ from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
+from gpquad.engine.tree.polynomial import expand, monomial_terms
 
 
 def additive_terms(codes, values, start: int = 0, sign: float = 1.0) -> list:
@@ -44,12 +45,29 @@ def gain_slot(codes) -> int | None:
     return None
 
 
+def model_terms(model: Tree) -> list[list[tuple[int, float]]]:
+    """The model's additive terms as prefix (code, value) lists, each with its own gain: its
+    monomials when it multiplies out (gpquad.engine.tree.polynomial), else its top-level
+    terms (gained_terms). A climber such as (c1 u_T + c2 w) * (1 + c3 u_R^2) is then four
+    terms, not one, and term insertion can exchange one of them for a missing phi^2."""
+    poly = expand(model.codes, model.values)
+    return monomial_terms(poly) if poly is not None else gained_terms(model)
+
+
 def with_term_coefficients(model: Tree) -> Tree:
-    """The model as a shallow sum of c_k * term_k, one constant per additive term (c_k
-    starts at the term's sign; a term that is a constant or already constant * subtree keeps
-    its form). A coupling written p*r, whose gain the truth has as 0.9, gets one."""
-    prefix = shallow_sum(gained_terms(model))
+    """The model as a shallow sum of c_k * term_k, one constant per additive term of
+    model_terms (a gained term's c_k starts at its sign; a term that is a constant or
+    already constant * subtree keeps its form). A coupling written p*r, whose gain the truth
+    has as 0.9, gets one."""
+    prefix = shallow_sum(model_terms(model))
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], model.delays)
+
+
+def signed_terms(model: Tree) -> list[tuple]:
+    """The top-level terms as sorted (sign, codes, values) tuples: two trees that only order
+    their terms differently have the same."""
+    return sorted((sign, tuple(codes), tuple(values))
+                  for sign, codes, values in additive_terms(model.codes, model.values))
 
 
 def gained_terms(model: Tree) -> list[list[tuple[int, float]]]:
@@ -75,7 +93,7 @@ def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
     if tree_depth(scaled) <= max_depth:
         out.append(Tree.from_lists(scaled, [0.0, 1.0] + model.values.tolist(), model.delays))
     per_term = with_term_coefficients(model)
-    if tree_depth(per_term.codes) <= max_depth and per_term.size > model.size:
+    if tree_depth(per_term.codes) <= max_depth and signed_terms(per_term) != signed_terms(model):
         out.append(per_term)
     return out
 
@@ -85,7 +103,7 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
     """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
     (an int n: the first n) and pair, within max_depth. A model too deep
     to take a new term makes room: with `contributions` (one per additive term of
-    gained_terms(model)), its least contributing terms are dropped until the new one fits,
+    model_terms(model)), its least contributing terms are dropped until the new one fits,
     so that a substitute can be exchanged for the right term.
 
     taps: the extra taps of the inputs (gpquad.engine.taps), variable -> its input's
@@ -110,7 +128,7 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
     additions += [[term(i), term(j)] for k, i in enumerate(variables) for j in variables[k + 1:]
                   if j in taps and taps[j] == taps.get(i, i)]
     out = []
-    base = gained_terms(model)
+    base = model_terms(model)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
     order = (np.argsort(contributions, kind="stable") if contributions is not None
              else np.zeros(0, dtype=np.int64))
@@ -155,12 +173,12 @@ def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variab
 
 
 def term_contributions(ev: Evaluator, model: Tree, suite) -> np.ndarray:
-    """RMS value of each additive term of gained_terms(model) over the suite's samples."""
+    """RMS value of each additive term of model_terms(model) over the suite's samples."""
     samples = np.ascontiguousarray((np.asarray(suite)[:, None]
                                     + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64)
     arrays = ev.arrays
     out = []
-    for term in gained_terms(model):
+    for term in model_terms(model):
         tree = Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
         values = eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
                                  arrays.states, arrays.inputs, samples)

@@ -109,12 +109,14 @@ def is_valid(codes) -> bool:
     return need == 0
 
 
-def shallow_sum(terms: list[list[tuple[int, float]]]) -> list[tuple[int, float]]:
+def shallow_sum(terms: list[list[tuple[int, float]]], operator: int = ADD
+                ) -> list[tuple[int, float]]:
     """Prefix (code, value) list of the sum of `terms` as the tree of ADD nodes of least
     depth: the two shallowest subtrees are joined first (ties: the earlier first), so that a
     product term (3 levels) sits higher than a constant (1 level). Under max_depth 5 that holds
     8 products, or 16 linear terms, or 4 products and 8 linear terms, where a balanced sum of
-    n terms puts every term at depth ceil(log2 n) and holds 8 terms of any kind."""
+    n terms puts every term at depth ceil(log2 n) and holds 8 terms of any kind.
+    operator=MUL makes a product the same way."""
     if not terms:
         raise ValueError("a sum needs at least one term")
     heap = [(tree_depth([c for c, _ in t]), k, t) for k, t in enumerate(terms)]
@@ -123,6 +125,6 @@ def shallow_sum(terms: list[list[tuple[int, float]]]) -> list[tuple[int, float]]
     while len(heap) > 1:
         depth_a, _, a = heapq.heappop(heap)
         depth_b, _, b = heapq.heappop(heap)
-        heapq.heappush(heap, (max(depth_a, depth_b) + 1, order, [(ADD, 0.0)] + a + b))
+        heapq.heappush(heap, (max(depth_a, depth_b) + 1, order, [(operator, 0.0)] + a + b))
         order += 1
     return heap[0][2]
