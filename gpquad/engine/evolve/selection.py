@@ -53,7 +53,7 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     # One gain per additive term first: a coupling written p*r (truth 0.9 p r) next to a
     # substitute term gets its coefficient, and the substitute's can fall to zero and go.
     per_term = with_term_coefficients(model)
-    if per_term.size > model.size:
+    if model.size < per_term.size <= ev_mse.capacity:  # within the depth limit's node count
         per_term, per_err = (regain_fit or fit)(per_term, mse_of(ev_mse, per_term, starts,
                                                                  n_steps), starts, n_steps)
         if bic(per_err, n, per_term.size) < score:

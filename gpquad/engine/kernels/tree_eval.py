@@ -8,9 +8,10 @@ leaf values for every lane; the result goes to out (n_lanes,).
 import numpy as np
 
 from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.encoding import MAX_LEAVES
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
 
-STACK_ROWS = 64
+STACK_ROWS = MAX_LEAVES  # a right-to-left evaluation holds at most one row per leaf
 
 
 @njit
