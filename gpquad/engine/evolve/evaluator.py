@@ -6,7 +6,7 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
-from gpquad.engine.tree.encoding import Tree, check_leaves, max_nodes
+from gpquad.engine.tree.encoding import Tree, check_stack, max_nodes
 from gpquad.engine.variables import target_index
 
 
@@ -26,9 +26,7 @@ class Evaluator:
     def pack(self, trees: list[Tree]):
         """Population arrays (codes, values, sizes, delays) for the kernel."""
         capacity = max(self.capacity, max(t.size for t in trees))
-        if capacity > self.capacity:  # beyond the depth limit: may overflow the kernels' stack
-            for t in trees:
-                check_leaves(t)
+        check_stack(capacity)
         codes = np.zeros((len(trees), capacity), dtype=np.int64)
         values = np.zeros((len(trees), capacity))
         sizes = np.empty(len(trees), dtype=np.int64)

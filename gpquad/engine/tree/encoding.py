@@ -18,10 +18,11 @@ from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, VAR_BASE
 MAX_LEAVES = 64
 
 
-def check_leaves(tree) -> None:
-    """Raise ValueError for a tree with more leaves than the kernels' stack holds (an
-    expanded or regrouped tree beyond the depth limit); a numba kernel would write past it."""
-    leaves = int(np.count_nonzero(np.asarray(tree.codes) >= CONST))
+def check_stack(n_nodes: int) -> None:
+    """Raise ValueError for a tree of more nodes than the kernels' stack can evaluate: every
+    node is a binary operator or a leaf, so n nodes are (n + 1) // 2 leaves (an expanded or
+    regrouped tree beyond the depth limit); a numba kernel would write past the stack."""
+    leaves = (int(n_nodes) + 1) // 2
     if leaves > MAX_LEAVES:
         raise ValueError(f"a tree of {leaves} leaves exceeds the kernels' stack ({MAX_LEAVES})")
 
