@@ -3,7 +3,6 @@ like terms merged, protected division as the kernels evaluate it, and no expansi
 the tree divides by a variable."""
 
 import numpy as np
-import pytest
 import sympy as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -90,31 +89,3 @@ def test_the_expansion_is_the_same_function(seed):
     a, b = _evaluate(tree, table), _evaluate(_as_tree(poly, tree.delays), table)
     scale = np.maximum(np.abs(a), 1.0)
     assert np.all(np.abs(a - b) <= 1e-9 * scale * max(1.0, max(map(abs, poly.values()))))
-
-
-def test_a_tree_beyond_the_kernels_stack_is_refused_not_evaluated():
-    """An expanded tree can have more leaves than the kernels' evaluation stack (MAX_LEAVES
-    rows, no bounds check in numba): the evaluator and the gradient fit raise instead."""
-    from conftest import truth_dataset
-
-    from gpquad.engine.evolve.evaluator import Evaluator
-    from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
-    from gpquad.engine.tree.encoding import MAX_LEAVES
-    from gpquad.engine.tree.operators import CONST, MUL
-
-    ds = truth_dataset({"p_dot": "-4.0*p + 9.0*u_R"}, duration_s=20.0, seed=1)
-    ev = Evaluator(ds, "p_dot", 50, "mse")
-    starts = np.array([10, 100], dtype=np.int64)
-
-    def wide(n_terms):
-        terms = [[(MUL, 0.0), (CONST, 0.001), (VAR_BASE + k % 13, 0.0)] for k in range(n_terms)]
-        prefix = shallow_sum(terms)
-        return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
-                               np.zeros(4, dtype=np.int64))
-
-    at_limit, beyond = wide(MAX_LEAVES // 2), wide(MAX_LEAVES // 2 + 1)
-    assert np.all(np.isfinite(ev.window_errors([at_limit], starts)))
-    with pytest.raises(ValueError, match="stack"):
-        ev.window_errors([beyond], starts)
-    with pytest.raises(ValueError, match="stack"):
-        residuals_and_jacobian(ev, beyond, starts, 50)

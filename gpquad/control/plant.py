@@ -16,6 +16,7 @@ import numpy as np
 
 from gpquad.control.pid_kernel import constant_input_accelerations
 from gpquad.data.simulator import TruthModel
+from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import from_sympy
 from gpquad.engine.variables import TARGET_NAMES, target_index
@@ -54,6 +55,7 @@ def plant_from_trees(name: str, trees: dict[str, Tree], input_names, trim, dt: f
     Trees may read several taps of an input (gpquad.engine.taps)."""
     codes, values, sizes, delays = stack_rows(
         {target_index(t): tree for t, tree in trees.items()}, 6, min_slots=len(input_names))
+    check_stack(codes, sizes)
     return Plant(name, tuple(input_names), codes, values, sizes, delays,
                  np.asarray(trim, dtype=float), float(dt))
 

@@ -19,6 +19,7 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.flight_arrays import FlightArrays
 from gpquad.engine.kernels.quaternion import quat_from_euler, rotation_matrix
+from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.taps import (
     base_input,
     canonical_taps,
@@ -272,6 +273,7 @@ class DiscoveredModel:
 
         codes, values, sizes, delays = stack_rows(
             {target_index(t): e.tree for t, e in self.equations.items()}, 6)
+        check_stack(codes, sizes)
         modelled = np.zeros(6, dtype=np.bool_)
         modelled[[target_index(t) for t in self.equations]] = True
         if not missing_from_data:

@@ -6,7 +6,8 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
-from gpquad.engine.tree.encoding import Tree, check_stack, max_nodes
+from gpquad.engine.kernels.tree_eval import check_stack
+from gpquad.engine.tree.encoding import Tree, max_nodes
 from gpquad.engine.variables import target_index
 
 
@@ -26,7 +27,6 @@ class Evaluator:
     def pack(self, trees: list[Tree]):
         """Population arrays (codes, values, sizes, delays) for the kernel."""
         capacity = max(self.capacity, max(t.size for t in trees))
-        check_stack(capacity)
         codes = np.zeros((len(trees), capacity), dtype=np.int64)
         values = np.zeros((len(trees), capacity))
         sizes = np.empty(len(trees), dtype=np.int64)
@@ -36,6 +36,7 @@ class Evaluator:
             values[i, : t.size] = t.values
             sizes[i] = t.size
             delays[i] = t.delays
+        check_stack(codes, sizes)
         return codes, values, sizes, delays
 
     def window_errors(self, trees: list[Tree], starts, bounds=None, n_steps=None) -> np.ndarray:

@@ -18,7 +18,8 @@ from scipy.optimize import least_squares
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.kernels.sensitivity import window_residuals
-from gpquad.engine.tree.encoding import Tree, check_stack
+from gpquad.engine.kernels.tree_eval import check_stack
+from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 
 #: A constant is held fixed when its Jacobian column is this close to a combination of the
@@ -33,7 +34,7 @@ def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
                            ) -> tuple[np.ndarray, np.ndarray, int]:
     """Residuals (W * n_steps,), Jacobian (W * n_steps, n_constants), diverged windows."""
     starts = np.ascontiguousarray(starts, dtype=np.int64)
-    check_stack(tree.size)
+    check_stack(tree.codes, tree.size)
     n_c = int(np.count_nonzero(tree.codes == CONST))
     res = np.empty(len(starts) * n_steps)
     jac = np.empty((len(starts) * n_steps, n_c))

@@ -8,10 +8,49 @@ leaf values for every lane; the result goes to out (n_lanes,).
 import numpy as np
 
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.encoding import MAX_LEAVES
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
 
-STACK_ROWS = MAX_LEAVES  # a right-to-left evaluation holds at most one row per leaf
+#: Rows of the evaluation stack of every kernel (no bounds check in numba). A right-to-left
+#: evaluation of "op left right" holds right's value while it evaluates left, so the height
+#: grows with the depth of left operands, not with the leaves: a depth-d tree needs at most
+#: d + 1 rows, a shallow sum of 33 products (67 leaves) 8. Only a left comb of more than
+#: 64 leaves needs more, and `check_stack` refuses it before any kernel runs.
+STACK_ROWS = 64
+
+
+@njit
+def stack_height(codes, size):
+    """Rows the right-to-left evaluation of a prefix tree of `size` nodes needs."""
+    sp = 0
+    height = 0
+    for i in range(size - 1, -1, -1):
+        if codes[i] >= VAR_BASE or codes[i] == CONST:
+            sp += 1
+            if sp > height:
+                height = sp
+        else:
+            sp -= 1
+    return height
+
+
+@njit
+def population_stack_height(codes, sizes):
+    """Largest stack_height over the rows of a packed population codes (P, M), sizes (P,)."""
+    height = 0
+    for i in range(codes.shape[0]):
+        height = max(height, stack_height(codes[i], sizes[i]))
+    return height
+
+
+def check_stack(codes, sizes) -> None:
+    """Raise ValueError if a tree of the packed population needs more than STACK_ROWS rows
+    (a numba kernel would write past its stack)."""
+    codes = np.atleast_2d(np.asarray(codes, dtype=np.int64))
+    sizes = np.atleast_1d(np.asarray(sizes, dtype=np.int64))
+    height = population_stack_height(codes, sizes)
+    if height > STACK_ROWS:
+        raise ValueError(f"a tree needs an evaluation stack of {height} rows; the kernels "
+                         f"have {STACK_ROWS}")
 
 
 @njit

@@ -13,19 +13,6 @@ import numpy as np
 
 from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, VAR_BASE
 
-#: Most leaves a tree may have: the kernels evaluate it on a stack of this many rows
-#: (gpquad.engine.kernels.tree_eval.STACK_ROWS), which a tree of depth <= 5 never fills.
-MAX_LEAVES = 64
-
-
-def check_stack(n_nodes: int) -> None:
-    """Raise ValueError for a tree of more nodes than the kernels' stack can evaluate: every
-    node is a binary operator or a leaf, so n nodes are (n + 1) // 2 leaves (an expanded or
-    regrouped tree beyond the depth limit); a numba kernel would write past the stack."""
-    leaves = (int(n_nodes) + 1) // 2
-    if leaves > MAX_LEAVES:
-        raise ValueError(f"a tree of {leaves} leaves exceeds the kernels' stack ({MAX_LEAVES})")
-
 
 def max_nodes(max_depth: int) -> int:
     """Node capacity of a full binary tree of the given depth."""
