@@ -68,8 +68,8 @@ def test_an_input_at_several_delays_parses_and_prints_back():
     # a plain input next to a delayed one is a tap at delay 0
     eq0 = _equation("2.0*u_R - u_R(t-2)")
     assert eq0.text() == "p_dot = 2.0*u_R - 1.0*u_R(t-2)"
-    with pytest.raises(GpquadError, match="more than 4 delays"):
-        parse_equation("u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4)", INPUTS)
+    with pytest.raises(GpquadError, match="more than 6 delays"):
+        parse_equation("u_R + " + " + ".join(f"u_R(t-{k})" for k in range(1, 7)), INPUTS)
 
 
 def test_taps_at_the_same_delay_are_one_variable():
@@ -108,7 +108,9 @@ def test_config_bounds_on_input_taps():
         validate(Config(evolution=EvolutionConfig(input_taps=0)))
     with pytest.raises(GpquadError, match=r"max_delay \+ 1 \(2\)"):
         validate(Config(evolution=EvolutionConfig(input_taps=3, max_delay=1)))
-    validate(Config(evolution=EvolutionConfig(input_taps=4)))
+    validate(Config(evolution=EvolutionConfig(input_taps=6)))  # every delay 0..max_delay
+    with pytest.raises(GpquadError, match="input_taps"):
+        validate(Config(evolution=EvolutionConfig(input_taps=7, max_delay=6)))
 
 
 def test_control_plant_reads_every_tap():
@@ -165,6 +167,14 @@ def test_two_taps_recover_a_lagging_loop_that_one_delay_cannot(lagging_dataset):
     assert terms["p"] == pytest.approx(-3.0, rel=1e-3)
     # one delay per input cannot fly the lag: its validation error is far larger
     assert one.validation_error > 1e3 * two.validation_error
+
+
+def test_every_delay_as_a_tap_runs_the_linear_seed(lagging_dataset):
+    """Six taps of four inputs make the linear seed a sum of 33 products (67 leaves): it
+    must evaluate (the stack holds 8 rows of it) and still find the lagging loop."""
+    six = _identify(lagging_dataset, 6)
+    assert six.validation_error < 1e-6
+    assert {d for n, d in six.used_delays().items() if base_input(n) == "u_R"} >= {1, 3}
 
 
 def test_an_equation_reading_one_tap_takes_the_papers_layout():

@@ -139,7 +139,8 @@ def test_parse_equation_with_delays():
 
 @pytest.mark.parametrize("text, message", [
     # several delays of one input are taps (tests/test_taps.py), up to MAX_TAPS of them
-    ("u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4)", "more than 4 delays"),
+    ("u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4) + u_R(t-5) + u_R(t-6)",
+     "more than 6 delays"),
     ("10*p(t-1)", "only inputs"),
     ("10*zeta", "unknown names"),
     ("10*(p", "cannot parse"),

@@ -23,7 +23,7 @@ from gpquad.engine.tree.operators import VAR_BASE
 from gpquad.engine.variables import N_STATE
 
 #: Taps an equation may have per input (config bound).
-MAX_TAPS = 4
+MAX_TAPS = 6
 _TAP = "__tap"
 _TAP_RE = re.compile(r"^(.*)__tap(\d+)$")
 
