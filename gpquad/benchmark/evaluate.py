@@ -40,7 +40,7 @@ def data_windows(test, starts, steps) -> np.ndarray:
 
 
 def score(simulate, test, measured: dict, horizons_s) -> dict:
-    """{"1s": {"windows", "steps", "diverged", "rse": {u..r}, "mean"}, ...}.
+    """{"1s": {"windows", "steps", "diverged", "rse": {u..r}, "mean", "window_sse"}, ...}.
 
     simulate(starts, steps) -> predicted states (W, steps + 1, 9).
     """
@@ -54,16 +54,27 @@ def score(simulate, test, measured: dict, horizons_s) -> dict:
             out[key] = {"windows": 0, "steps": 0, "diverged": 0, "rse": {}, "mean": None}
             continue
         pred = simulate(starts, steps)
+        data = data_windows(test, starts, steps)
         div = diverged(pred, bound)
         keep = ~div
-        values = rse(pred[keep], data_windows(test, starts, steps)[keep]) if keep.any() \
-            else np.full(6, np.nan)
+        values = rse(pred[keep], data[keep]) if keep.any() else np.full(6, np.nan)
         per_state = {s: (float(v) if measured[s] and np.isfinite(v) else None)
                      for s, v in zip(SCORED_STATES, values, strict=True)}
         kept = [v for v in per_state.values() if v is not None]
         out[key] = {"windows": int(len(starts)), "steps": int(steps), "diverged": int(div.sum()),
-                    "rse": per_state, "mean": float(np.mean(kept)) if kept else None}
+                    "rse": per_state, "mean": float(np.mean(kept)) if kept else None,
+                    "window_sse": window_sse(pred, data, div)}
     return out
+
+
+def window_sse(pred: np.ndarray, data: np.ndarray, div: np.ndarray) -> list:
+    """Sum of squared errors of u..r per window (W lists of 6, 6 significant digits; None
+    for a diverged window): RSE's numerator window by window, so that two methods can be
+    compared on the windows both flew (gpquad.benchmark.paired)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        sse = ((pred[:, 1:, SCORED_INDEX] - data[:, 1:, SCORED_INDEX]) ** 2).sum(axis=1)
+    return [None if bad else [float(f"{v:.6g}") for v in row]
+            for row, bad in zip(sse, div, strict=True)]
 
 
 def figure_window(test) -> tuple[int, int] | None:

@@ -66,6 +66,7 @@ def write_report(out: Path, info: dict) -> dict:
     """Aggregate the cells into results.json and benchmark.md, and draw the figures."""
     from gpquad.benchmark import table
     from gpquad.benchmark.figures import scenario_figure
+    from gpquad.benchmark.paired import paired, paired_markdown
     from gpquad.benchmark.runner import collect
     from gpquad.study.store import atomic_write_text, write_json
 
@@ -73,7 +74,8 @@ def write_report(out: Path, info: dict) -> dict:
     agg = table.aggregate(found)
     figures = {k: v for k, v in info.items() if k == "figures"}
     summary = {k: v for k, v in info.items() if k not in ("figures",)}
-    write_json(out / "results.json", {"results": agg, "benchmark": summary})
+    pairs = paired(found)
+    write_json(out / "results.json", {"results": agg, "paired": pairs, "benchmark": summary})
     head = [f"gpquad benchmark, git {info['git_revision']}, engine settings from "
             f"{info['engine_config']}; gpquad and operon: mean over seeds "
             f"{info['seeds'].get('gpquad')} (min-max); zero, ols, sindy are deterministic.", ""]
@@ -81,7 +83,11 @@ def write_report(out: Path, info: dict) -> dict:
         head += [f"Skipped: {why}" for why in info["skipped_scenarios"].values()]
         head += [f"Skipped peer {p}: {why}" for p, why in info["skipped_peers"].items()]
         head.append("")
-    head += ["## Summary", "", table.summary_markdown(agg), "## Per state", ""]
+    head += ["## Summary", "", table.summary_markdown(agg)]
+    if pairs:
+        head += ["## Where a peer diverged: gpquad on the windows the peer flew", "",
+                 paired_markdown(pairs)]
+    head += ["## Per state", ""]
     atomic_write_text(out / "benchmark.md", "\n".join(head) + table.markdown(agg))
     for name in info["scenarios"]:
         scenario_figure(name, figures["figures"].get(name), found, out)
