@@ -2,10 +2,12 @@
 
 model.json contract:
 {"targets": {"p_dot": {"expr": "<sympy string>", "delays": {"u_R": 1, ...}, "error": ...,
-             "validation_error": ..., "latex": ..., "prefix": {...}}, ...},
+             "validation_error": ..., "latex": ..., "digits": ..., "prefix": {...}}, ...},
  "seed": ..., "config": {...}, "input_names": [...], "trim": {...}, "dt": ...}
 `expr` is in the model's own variables (trim-subtracted inputs); `expr_raw` writes
-the same equation in the log's raw inputs (u = u' + trim).
+the same equation in the log's raw inputs (u = u' + trim). `digits`: significant digits of
+every printed form (text, LaTeX), enough for it to stay the model (gpquad.models.precision);
+`prefix` holds the full constants.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ class Equation:
     trim: dict[str, float] = field(default_factory=dict)
     #: Simpler or other alternatives: the run's size/error Pareto front, as JSON records.
     candidates: list[dict] = field(default_factory=list)
+    #: Significant digits of the printed forms (gpquad.models.precision.printed_digits).
+    digits: int = 3
 
     def __post_init__(self):
         # taps in a canonical order: the read ones first, by delay (gpquad.engine.taps)
@@ -87,10 +91,11 @@ class Equation:
                 for n in self.leaf_names if self.trim.get(base_input(n), 0.0)}
         return simplify(expr.xreplace(reps)) if reps else expr
 
-    def latex(self, digits: int = 3, raw: bool = False) -> str:
+    def latex(self, digits: int | None = None, raw: bool = False) -> str:
+        """LaTeX with constants at `digits` significant digits (default: self.digits)."""
         lhs = TARGET_LATEX[target_index(self.target)]
         expr = self.sympy_raw() if raw else self.sympy()
-        return f"{lhs} = {to_latex(expr, self.delays, self.leaf_names, digits)}"
+        return f"{lhs} = {to_latex(expr, self.delays, self.leaf_names, digits or self.digits)}"
 
     def shown_inputs(self) -> dict[sp.Symbol, sp.Symbol]:
         """Input symbols -> their display symbols: u_T (t-5), u_R__tap1 at delay 0 -> u_R."""
@@ -102,9 +107,10 @@ class Equation:
                                                          real=True)
         return out
 
-    def text(self, digits: int = 3, raw: bool = False) -> str:
-        """One line, delayed inputs written u_T(t-5), constants rounded for display."""
-        expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits)
+    def text(self, digits: int | None = None, raw: bool = False) -> str:
+        """One line, delayed inputs written u_T(t-5), constants rounded to `digits`
+        significant digits (default: self.digits, which keeps the line faithful)."""
+        expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits or self.digits)
         return f"{self.target} = {expr.xreplace(self.shown_inputs())}"
 
     def summary(self) -> dict:
@@ -119,6 +125,7 @@ class Equation:
             "error": _json_number(self.error),
             "validation_error": _json_number(self.validation_error),
             "latex": self.latex(),
+            "digits": self.digits,
             "size": self.tree.size,
             "prefix": {"codes": self.tree.codes.tolist(), "values": self.tree.values.tolist()},
         }
@@ -137,7 +144,8 @@ class Equation:
             return np.nan if x is None else float(x)
 
         return cls(target, tree, tuple(input_names), number(d["error"]),
-                   number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])))
+                   number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])),
+                   int(d.get("digits", 3)))
 
 
 @dataclass

@@ -40,6 +40,7 @@ from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
+from gpquad.models.precision import with_printed_digits
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 
 #: Window lengths of the growing horizon (s); the last one also decides acceptance.
@@ -182,11 +183,12 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
 
 def finish_model(model, dataset, evolution):
     """The model after the joint refit when `evolution.joint_fit` is set and all six
-    equations are there (its report in model.joint_fit); else the model unchanged."""
-    if not evolution.joint_fit or any(t not in model.equations for t in TARGET_NAMES):
-        return model
-    refitted, report = joint_refit(model, dataset)
-    return dataclasses.replace(refitted, joint_fit=report)
+    equations are there (its report in model.joint_fit), with the significant digits its
+    printed equations need (gpquad.models.precision)."""
+    if evolution.joint_fit and all(t in model.equations for t in TARGET_NAMES):
+        refitted, report = joint_refit(model, dataset)
+        model = dataclasses.replace(refitted, joint_fit=report)
+    return with_printed_digits(model, dataset)
 
 
 def joint_fit_summary(report: dict) -> str:

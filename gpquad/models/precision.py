@@ -1,0 +1,94 @@
+"""How many significant digits a printed equation needs to stay the model.
+
+Equations are printed (text, LaTeX, the report, benchmark cells) with rounded constants.
+Three significant digits suffice for p_dot = -4.15 p + 10.3 u_R, not for a lag filter
+whose taps nearly cancel, such as 1310 u_R - 2760 u_R(t-1) + 3420 u_R(t-2) - 3060 u_R(t-3)
++ 1510 u_R(t-4) - 417 u_R(t-5): its gain at low frequency is the sum of the coefficients,
+3, and rounding each to 3 digits moves that sum by up to 25. On the benchmark's
+rotorpy-angle models the 3-digit texts flew 1.5 to 3 times worse than the models at 7 s.
+
+An equation's printed form is faithful when, on training samples of the data it was found
+on, it differs from the model's own expression by at most TOLERANCE of the expression's
+RMS value. `printed_digits` is the least number of digits from MIN_DIGITS to MAX_DIGITS for
+which both printed forms (trimmed and raw inputs) are; model.json keeps it and every
+printed form uses it. The kernels and model.json's "prefix" always hold the full constants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import sympy as sp
+
+from gpquad.engine.taps import base_input
+from gpquad.engine.tree.export import round_constants
+from gpquad.engine.variables import STATE_NAMES
+
+TOLERANCE = 1e-3
+MIN_DIGITS, MAX_DIGITS = 3, 8
+#: Training samples the printed and the exact expression are compared on.
+SAMPLES = 2000
+
+
+def sample_rows(ranges, max_delay: int, count: int = SAMPLES) -> np.ndarray:
+    """Up to `count` sample indices spread evenly over `ranges`, each with max_delay samples
+    of input history inside its range."""
+    rows = np.concatenate([np.arange(a + max_delay, b) for a, b in ranges if b > a + max_delay]
+                          or [np.zeros(0, dtype=np.int64)])
+    if len(rows) > count:
+        rows = rows[np.linspace(0, len(rows) - 1, count).round().astype(np.int64)]
+    return rows.astype(np.int64)
+
+
+def _columns(equation, arrays, rows, raw: bool) -> dict[str, np.ndarray]:
+    """Each variable of the equation at `rows`: states, and inputs at their delays (raw:
+    with the trim added back)."""
+    out = {n: arrays.states[rows, k] for k, n in enumerate(STATE_NAMES)}
+    for name, delay in equation.delays.items():
+        base = base_input(name)
+        j = equation.input_names.index(base)
+        out[name] = arrays.inputs[rows - delay, j] + (equation.trim.get(base, 0.0) if raw else 0.0)
+    return out
+
+
+def _values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
+    symbols = sorted(expr.free_symbols, key=lambda s: s.name)
+    func = sp.lambdify(symbols, expr, "numpy")
+    with np.errstate(all="ignore"):
+        return np.broadcast_to(np.asarray(func(*[columns[s.name] for s in symbols]), float), (n,))
+
+
+def faithful(expr: sp.Expr, columns: dict[str, np.ndarray], digits: int, n: int) -> bool:
+    """Whether `expr` rounded to `digits` stays within TOLERANCE x RMS of `expr`."""
+    exact = _values(expr, columns, n)
+    finite = np.isfinite(exact)
+    if not finite.any():
+        return True
+    rounded = _values(round_constants(expr, digits), columns, n)
+    scale = float(np.sqrt(np.mean(exact[finite] ** 2)))
+    return bool(np.max(np.abs(rounded[finite] - exact[finite])) <= TOLERANCE * max(scale, 1e-12))
+
+
+def printed_digits(equation, arrays, rows) -> int:
+    """Least significant digits (MIN_DIGITS..MAX_DIGITS) that keep both printed forms of
+    `equation` faithful on `rows` of `arrays` (a Dataset's arrays, trimmed inputs)."""
+    forms = [(equation.sympy(), False)]
+    if any(equation.trim.get(base_input(n), 0.0) for n in equation.delays):
+        forms.append((equation.sympy_raw(), True))
+    columns = {raw: _columns(equation, arrays, rows, raw) for _, raw in forms}
+    for digits in range(MIN_DIGITS, MAX_DIGITS + 1):
+        if all(faithful(expr, columns[raw], digits, len(rows)) for expr, raw in forms):
+            return digits
+    return MAX_DIGITS
+
+
+def with_printed_digits(model, dataset):
+    """The model with each equation's `digits` set from the dataset's training samples."""
+    max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
+    rows = sample_rows(dataset.train or dataset.validation, max_delay)
+    if len(rows) == 0:
+        return model
+    equations = {t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
+                 for t, e in model.equations.items()}
+    return dataclasses.replace(model, equations=equations)
