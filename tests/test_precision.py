@@ -17,6 +17,7 @@ from gpquad.models.precision import (
     MIN_DIGITS,
     TOLERANCE,
     _columns,
+    _values,
     faithful,
     printed_digits,
     sample_rows,
@@ -56,8 +57,9 @@ def test_a_cancelling_filter_gets_the_digits_it_needs_and_its_text_is_the_model(
     digits = printed_digits(eq, ds.arrays, rows)
     assert digits > MIN_DIGITS
     columns = _columns(eq, ds.arrays, rows, raw=False)
-    assert faithful(eq.sympy(), columns, digits, len(rows))
-    assert not faithful(eq.sympy(), columns, digits - 1, len(rows))  # the check can fail
+    own = _values(eq.sympy(), columns, len(rows))
+    assert faithful(eq.sympy(), own, columns, digits)
+    assert not faithful(eq.sympy(), own, columns, digits - 1)  # the check can fail
     # the printed line, parsed back, evaluates like the model (and the 3-digit one does not)
     exact = _tree_values(eq, ds, rows)
     scale = np.sqrt(np.mean(exact ** 2))

@@ -63,8 +63,6 @@ trees = st.recursive(leaf, lambda sub: st.tuples(st.integers(0, 3), sub, sub).ma
 
 @settings(max_examples=80, deadline=None)
 @given(trees)
-
-
 def test_stack_height_is_exact_and_bounded_by_depth(prefix):
     tree = _tree(prefix)
     height = stack_height(tree.codes, tree.size)

@@ -59,13 +59,14 @@ def _values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray
         return np.broadcast_to(np.asarray(func(*[columns[s.name] for s in symbols]), float), (n,))
 
 
-def faithful(expr: sp.Expr, columns: dict[str, np.ndarray], digits: int, n: int) -> bool:
-    """Whether `expr` rounded to `digits` stays within TOLERANCE x RMS of `expr`."""
-    exact = _values(expr, columns, n)
+def faithful(expr: sp.Expr, exact: np.ndarray, columns: dict[str, np.ndarray],
+             digits: int) -> bool:
+    """Whether `expr` rounded to `digits` stays within TOLERANCE x RMS of its own values
+    `exact` (= _values(expr, columns))."""
     finite = np.isfinite(exact)
     if not finite.any():
         return True
-    rounded = _values(round_constants(expr, digits), columns, n)
+    rounded = _values(round_constants(expr, digits), columns, len(exact))
     scale = float(np.sqrt(np.mean(exact[finite] ** 2)))
     return bool(np.max(np.abs(rounded[finite] - exact[finite])) <= TOLERANCE * max(scale, 1e-12))
 
@@ -76,9 +77,12 @@ def printed_digits(equation, arrays, rows) -> int:
     forms = [(equation.sympy(), False)]
     if any(equation.trim.get(base_input(n), 0.0) for n in equation.delays):
         forms.append((equation.sympy_raw(), True))
-    columns = {raw: _columns(equation, arrays, rows, raw) for _, raw in forms}
+    checks = []
+    for expr, raw in forms:
+        columns = _columns(equation, arrays, rows, raw)
+        checks.append((expr, _values(expr, columns, len(rows)), columns))
     for digits in range(MIN_DIGITS, MAX_DIGITS + 1):
-        if all(faithful(expr, columns[raw], digits, len(rows)) for expr, raw in forms):
+        if all(faithful(expr, exact, columns, digits) for expr, exact, columns in checks):
             return digits
     return MAX_DIGITS
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
-from gpquad.engine.kernels.tree_eval import check_stack
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, check_stack
 from gpquad.engine.tree.encoding import Tree, max_nodes
 from gpquad.engine.variables import target_index
 
@@ -36,7 +36,8 @@ class Evaluator:
             values[i, : t.size] = t.values
             sizes[i] = t.size
             delays[i] = t.delays
-        check_stack(codes, sizes)
+        if (capacity + 1) // 2 > STACK_ROWS:  # n nodes hold <= (n + 1) // 2 leaves >= height
+            check_stack(codes, sizes)
         return codes, values, sizes, delays
 
     def window_errors(self, trees: list[Tree], starts, bounds=None, n_steps=None) -> np.ndarray:
