@@ -12,6 +12,7 @@ from conftest import truth_dataset
 
 from gpquad.control.pid_kernel import plant_accelerations
 from gpquad.control.plant import model_plant
+from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.leaves import measured_variables
 from gpquad.engine.evolve.term_search import term_candidates
 from gpquad.engine.kernels.tree_eval import STACK_ROWS
@@ -28,7 +29,7 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.study.config import Config, EvolutionConfig, validate
+from gpquad.study.config import Config, EvolutionConfig, config_from_dict, validate
 from gpquad.study.runner import identify
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
@@ -111,6 +112,37 @@ def test_config_bounds_on_input_taps():
     validate(Config(evolution=EvolutionConfig(input_taps=6)))  # every delay 0..max_delay
     with pytest.raises(GpquadError, match="input_taps"):
         validate(Config(evolution=EvolutionConfig(input_taps=7, max_delay=6)))
+
+
+def test_input_taps_per_target_table():
+    cfg = config_from_dict({"evolution": {"input_taps": {"p_dot": 6, "a_x": 2}}})
+    assert [cfg.evolution.taps_for(t) for t in ("p_dot", "a_x", "r_dot")] == [6, 2, 1]
+    assert EvolutionConfig(input_taps=4).taps_for("r_dot") == 4
+    with pytest.raises(GpquadError, match=r"input_taps\.x_dot.*unknown target"):
+        config_from_dict({"evolution": {"input_taps": {"x_dot": 2}}}, "exp.toml")
+    with pytest.raises(GpquadError, match=r"input_taps\.q_dot.*between 1 and 6"):
+        config_from_dict({"evolution": {"input_taps": {"p_dot": 2, "q_dot": 7}}}, "exp.toml")
+    with pytest.raises(GpquadError, match="input_taps"):
+        config_from_dict({"evolution": {"input_taps": {"p_dot": "six"}}}, "exp.toml")
+
+
+def test_each_target_searches_with_its_own_taps(lagging_dataset):
+    ev = EvolutionConfig(input_taps={"p_dot": 3}, window_steps=100)
+    assert len(Coevolution(lagging_dataset, "p_dot", ev).dataset.input_names) == 3 * 4
+    assert Coevolution(lagging_dataset, "a_x", ev).dataset.input_names == INPUTS
+
+
+def test_a_model_mixing_tap_counts_flies_each_equation_as_alone():
+    lag = _equation(LAGGING)                         # 2 taps (8 delay slots)
+    yaw = _equation("2.0*u_Y(t-2) - 0.5*r", "r_dot")  # 1 tap (4 slots)
+    assert (len(lag.tree.delays), len(yaw.tree.delays)) == (8, 4)
+    u = np.random.default_rng(3).normal(size=(60, 4))
+    mixed = DiscoveredModel({"p_dot": lag, "r_dot": yaw}, INPUTS, {}, 0.04, 1, {}).fly(u).rates
+    alone_p = DiscoveredModel({"p_dot": lag}, INPUTS, {}, 0.04, 1, {}).fly(u).rates
+    alone_r = DiscoveredModel({"r_dot": yaw}, INPUTS, {}, 0.04, 1, {}).fly(u).rates
+    np.testing.assert_array_equal(mixed[:, 0], alone_p[:, 0])
+    np.testing.assert_array_equal(mixed[:, 2], alone_r[:, 2])
+    assert np.abs(mixed[:, 2]).max() > 0.1
 
 
 def test_control_plant_reads_every_tap():

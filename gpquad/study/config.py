@@ -160,8 +160,16 @@ class EvolutionConfig:
     joint_fit: bool = False
     # Not in the paper: taps per input: an equation may read each input at up to this many
     # evolvable delays, e.g. 110 u_R(t-1) - 70 u_R(t-3) for a lagging motor
-    # (gpquad.engine.taps). 1 = the paper's one delay per input and equation.
-    input_taps: int = 1
+    # (gpquad.engine.taps). 1 = the paper's one delay per input and equation. Either one
+    # number for every equation or a table per target, e.g. {a_x = 4, p_dot = 6}
+    # (a target the table leaves out gets 1).
+    input_taps: int | dict[str, int] = 1
+
+    def taps_for(self, target: str) -> int:
+        """Taps per input of `target`'s equation."""
+        if isinstance(self.input_taps, dict):
+            return int(self.input_taps.get(target, 1))
+        return int(self.input_taps)
 
 
 @dataclass(frozen=True)

@@ -70,10 +70,16 @@ def validate(cfg: Config, source: str = "config") -> Config:
                               field=f"evolution.exclude_leaves[{i}]")
     if not 0.0 <= ev.term_min_gain < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
-    if not 1 <= ev.input_taps <= min(MAX_TAPS, ev.max_delay + 1):
-        raise GpquadError(f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
-                          f"({ev.max_delay + 1}): each tap needs its own delay", source=source,
-                          field="evolution.input_taps")
+    taps = ev.input_taps if isinstance(ev.input_taps, dict) else {"": ev.input_taps}
+    for target, k in taps.items():
+        where = "evolution.input_taps" + (f".{target}" if target else "")
+        if target and target not in TARGET_NAMES:
+            raise GpquadError(f"unknown target; the table's keys are targets {list(TARGET_NAMES)}",
+                              source=source, field=where)
+        if not 1 <= k <= min(MAX_TAPS, ev.max_delay + 1):
+            raise GpquadError(f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
+                              f"({ev.max_delay + 1}): each tap needs its own delay",
+                              source=source, field=where)
     if ev.gradient_steps < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
     if ev.linear_seed and ev.constant_fit != "gauss-newton":
