@@ -84,8 +84,9 @@ def eval_tree(codes, values, leaves):
     return rec()
 
 
-def window_error(tree, target, arrays, start, n_steps, squared=False):
-    """Integrate every state from `start` with the tree's acceleration for `target`."""
+def window_error(tree, target, arrays, start, n_steps, squared=False, att_weight=0.0):
+    """Integrate every state from `start` with the tree's acceleration for `target`; with
+    att_weight, angular targets also count their angle (phi, theta, psi for p, q, r)."""
     quat = arrays.quat[start].copy()
     vel = arrays.states[start, 3:6].copy()
     rates = arrays.states[start, 6:9].copy()
@@ -103,4 +104,8 @@ def window_error(tree, target, arrays, start, n_steps, squared=False):
             return np.inf
         e = x - arrays.states[idx + 1, 3 + target]
         total += e * e if squared else abs(e)
+        if target >= 3 and att_weight > 0:
+            d = euler(quat)[target - 3] - arrays.states[idx + 1, target - 3]
+            d = att_weight * (np.mod(d + np.pi, 2 * np.pi) - np.pi)
+            total += d * d if squared else abs(d)
     return total / n_steps

@@ -216,11 +216,12 @@ def test_paper_defaults_leave_the_new_features_off():
     ev = load_config(EXPERIMENTS / "paper.toml").evolution
     assert (ev.constant_fit, ev.final_selection, ev.term_search) == ("nelder-mead", "prune",
                                                                       False)
+    assert ev.attitude_weight == 0.0
 
 
 @pytest.mark.parametrize("field, value", [
     ("constant_fit", "newton"), ("final_selection", "aic"), ("term_min_gain", 1.5),
-    ("gradient_steps", -1)])
+    ("gradient_steps", -1), ("attitude_weight", -0.5)])
 def test_bad_engine_settings_name_their_field(field, value):
     cfg = tiny_config()
     bad = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,

@@ -145,16 +145,19 @@ def test_tree_evaluation_matches_recursive_reference(nodes, lanes):
 @settings(max_examples=25, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
-       st.booleans())
-def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared):
-    """The kernel's exact shortcuts equal a full-state integration of every window."""
+       st.booleans(), st.sampled_from([0.0, 0.7]))
+def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared,
+                                                 att_weight):
+    """The kernel's exact shortcuts equal a full-state integration of every window (with the
+    attitude term of angular targets when att_weight > 0)."""
     tree = as_tree(nodes, delays)
     arrays = short_dataset.arrays
     starts = np.array([10, 400, 900], dtype=np.int64)
     out = np.empty(3)
     tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                       60, squared, np.inf, out)
-    ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared) for s in starts])
+                       60, squared, att_weight, np.inf, out)
+    ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared, att_weight)
+                    for s in starts])
     both_inf = np.isinf(out) & np.isinf(ref)
     np.testing.assert_allclose(out[~both_inf], ref[~both_inf], rtol=1e-7, atol=1e-9)
 
@@ -170,9 +173,43 @@ def test_true_model_has_zero_error(short_dataset):
         # inputs in the dataset are trim-subtracted: substitute u = u' + trim
         expr = expr.subs({s: s + trim[str(s)] for s in expr.free_symbols if str(s) in trim})
         tree = from_sympy(expr, delays, short_dataset.input_names)
-        ev = Evaluator(short_dataset, name, 300)
-        err = ev.window_errors([tree], np.array([20, 600], dtype=np.int64))
-        assert err.max() < 1e-9, (name, err)
+        for attitude in (0.0, 1.0):  # the angles integrated from the true rates match too
+            ev = Evaluator(short_dataset, name, 300, attitude=attitude)
+            err = ev.window_errors([tree], np.array([20, 600], dtype=np.int64))
+            assert err.max() < 1e-9, (name, attitude, err)
+
+
+def test_attitude_weight_scales_the_angle_like_the_rate(short_dataset):
+    """The angle's weight is the ratio of the rate's and the angle's spreads; none for
+    linear targets, for weight 0, or where a flight does not measure the angle; and it
+    counts: a rate equation with a small bias scores worse with it."""
+    import dataclasses
+
+    from gpquad.engine.evolve.evaluator import attitude_weight
+
+    states = short_dataset.arrays.states
+    assert attitude_weight(short_dataset, "q_dot", 2.0) == pytest.approx(
+        2.0 * states[:, 7].std() / states[:, 1].std(), rel=1e-12)
+    assert attitude_weight(short_dataset, "a_x", 1.0) == 0.0
+    assert attitude_weight(short_dataset, "p_dot", 0.0) == 0.0
+    info = [{**i, "measured": {"phi": "not measured (test)"}} for i in short_dataset.flight_info]
+    blind = dataclasses.replace(short_dataset, flight_info=info)
+    assert attitude_weight(blind, "p_dot", 1.0) == 0.0
+    assert attitude_weight(blind, "q_dot", 1.0) > 0.0
+    starts = np.array([20, 600], dtype=np.int64)
+    # the truth's roll equation with a small bias: p settles off by bias / damping, and the
+    # roll angle integrates that offset
+    from gpquad.engine.tree.export import from_sympy, parse_equation
+    from gpquad.study.config import MEDIAN_MODEL
+
+    trim = short_dataset.trim
+    expr, delays = parse_equation(MEDIAN_MODEL["p_dot"] + " + 0.2", short_dataset.input_names)
+    expr = expr.subs({s: s + trim[str(s)] for s in expr.free_symbols if str(s) in trim})
+    biased = from_sympy(expr, delays, short_dataset.input_names)
+    plain = Evaluator(short_dataset, "p_dot", 300).mean_errors([biased], starts)[0]
+    with_angle = Evaluator(short_dataset, "p_dot", 300, attitude=1.0).mean_errors([biased],
+                                                                                  starts)[0]
+    assert plain > 0 and with_angle > 2.0 * plain
 
 
 def test_rollout_equals_fast_path(short_dataset):
@@ -186,7 +223,7 @@ def test_rollout_equals_fast_path(short_dataset):
         tree = random_tree(rng, params)
         out = np.empty(2)
         tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                           50, False, np.inf, out)
+                           50, False, 0.0, np.inf, out)
         codes = np.full((6, tree.size), CONST, dtype=np.int64)
         values = np.zeros((6, tree.size))
         codes[target], values[target] = tree.codes, tree.values

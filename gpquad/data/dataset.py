@@ -59,7 +59,7 @@ class Dataset:
         }
 
     def unmeasured(self, state: str) -> list[str]:
-        """Flights whose log does not measure `state` (u, v, w, p, q, r)."""
+        """Flights whose log does not measure `state` (phi, theta, psi, u, v, w, p, q, r)."""
         return [info["name"] for info in self.flight_info
                 if not info.get("measured", {}).get(state, "measured").startswith("measured")]
 

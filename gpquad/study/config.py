@@ -164,6 +164,12 @@ class EvolutionConfig:
     # number for every equation or a table per target, e.g. {a_x = 4, p_dot = 6}
     # (a target the table leaves out gets 1).
     input_taps: int | dict[str, int] = 1
+    # Not in the paper: an angular equation's fitness also counts the error of the Euler
+    # angle its rate integrates into (p -> phi, q -> theta, r -> psi), this weight times the
+    # ratio of the two signals' spreads on the data; 0 = the rate alone (the paper).
+    # A roll equation without the attitude feedback of a stiff loop leaks a small rate bias
+    # that the angle integrates (gpquad.engine.kernels.fitness).
+    attitude_weight: float = 0.0
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

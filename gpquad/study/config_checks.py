@@ -68,6 +68,9 @@ def validate(cfg: Config, source: str = "config") -> Config:
             raise GpquadError(f"unknown variable '{name}'; choose from the states "
                               f"{list(STATE_NAMES)} or the inputs", source=source,
                               field=f"evolution.exclude_leaves[{i}]")
+    if not 0.0 <= ev.attitude_weight <= 100.0:
+        raise GpquadError("must be in [0, 100] (1 counts the angle like the rate; 0 = off)",
+                          source=source, field="evolution.attitude_weight")
     if not 0.0 <= ev.term_min_gain < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
     taps = ev.input_taps if isinstance(ev.input_taps, dict) else {"": ev.input_taps}

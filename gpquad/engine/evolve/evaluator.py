@@ -8,16 +8,41 @@ from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, check_stack
 from gpquad.engine.tree.encoding import Tree, max_nodes
-from gpquad.engine.variables import target_index
+from gpquad.engine.variables import STATE_NAMES, target_index
+
+
+def attitude_weight(dataset: Dataset, target: str, weight: float) -> float:
+    """The kernels' att_weight for `target`: `weight` x (RMS deviation of the target's rate) /
+    (RMS deviation of the Euler angle it integrates into), both on `dataset`, so that with
+    weight 1 the rate and the angle count alike whatever the units and the flight's range.
+    0 for linear targets, for weight 0, and where the angle is not measured in every flight.
+    """
+    k = target_index(target)
+    if weight <= 0.0 or k < 3:
+        return 0.0
+    angle = STATE_NAMES[k - 3]
+    if dataset.unmeasured(angle):
+        return 0.0
+    states = dataset.arrays.states
+    rate_spread = float(np.std(states[:, 3 + k]))
+    angle_spread = float(np.std(states[:, k - 3]))
+    if not (rate_spread > 0.0 and angle_spread > 0.0):
+        return 0.0
+    return float(weight * rate_spread / angle_spread)
 
 
 class Evaluator:
-    """Integrated-state errors of trees for one target on one dataset."""
+    """Integrated-state errors of trees for one target on one dataset.
+
+    attitude: the weight of the angle an angular target's rate integrates into
+    (gpquad.engine.kernels.fitness; scaled by `attitude_weight`); 0 = the paper's fitness.
+    """
 
     def __init__(self, dataset: Dataset, target: str, n_steps: int, metric: str = "mae",
-                 max_depth: int = 5):
+                 max_depth: int = 5, attitude: float = 0.0):
         self.arrays = dataset.arrays
         self.target = target_index(target)
+        self.att_weight = attitude_weight(dataset, target, attitude)
         self.n_steps = int(n_steps)
         self.squared = metric == "mse"
         self.capacity = max_nodes(max_depth)
@@ -49,7 +74,8 @@ class Evaluator:
         out = np.empty((len(trees), len(starts)))
         codes, values, sizes, delays = self.pack(trees)
         population_window_errors(codes, values, sizes, delays, self.target, self.arrays, starts,
-                                 n_steps, self.squared, np.asarray(bounds, dtype=float), out)
+                                 n_steps, self.squared, self.att_weight,
+                                 np.asarray(bounds, dtype=float), out)
         self.evaluations += len(trees) * len(starts)
         return out
 

@@ -17,7 +17,7 @@ from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.kernels.sensitivity import window_residuals
+from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
 from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -32,14 +32,16 @@ GRAM_FULL_RANK = 1e-10
 
 def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
                            ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Residuals (W * n_steps,), Jacobian (W * n_steps, n_constants), diverged windows."""
+    """Residuals (W * n_steps * rows,), Jacobian (same rows, n_constants), diverged windows;
+    rows = 2 when the evaluator scores the attitude too (gpquad.engine.kernels.sensitivity)."""
     starts = np.ascontiguousarray(starts, dtype=np.int64)
     check_stack(tree.codes, tree.size)
     n_c = int(np.count_nonzero(tree.codes == CONST))
-    res = np.empty(len(starts) * n_steps)
-    jac = np.empty((len(starts) * n_steps, n_c))
+    rows = len(starts) * n_steps * residual_rows(ev.target, ev.att_weight)
+    res = np.empty(rows)
+    jac = np.empty((rows, n_c))
     diverged = window_residuals(tree.codes, tree.values, tree.size, tree.delays, ev.target,
-                                ev.arrays, starts, int(n_steps), res, jac)
+                                ev.arrays, starts, int(n_steps), ev.att_weight, res, jac)
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
 

@@ -5,13 +5,20 @@ the data's state at `start`, integrates n_steps with the tree's acceleration
 for k and the data's accelerations for the other five (paper section 3.2), and
 scores |x_k(pred) - x_k(data)| (or its square) averaged over the steps.
 
+Not in the paper: with att_weight > 0, an angular target's step error also counts the
+Euler angle its rate integrates into (p -> phi, q -> theta, r -> psi):
+|dx| + att_weight |d angle| (squared: dx^2 + (att_weight d angle)^2, the angle difference
+wrapped to [-pi, pi]). A rate equation without the attitude feedback of a stiff loop leaks
+a small bias into the rate that the rate error hardly sees but the angle integrates
+(gpquad.engine.evolve.evaluator picks the weight from the data's scales).
+
 Only the states that can influence the score are integrated, which is exact,
 not an approximation:
 - linear targets: rates and attitude are the data's (they are driven by data
   accelerations only), so the rotation R_{b_t}^{b_{t+1}} is read from
   FlightArrays.rot and Euler angles from the data;
 - angular targets: the attitude is integrated only when the tree reads Euler
-  angles, and the velocity only when it reads u, v or w.
+  angles or att_weight > 0, and the velocity only when it reads u, v or w.
 `rollout` integrates everything and is the reference these paths are tested on.
 """
 
@@ -37,6 +44,12 @@ STATE_LIMIT = 1e6
 
 
 @njit
+def wrap_angle(a):
+    """a wrapped to [-pi, pi]."""
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit
 def _uses(codes, size, first, last):
     for i in range(size):
         c = codes[i] - VAR_BASE
@@ -47,7 +60,7 @@ def _uses(codes, size, first, last):
 
 @njit
 def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
-                       bound, out):
+                       att_weight, bound, out):
     """Mean per-step error of one tree on each window; fills out (n_windows,).
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
@@ -66,7 +79,8 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     uses_euler = uses_phi or uses_theta or uses_psi
     uses_vel = _uses(codes, size, 3, 5)
     need_vel = linear or uses_vel
-    need_att = (not linear) and uses_euler
+    att_err = (not linear) and att_weight > 0.0
+    need_att = (not linear) and (uses_euler or att_err)
     budget = bound * n * n_steps
 
     features = np.zeros((9 + n_in, n))
@@ -181,6 +195,17 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 e = e * e
             else:
                 e = abs(e)
+            if att_err:
+                a = target - 3
+                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+                if a == 0:
+                    da = euler_phi(q0, q1, q2, q3)
+                elif a == 1:
+                    da = euler_theta(q0, q1, q2, q3)
+                else:
+                    da = euler_psi(q0, q1, q2, q3)
+                da = wrap_angle(da - states[idx + 1, a]) * att_weight
+                e += da * da if squared else abs(da)
             if not abs(x) < STATE_LIMIT:  # also catches NaN
                 e = DIVERGED
                 alive[lane] = False
@@ -198,11 +223,11 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
 
 @njit
 def population_window_errors(codes, values, sizes, delays, target, flight, starts, n_steps, squared,
-                             bounds, out):
+                             att_weight, bounds, out):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
     for i in range(codes.shape[0]):
         tree_window_errors(codes[i], values[i], sizes[i], delays[i], target, flight, starts,
-                           n_steps, squared, bounds[i], out[i])
+                           n_steps, squared, att_weight, bounds[i], out[i])
 
 
 @njit

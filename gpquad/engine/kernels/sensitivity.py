@@ -17,16 +17,25 @@ sensitivity is then advanced through the integrator step:
   velocity itself; leaves u, v, w read rows of S. This is the exact derivative.
 - angular targets: the target rate's sensitivity s follows s <- s + dt da/dtheta and the
   target's rate leaf reads it; the other rates come from the data's accelerations and do not
-  depend on the constants. Euler-angle and velocity leaves (integrated from the rates) are
-  given zero tangent: exact for trees that read only rates, inputs and data states, a
-  first-order approximation otherwise (the attitude moves by dt * rate error).
+  depend on the constants. The Euler angles' sensitivities A (3, n_c) follow the Euler
+  kinematics linearised at the current state, A <- A + dt (J A + e s) (e: d(phi, theta,
+  psi)_dot / d(target rate), J: d(phi, theta, psi)_dot / d(phi, theta)), and the Euler
+  leaves read them; this is what lets LM see that k in k (u_R - phi) closes a loop. The
+  Euler-rate form differs from the integrator's exponential map by O(dt) per step, and the
+  velocity leaves of angular targets get zero tangent: exact for trees that read only
+  rates, inputs and data states, within a few per cent otherwise (tests).
+
+With att_weight > 0 (angular targets; gpquad.engine.kernels.fitness) every step has a
+second row, att_weight * (angle - angle(data)) for the angle the target's rate integrates
+into (wrapped), with Jacobian att_weight * A of that angle: rows 2 (w n_steps + k) and
+2 (w n_steps + k) + 1.
 
 Flat arrays only: codes, values, size, delays as the fitness kernel; flight is FlightArrays.
 """
 
 import numpy as np
 
-from gpquad.engine.kernels.fitness import STATE_LIMIT
+from gpquad.engine.kernels.fitness import STATE_LIMIT, wrap_angle
 from gpquad.engine.kernels.quaternion import (
     euler_phi,
     euler_psi,
@@ -103,10 +112,18 @@ def eval_with_tangent(codes, values, size, slot_of, features, tangents, stack, d
 
 
 @njit
-def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, res, jac):
-    """Residuals res (n_windows * n_steps,) and Jacobian jac (n_windows * n_steps, n_c).
+def residual_rows(target, att_weight):
+    """Residual rows per window step: 2 with an angle row (see the module notes), else 1."""
+    return 2 if target >= 3 and att_weight > 0.0 else 1
 
-    Row w * n_steps + k is window w after k + 1 steps. n_c = number of CONST nodes. A window
+
+@njit
+def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, att_weight,
+                     res, jac):
+    """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
+    residual_rows(target, att_weight).
+
+    Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST nodes. A window
     whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL and zero
     Jacobian rows from that step on. Returns the number of diverged windows.
     """
@@ -114,6 +131,7 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
     linear = target < 3
+    n_rows = residual_rows(target, att_weight)
     slot_of = np.full(size, -1, dtype=np.int64)
     j = 0
     for i in range(size):
@@ -126,6 +144,9 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     dstack = np.empty((STACK_ROWS, n_c))
     grad = np.empty(n_c)
     sens = np.zeros((3, n_c))  # linear: d vel / d theta; angular: row 0 = d rate_k / d theta
+    asens = np.zeros((3, n_c))  # angular: d (phi, theta, psi) / d theta
+    kin = np.zeros(3)
+    jang = np.zeros((3, 2))
     tmp = np.empty((3, n_c))
     vel = np.empty(3)
     rates = np.empty(3)
@@ -138,12 +159,14 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
             vel[i] = states[s, 3 + i]
             rates[i] = states[s, 6 + i]
         sens[:, :] = 0.0
+        asens[:, :] = 0.0
         alive = True
         for k in range(n_steps):
-            row = w * n_steps + k
+            row = (w * n_steps + k) * n_rows
             if not alive:
-                res[row] = DIVERGED_RESIDUAL
-                jac[row, :] = 0.0
+                for extra in range(n_rows):
+                    res[row + extra] = DIVERGED_RESIDUAL
+                    jac[row + extra, :] = 0.0
                 continue
             idx = s + k
             for i in range(9 + n_in):
@@ -165,6 +188,8 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                     features[6 + i] = rates[i]
                 for c in range(n_c):
                     tangents[6 + target - 3, c] = sens[0, c]
+                    for i in range(3):
+                        tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
             pred = eval_with_tangent(codes, values, size, slot_of, features, tangents, stack,
@@ -199,15 +224,59 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                         rates[i] += pred * dt
                     else:
                         rates[i] += acc[idx, 3 + i] * dt
+                # the kinematics at the step's mid-attitude (second order in dt)
+                phi_mid = features[0] + 0.5 * wrap_angle(euler_phi(q0, q1, q2, q3) - features[0])
+                theta_mid = 0.5 * (features[1] + euler_theta(q0, q1, q2, q3))
+                euler_kinematics(target - 3, phi_mid, theta_mid, features[7], features[8], kin,
+                                 jang)
                 for c in range(n_c):
+                    a0, a1 = asens[0, c], asens[1, c]
+                    for i in range(3):
+                        asens[i, c] += dt * (jang[i, 0] * a0 + jang[i, 1] * a1
+                                             + kin[i] * sens[0, c])
                     sens[0, c] += grad[c] * dt
                     jac[row, c] = sens[0, c]
                 x = rates[target - 3]
             if not abs(x) < STATE_LIMIT:
                 alive = False
                 n_diverged += 1
-                res[row] = DIVERGED_RESIDUAL
-                jac[row, :] = 0.0
+                for extra in range(n_rows):
+                    res[row + extra] = DIVERGED_RESIDUAL
+                    jac[row + extra, :] = 0.0
                 continue
             res[row] = x - states[idx + 1, 3 + target]
+            if n_rows == 2:
+                a = target - 3
+                if a == 0:
+                    angle = euler_phi(q0, q1, q2, q3)
+                elif a == 1:
+                    angle = euler_theta(q0, q1, q2, q3)
+                else:
+                    angle = euler_psi(q0, q1, q2, q3)
+                res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, a])
+                for c in range(n_c):
+                    jac[row + 1, c] = att_weight * asens[a, c]
     return n_diverged
+
+
+@njit
+def euler_kinematics(axis, phi, theta, q, r, column, jang):
+    """Partials of the Euler-angle rates (phi, theta, psi)_dot (ZYX) at the current state:
+    column (3,) w.r.t. body rate `axis` (0 p, 1 q, 2 r), jang (3, 2) w.r.t. phi and theta.
+
+    phi_dot = p + tan(theta) (q sin(phi) + r cos(phi)), theta_dot = q cos(phi) - r sin(phi),
+    psi_dot = (q sin(phi) + r cos(phi)) / cos(theta)."""
+    sp, cp = np.sin(phi), np.cos(phi)
+    ct = np.cos(theta)
+    tt = np.sin(theta) / ct
+    if axis == 0:
+        column[0], column[1], column[2] = 1.0, 0.0, 0.0
+    elif axis == 1:
+        column[0], column[1], column[2] = sp * tt, cp, sp / ct
+    else:
+        column[0], column[1], column[2] = cp * tt, -sp, cp / ct
+    lead = q * sp + r * cp  # the yaw-plane rate
+    cross = q * cp - r * sp
+    jang[0, 0], jang[0, 1] = tt * cross, lead / (ct * ct)
+    jang[1, 0], jang[1, 1] = -lead, 0.0
+    jang[2, 0], jang[2, 1] = cross / ct, lead * tt / ct
