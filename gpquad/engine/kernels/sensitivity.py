@@ -123,9 +123,9 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
     residual_rows(target, att_weight).
 
-    Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST nodes. A window
-    whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL and zero
-    Jacobian rows from that step on. Returns the number of diverged windows.
+    Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST
+    nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
+    and zero Jacobian rows from that step on. Returns the number of diverged windows.
     """
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
