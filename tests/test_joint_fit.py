@@ -10,7 +10,7 @@ from gpquad.data.dataset import build_dataset
 from gpquad.engine.evolve.leaves import measured_variables, tracked_states
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
-from gpquad.models import joint_fit
+from gpquad.models import finish, joint_fit
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.study.config import EvolutionConfig, SimulatorConfig
 
@@ -92,12 +92,12 @@ def test_finish_model_only_with_the_option_and_six_equations(raw_dataset, tmp_pa
             np.array_equal(done.equations[t].tree.values, e.tree.values)
             for t, e in before.equations.items()) and set(done.equations) == set(before.equations)
 
-    assert unchanged(joint_fit.finish_model(model, raw_dataset, off), model)
+    assert unchanged(finish.finish_model(model, raw_dataset, off), model)
     on = dataclasses.replace(off, joint_fit=True)
     five = dataclasses.replace(model, equations={t: e for t, e in model.equations.items()
                                                  if t != "r_dot"})
-    assert unchanged(joint_fit.finish_model(five, raw_dataset, on), five)
-    done = joint_fit.finish_model(model, raw_dataset, on)
+    assert unchanged(finish.finish_model(five, raw_dataset, on), five)
+    done = finish.finish_model(model, raw_dataset, on)
     assert done.joint_fit["constants"] == 13 and done.joint_fit["judged_on"] == "validation"
     assert done.joint_fit["rollouts"] > 13  # the Jacobians (13 rollouts each) are counted
     again = DiscoveredModel.from_dict(done.to_dict())  # the report is kept in model.json

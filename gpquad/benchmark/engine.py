@@ -49,7 +49,7 @@ def fit_gpquad(dataset, cfg: Config):
     """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel."""
     from gpquad.engine.variables import TARGET_NAMES
     from gpquad.models.equations import DiscoveredModel
-    from gpquad.models.joint_fit import finish_model
+    from gpquad.models.finish import finish_model
     from gpquad.study.runner import identify
 
     equations = {t: identify(dataset, t, cfg)[0] for t in TARGET_NAMES}

@@ -5,7 +5,7 @@ round(h / dt) steps (`gpquad.models.scoring.validation_windows`, which tiles wit
 `gpquad.engine.evolve.windows.tile`) after MAX_LAG samples of input history, so that every
 method flies the same windows; a horizon that no test range fits is skipped. A window
 is diverged when a scored state is non-finite or beyond 10 x max(|data|, 1)
-(`gpquad.study.assemble.diverged`, as `gpquad sweep` counts them); the RSE of each of u, v, w,
+(`gpquad.models.scoring.diverged`, as `gpquad sweep` counts them); the RSE of each of u, v, w,
 p, q, r (`gpquad.models.scoring.rse`) is taken over the windows that did not diverge, and is
 NaN for a state the log does not measure. `mean` averages the measured states.
 """
@@ -16,10 +16,15 @@ import numpy as np
 
 from gpquad.benchmark.rollout import MAX_LAG
 from gpquad.errors import GpquadError
-from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse, validation_windows
-from gpquad.study.assemble import diverged
+from gpquad.models.scoring import (
+    SCORED_INDEX,
+    SCORED_STATES,
+    diverged,
+    divergence_bound,
+    rse,
+    validation_windows,
+)
 
-DIVERGENCE_FACTOR = 10.0
 FIGURE_HORIZON_S = 7.0
 
 
@@ -45,7 +50,7 @@ def score(simulate, test, measured: dict, horizons_s) -> dict:
     simulate(starts, steps) -> predicted states (W, steps + 1, 9).
     """
     states = test.arrays.states[:, SCORED_INDEX]
-    bound = DIVERGENCE_FACTOR * np.maximum(np.abs(states).max(axis=0), 1.0)
+    bound = divergence_bound(states)
     out = {}
     for h in horizons_s:
         key = f"{h:g}s"

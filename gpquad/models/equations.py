@@ -30,7 +30,14 @@ from gpquad.engine.taps import (
     taps_of,
 )
 from gpquad.engine.tree.encoding import Tree, stack_rows
-from gpquad.engine.tree.export import expr_string, round_constants, simplify, to_latex, to_sympy
+from gpquad.engine.tree.export import (
+    expr_string,
+    from_sympy,
+    round_constants,
+    simplify,
+    to_latex,
+    to_sympy,
+)
 from gpquad.engine.variables import TARGET_LATEX, TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
 from gpquad.study.store import read_json
@@ -118,6 +125,16 @@ class Equation:
         return {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
                 "error": _json_number(self.error), "size": self.tree.size}
 
+    def alternatives(self) -> list[Equation]:
+        """The front's candidates (`candidates`) as equations of the same inputs and trim,
+        in the front's order (smallest first); their validation error is unknown (NaN)."""
+        out = []
+        for c in self.candidates:
+            tree = from_sympy(sp.sympify(c["expr"]), c.get("delays", {}), self.input_names)
+            out.append(Equation(self.target, tree, self.input_names, _number(c.get("error")),
+                                np.nan, dict(self.trim), [], self.digits))
+        return out
+
     def to_dict(self) -> dict:
         out = {
             "expr": expr_string(self.sympy()),
@@ -140,11 +157,8 @@ class Equation:
         taps = 1 + max((tap_index(n) for n in d["delays"]), default=0)
         delays = [int(d["delays"].get(n, 0)) for n in tap_names(input_names, taps)]
         tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
-        def number(x):
-            return np.nan if x is None else float(x)
-
-        return cls(target, tree, tuple(input_names), number(d["error"]),
-                   number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])),
+        return cls(target, tree, tuple(input_names), _number(d["error"]),
+                   _number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])),
                    int(d.get("digits", 3)))
 
 
@@ -161,6 +175,8 @@ class DiscoveredModel:
     interrupted: bool = False
     #: The joint refit's report (gpquad.models.joint_fit), or None when none was made.
     joint_fit: dict | None = None
+    #: The full-model stability repair's report (gpquad.models.stability), or None.
+    stability: dict | None = None
 
     def to_dict(self) -> dict:
         out = {
@@ -176,6 +192,8 @@ class DiscoveredModel:
             out["interrupted"] = True
         if self.joint_fit is not None:
             out["joint_fit"] = self.joint_fit
+        if self.stability is not None:
+            out["stability"] = self.stability
         return out
 
     @classmethod
@@ -184,7 +202,8 @@ class DiscoveredModel:
         eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
-                   d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"))
+                   d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
+                   d.get("stability"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:
@@ -301,3 +320,8 @@ def _rotate(quat, body_vector) -> np.ndarray:
 def _json_number(x: float):
     """A float for JSON; NaN or inf (no validation data, a diverged model) becomes null."""
     return float(x) if np.isfinite(x) else None
+
+
+def _number(x) -> float:
+    """A JSON number back to a float; null (NaN or inf when written) becomes NaN."""
+    return np.nan if x is None else float(x)

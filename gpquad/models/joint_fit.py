@@ -40,7 +40,6 @@ from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
-from gpquad.models.precision import with_printed_digits
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 
 #: Window lengths of the growing horizon (s); the last one also decides acceptance.
@@ -87,7 +86,11 @@ class FullModelError:
         self.scale = 1.0 / np.sqrt(np.maximum(rse_denominator(self.data), 1e-300))
 
     def residuals(self, model) -> np.ndarray:
-        pred = model.simulate(self.dataset, self.starts, self.steps)[:, 1:, :][:, :, self.cols]
+        return self.residuals_of(model.simulate(self.dataset, self.starts, self.steps))
+
+    def residuals_of(self, flown: np.ndarray) -> np.ndarray:
+        """The residuals of states flown over the windows (W, steps + 1, 9)."""
+        pred = flown[:, 1:, :][:, :, self.cols]
         with np.errstate(invalid="ignore", over="ignore"):
             r = (pred - self.data) * self.scale
         r = np.where(np.isfinite(r), r, RESIDUAL_CLIP)
@@ -113,7 +116,9 @@ def significant_drop(before: np.ndarray, after: np.ndarray) -> bool:
     return bool(drop.mean() > SIGNIFICANCE * drop.std(ddof=1) / np.sqrt(drop.size))
 
 
-def _windows(dataset, ranges, seconds: float, history: int, limit: int | None):
+def horizon_starts(dataset, ranges, seconds: float, history: int, limit: int | None):
+    """Non-overlapping window starts of `seconds` over `ranges` (at most `limit` of them,
+    evenly spread), and their step count."""
     steps = max(1, int(round(seconds / dataset.dt)))
     starts, got = tile(ranges, steps, history)
     if limit is not None:
@@ -142,10 +147,10 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
               "states": [SCORED_STATES[i] for i in states], "constants": int(x0.size),
               "rollouts": 0}
     judge_ranges, judged_on = dataset.validation, "validation"
-    judge_starts, judge_steps = _windows(dataset, judge_ranges, horizons_s[-1], history, None)
+    judge_starts, judge_steps = horizon_starts(dataset, judge_ranges, horizons_s[-1], history, None)
     if len(judge_starts) == 0:
         judge_ranges, judged_on = dataset.train, "training"
-        judge_starts, judge_steps = _windows(dataset, judge_ranges, horizons_s[-1], history,
+        judge_starts, judge_steps = horizon_starts(dataset, judge_ranges, horizons_s[-1], history,
                                              None)
     if x0.size == 0 or not states or len(judge_starts) == 0 or len(model.equations) < 6:
         report.update(judged_on=None, error_before=None, error_after=None,
@@ -157,7 +162,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     x = x0.copy()
     objectives = []
     for seconds in horizons_s:
-        starts, steps = _windows(dataset, dataset.train, seconds, history, MAX_WINDOWS)
+        starts, steps = horizon_starts(dataset, dataset.train, seconds, history, MAX_WINDOWS)
         if len(starts) == 0:
             continue
         objectives.append(FullModelError(dataset, starts, steps, states))
@@ -179,16 +184,6 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     report.update(accepted=accepted, judged_on=judged_on, error_before=before,
                   error_after=after, time_s=time.perf_counter() - t0)
     return (refitted if accepted else model), report
-
-
-def finish_model(model, dataset, evolution):
-    """The model after the joint refit when `evolution.joint_fit` is set and all six
-    equations are there (its report in model.joint_fit), with the significant digits its
-    printed equations need (gpquad.models.precision)."""
-    if evolution.joint_fit and all(t in model.equations for t in TARGET_NAMES):
-        refitted, report = joint_refit(model, dataset)
-        model = dataclasses.replace(refitted, joint_fit=report)
-    return with_printed_digits(model, dataset)
 
 
 def joint_fit_summary(report: dict) -> str:

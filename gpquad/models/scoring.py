@@ -30,6 +30,9 @@ from gpquad.study.store import read_json
 
 SCORED_STATES = ("u", "v", "w", "p", "q", "r")
 SCORED_INDEX = (3, 4, 5, 6, 7, 8)
+#: A flight has diverged when a scored state is non-finite or beyond this many times the
+#: largest |value| the data hold (at least 1).
+DIVERGENCE_FACTOR = 10.0
 
 
 def validation_windows(dataset: Dataset, horizon_steps: int, max_delay: int = 0
@@ -60,6 +63,20 @@ def rse(pred: np.ndarray, data: np.ndarray) -> np.ndarray:
         num = ((p - d) ** 2).reshape(-1, 6).sum(axis=0)
     num = np.where(np.isfinite(num), num, np.inf)
     return num / np.maximum(den, 1e-300)
+
+
+def divergence_bound(scored: np.ndarray) -> np.ndarray:
+    """The bound of each scored state (S,) from its recorded values (..., S)."""
+    flat = np.abs(scored).reshape(-1, scored.shape[-1])
+    return DIVERGENCE_FACTOR * np.maximum(flat.max(axis=0), 1.0)
+
+
+def diverged(pred: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(n_windows,) True where a scored state is non-finite or beyond its bound."""
+    p = pred[:, :, SCORED_INDEX]
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(p) | (np.abs(p) > bound[None, None, :])
+    return bad.any(axis=(1, 2))
 
 
 def model_view(dataset: Dataset, trim: dict[str, float]) -> Dataset:

@@ -32,7 +32,8 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.models import scoring
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.models.joint_fit import finish_model
+from gpquad.models.finish import finish_model
+from gpquad.models.scoring import diverged
 from gpquad.study.config import Config, load_folder_config
 from gpquad.study.runner import write_model
 from gpquad.study.seeding import ASSEMBLY_CHILD, assembly_seed
@@ -140,14 +141,6 @@ def truth(dataset: Dataset, starts, steps: int) -> np.ndarray:
     """Recorded states over the windows: (n_windows, steps + 1, 9)."""
     idx = np.asarray(starts)[:, None] + np.arange(steps + 1)[None, :]
     return dataset.arrays.states[idx]
-
-
-def diverged(pred: np.ndarray, bound: np.ndarray) -> np.ndarray:
-    """(n_windows,) True where a scored state is non-finite or beyond its bound."""
-    p = pred[:, :, SCORED]
-    with np.errstate(invalid="ignore"):
-        bad = ~np.isfinite(p) | (np.abs(p) > bound[None, None, :])
-    return bad.any(axis=(1, 2))
 
 
 def rse(pred: np.ndarray, data: np.ndarray, keep: np.ndarray) -> np.ndarray:

@@ -158,6 +158,10 @@ class EvolutionConfig:
     # full-model rollouts, kept if the validation error drops significantly
     # (gpquad.models.joint_fit).
     joint_fit: bool = False
+    # Not in the paper: when the six equations diverge flown together (validation flights
+    # of the joint refit's horizon), swap equations for their front's alternatives until
+    # they stop (gpquad.models.stability); runs before the joint refit.
+    stability_repair: bool = False
     # Not in the paper: taps per input: an equation may read each input at up to this many
     # evolvable delays, e.g. 110 u_R(t-1) - 70 u_R(t-3) for a lagging motor
     # (gpquad.engine.taps). 1 = the paper's one delay per input and equation. Either one
@@ -170,6 +174,11 @@ class EvolutionConfig:
     # A roll equation without the attitude feedback of a stiff loop leaks a small rate bias
     # that the angle integrates (gpquad.engine.kernels.fitness).
     attitude_weight: float = 0.0
+    # Not in the paper: the gradient fit's Jacobian follows the constants through the Euler
+    # angles a tree reads (exact; off, they get zero tangent). Off by default: on angle-mode
+    # flights it lets LM fit attitude loops so stiff that they diverge flown together
+    # (gpquad.engine.kernels.sensitivity, README "Engine extensions").
+    angle_tangents: bool = False
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

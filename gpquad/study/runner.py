@@ -16,7 +16,9 @@ from gpquad.engine.evolve.coevolution import Coevolution, RunState
 from gpquad.engine.variables import TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.models.joint_fit import finish_model, joint_fit_summary
+from gpquad.models.finish import finish_model
+from gpquad.models.joint_fit import joint_fit_summary
+from gpquad.models.stability import stability_summary
 from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.loop import evolve, final_equation
@@ -200,6 +202,8 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     finally:
         history.close()
     model = finish_model(model, dataset, ev)
+    if model.stability is not None:
+        report.say(stability_summary(model.stability))
     if model.joint_fit is not None:
         report.say(joint_fit_summary(model.joint_fit))
     write_model(run_dir, model)

@@ -36,13 +36,16 @@ class Evaluator:
 
     attitude: the weight of the angle an angular target's rate integrates into
     (gpquad.engine.kernels.fitness; scaled by `attitude_weight`); 0 = the paper's fitness.
+    angle_tangents: the constants' Jacobian follows them through the Euler angles the tree
+    reads (gpquad.engine.kernels.sensitivity; used by the gradient fit only).
     """
 
     def __init__(self, dataset: Dataset, target: str, n_steps: int, metric: str = "mae",
-                 max_depth: int = 5, attitude: float = 0.0):
+                 max_depth: int = 5, attitude: float = 0.0, angle_tangents: bool = False):
         self.arrays = dataset.arrays
         self.target = target_index(target)
         self.att_weight = attitude_weight(dataset, target, attitude)
+        self.angle_tangents = bool(angle_tangents)
         self.n_steps = int(n_steps)
         self.squared = metric == "mse"
         self.capacity = max_nodes(max_depth)

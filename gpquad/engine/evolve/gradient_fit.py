@@ -41,7 +41,8 @@ def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
     res = np.empty(rows)
     jac = np.empty((rows, n_c))
     diverged = window_residuals(tree.codes, tree.values, tree.size, tree.delays, ev.target,
-                                ev.arrays, starts, int(n_steps), ev.att_weight, res, jac)
+                                ev.arrays, starts, int(n_steps), ev.att_weight,
+                                ev.angle_tangents, res, jac)
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
 

@@ -19,11 +19,16 @@ sensitivity is then advanced through the integrator step:
   target's rate leaf reads it; the other rates come from the data's accelerations and do not
   depend on the constants. The Euler angles' sensitivities A (3, n_c) follow the Euler
   kinematics linearised at the current state, A <- A + dt (J A + e s) (e: d(phi, theta,
-  psi)_dot / d(target rate), J: d(phi, theta, psi)_dot / d(phi, theta)), and the Euler
-  leaves read them; this is what lets LM see that k in k (u_R - phi) closes a loop. The
-  Euler-rate form differs from the integrator's exponential map by O(dt) per step, and the
-  velocity leaves of angular targets get zero tangent: exact for trees that read only
-  rates, inputs and data states, within a few per cent otherwise (tests).
+  psi)_dot / d(target rate), J: d(phi, theta, psi)_dot / d(phi, theta)). With
+  angle_tangents the Euler leaves read them: this is what lets LM see that k in
+  k (u_R - phi) closes a loop (within a few per cent of central differences; the
+  Euler-rate form differs from the integrator's exponential map by O(dt) per step).
+  Without, the Euler leaves get zero tangent (off by 90-600 % on stiff-loop trees): the
+  engine's default, because the exact Jacobian lets LM fit attitude loops as stiff as
+  the data allow (gains ~1800 where the truth is 544, at 25 Hz), which fly alone but
+  diverge together (gpquad.models.stability). The velocity leaves of angular targets get
+  zero tangent; the Jacobian is exact for trees that read only rates, inputs and data
+  states.
 
 With att_weight > 0 (angular targets; gpquad.engine.kernels.fitness) every step has a
 second row, att_weight * (angle - angle(data)) for the angle the target's rate integrates
@@ -119,9 +124,10 @@ def residual_rows(target, att_weight):
 
 @njit
 def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, att_weight,
-                     res, jac):
+                     angle_tangents, res, jac):
     """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
-    residual_rows(target, att_weight).
+    residual_rows(target, att_weight); angle_tangents: the Euler leaves read their
+    sensitivities (module notes).
 
     Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST
     nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
@@ -188,8 +194,9 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                     features[6 + i] = rates[i]
                 for c in range(n_c):
                     tangents[6 + target - 3, c] = sens[0, c]
-                    for i in range(3):
-                        tangents[i, c] = asens[i, c]
+                    if angle_tangents:
+                        for i in range(3):
+                            tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
             pred = eval_with_tangent(codes, values, size, slot_of, features, tangents, stack,

@@ -1,0 +1,27 @@
+"""The steps that make a model of six per-equation searches one model: stability repair
+(gpquad.models.stability), joint refit (gpquad.models.joint_fit) and printed precision
+(gpquad.models.precision)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from gpquad.engine.variables import TARGET_NAMES
+from gpquad.models.joint_fit import joint_refit
+from gpquad.models.precision import with_printed_digits
+from gpquad.models.stability import repair_stability
+
+
+def finish_model(model, dataset, evolution):
+    """The model after the full-model steps the config asks for, when all six equations
+    are there: the stability repair (`evolution.stability_repair`, its report in
+    model.stability), then the joint refit (`evolution.joint_fit`, model.joint_fit); with
+    the significant digits its printed equations need."""
+    if all(t in model.equations for t in TARGET_NAMES):
+        if evolution.stability_repair:
+            repaired, report = repair_stability(model, dataset)
+            model = dataclasses.replace(repaired, stability=report)
+        if evolution.joint_fit:
+            refitted, report = joint_refit(model, dataset)
+            model = dataclasses.replace(refitted, joint_fit=report)
+    return with_printed_digits(model, dataset)
