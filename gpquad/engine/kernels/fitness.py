@@ -25,6 +25,7 @@ not an approximation:
 import numpy as np
 
 from gpquad.engine.kernels.quaternion import (
+    euler_angle,
     euler_from_quat,
     euler_phi,
     euler_psi,
@@ -197,13 +198,7 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 e = abs(e)
             if att_err:
                 a = target - 3
-                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
-                if a == 0:
-                    da = euler_phi(q0, q1, q2, q3)
-                elif a == 1:
-                    da = euler_theta(q0, q1, q2, q3)
-                else:
-                    da = euler_psi(q0, q1, q2, q3)
+                da = euler_angle(a, quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
                 da = wrap_angle(da - states[idx + 1, a]) * att_weight
                 e += da * da if squared else abs(da)
             if not abs(x) < STATE_LIMIT:  # also catches NaN

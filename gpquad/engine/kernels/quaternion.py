@@ -122,6 +122,16 @@ def euler_psi(q0, q1, q2, q3):
 
 
 @njit
+def euler_angle(axis, q0, q1, q2, q3):
+    """Euler angle `axis` (0 phi, 1 theta, 2 psi) of the attitude."""
+    if axis == 0:
+        return euler_phi(q0, q1, q2, q3)
+    if axis == 1:
+        return euler_theta(q0, q1, q2, q3)
+    return euler_psi(q0, q1, q2, q3)
+
+
+@njit
 def euler_from_quat(q0, q1, q2, q3):
     """ZYX Euler angles (phi, theta, psi) in rad of a body-to-world quaternion."""
     return euler_phi(q0, q1, q2, q3), euler_theta(q0, q1, q2, q3), euler_psi(q0, q1, q2, q3)

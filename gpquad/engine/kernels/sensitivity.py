@@ -42,6 +42,7 @@ import numpy as np
 
 from gpquad.engine.kernels.fitness import STATE_LIMIT, wrap_angle
 from gpquad.engine.kernels.quaternion import (
+    euler_angle,
     euler_phi,
     euler_psi,
     euler_theta,
@@ -254,12 +255,7 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
             res[row] = x - states[idx + 1, 3 + target]
             if n_rows == 2:
                 a = target - 3
-                if a == 0:
-                    angle = euler_phi(q0, q1, q2, q3)
-                elif a == 1:
-                    angle = euler_theta(q0, q1, q2, q3)
-                else:
-                    angle = euler_psi(q0, q1, q2, q3)
+                angle = euler_angle(a, q0, q1, q2, q3)
                 res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, a])
                 for c in range(n_c):
                     jac[row + 1, c] = att_weight * asens[a, c]
