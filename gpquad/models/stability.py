@@ -79,7 +79,8 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1]):
     best = flights.score(model)
     report = {"horizon_s": float(seconds), "judged_on": judged_on, "windows": int(len(starts)),
               "diverged_before": best[0], "error_before": best[1], "swaps": [], "flights": 1}
-    alternatives = {t: model.equations[t].alternatives() for t in TARGET_NAMES}
+    alternatives = ({t: model.equations[t].alternatives() for t in TARGET_NAMES}
+                    if best[0] else {})
     for _ in range(MAX_ROUNDS):
         if best[0] == 0:
             break
