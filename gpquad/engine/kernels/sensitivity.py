@@ -139,6 +139,8 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     n_c = jac.shape[1]
     linear = target < 3
     n_rows = residual_rows(target, att_weight)
+    # the angles' sensitivities are followed only where something reads them
+    track_angles = (not linear) and (angle_tangents or n_rows == 2)
     slot_of = np.full(size, -1, dtype=np.int64)
     j = 0
     for i in range(size):
@@ -232,16 +234,18 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                         rates[i] += pred * dt
                     else:
                         rates[i] += acc[idx, 3 + i] * dt
-                # the kinematics at the step's mid-attitude (second order in dt)
-                phi_mid = features[0] + 0.5 * wrap_angle(euler_phi(q0, q1, q2, q3) - features[0])
-                theta_mid = 0.5 * (features[1] + euler_theta(q0, q1, q2, q3))
-                euler_kinematics(target - 3, phi_mid, theta_mid, features[7], features[8], kin,
-                                 jang)
+                if track_angles:  # the kinematics at the step's mid-attitude (2nd order)
+                    phi_mid = features[0] + 0.5 * wrap_angle(euler_phi(q0, q1, q2, q3)
+                                                             - features[0])
+                    theta_mid = 0.5 * (features[1] + euler_theta(q0, q1, q2, q3))
+                    euler_kinematics(target - 3, phi_mid, theta_mid, features[7], features[8],
+                                     kin, jang)
+                    for c in range(n_c):
+                        a0, a1 = asens[0, c], asens[1, c]
+                        for i in range(3):
+                            asens[i, c] += dt * (jang[i, 0] * a0 + jang[i, 1] * a1
+                                                 + kin[i] * sens[0, c])
                 for c in range(n_c):
-                    a0, a1 = asens[0, c], asens[1, c]
-                    for i in range(3):
-                        asens[i, c] += dt * (jang[i, 0] * a0 + jang[i, 1] * a1
-                                             + kin[i] * sens[0, c])
                     sens[0, c] += grad[c] * dt
                     jac[row, c] = sens[0, c]
                 x = rates[target - 3]
