@@ -126,6 +126,27 @@ def horizon_starts(dataset, ranges, seconds: float, history: int, limit: int | N
     return starts, got
 
 
+def measured_states(dataset) -> list[int]:
+    """Indices into SCORED_STATES of the states every flight of the dataset measures."""
+    return [i for i, s in enumerate(SCORED_STATES) if not dataset.unmeasured(s)]
+
+
+def model_history(model) -> int:
+    """Input samples a model reads before a window's start (its largest delay)."""
+    return max(int(e.tree.delays.max()) for e in model.equations.values())
+
+
+def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str]:
+    """Window starts and steps of `seconds` over the validation ranges, else the training
+    ranges, and which ("validation" or "training"): where full models are judged."""
+    history = model_history(model)
+    starts, steps = horizon_starts(dataset, dataset.validation, seconds, history, None)
+    if len(starts):
+        return starts, steps, "validation"
+    starts, steps = horizon_starts(dataset, dataset.train, seconds, history, None)
+    return starts, steps, "training"
+
+
 def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     """(model, report): the model with its constants refitted jointly, or the model as it
     was when that does not lower the full-model error at the longest horizon.
@@ -136,22 +157,17 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     included), "time_s"}.
     """
     t0 = time.perf_counter()
-    states = [i for i, s in enumerate(SCORED_STATES) if not dataset.unmeasured(s)]
+    states = measured_states(dataset)
     fitted_targets = {t for t in TARGET_NAMES if TARGET_STATE[t] in
                       {SCORED_STATES[i] for i in states}}
     slots = [(t, idx) for t, idx in _slots(model) if t in fitted_targets and len(idx)]
     x0 = np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots]) \
         if slots else np.zeros(0)
-    history = max(int(e.tree.delays.max()) for e in model.equations.values())
+    history = model_history(model)
     report = {"accepted": False, "horizon_s": float(horizons_s[-1]),
               "states": [SCORED_STATES[i] for i in states], "constants": int(x0.size),
               "rollouts": 0}
-    judge_ranges, judged_on = dataset.validation, "validation"
-    judge_starts, judge_steps = horizon_starts(dataset, judge_ranges, horizons_s[-1], history, None)
-    if len(judge_starts) == 0:
-        judge_ranges, judged_on = dataset.train, "training"
-        judge_starts, judge_steps = horizon_starts(dataset, judge_ranges, horizons_s[-1], history,
-                                             None)
+    judge_starts, judge_steps, judged_on = judged_windows(dataset, model, horizons_s[-1])
     if x0.size == 0 or not states or len(judge_starts) == 0 or len(model.equations) < 6:
         report.update(judged_on=None, error_before=None, error_after=None,
                       time_s=time.perf_counter() - t0)

@@ -1,9 +1,10 @@
 """Full-model stability repair: a model whose equations diverge when flown together.
 
 Each equation is identified with the other accelerations taken from the data, so each can
-be stable alone and the six together unstable: on angle-mode flights the attitude loops
-are fitted as stiff as the data allow (p_dot = -1800 phi - 80 p + ... at 25 Hz, its
-discrete poles at |z| ~ 0.8), and a coupling term of another equation (r theta, q u_R) is
+be stable alone and the six together unstable: with `angle_tangents` the attitude loops
+of angle-mode flights are fitted as stiff as the data allow (p_dot = -1800 phi - 80 p + ...
+at 25 Hz; for that loop alone and the integrator's explicit step the discrete poles are at
+|z| ~ 0.8, computed), and a coupling term of another equation (r theta, q u_R) is
 enough to push one of them out of the unit circle once every state is integrated
 (measured on rotorpy-angle, hummingbird: every equation flies alone, the full model
 diverged in 21 of 42 seven-second windows).
@@ -25,8 +26,13 @@ import dataclasses
 import numpy as np
 
 from gpquad.engine.variables import TARGET_NAMES
-from gpquad.models.joint_fit import JOINT_HORIZONS_S, FullModelError, horizon_starts
-from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, diverged, divergence_bound
+from gpquad.models.joint_fit import (
+    JOINT_HORIZONS_S,
+    FullModelError,
+    judged_windows,
+    measured_states,
+)
+from gpquad.models.scoring import SCORED_INDEX, diverged, divergence_bound
 
 #: At most this many rounds of single swaps (each round flies every alternative once).
 MAX_ROUNDS = 6
@@ -36,24 +42,13 @@ class FullModelFlights:
     """(diverged windows, full-model error) of a model over fixed windows of a dataset."""
 
     def __init__(self, dataset, starts: np.ndarray, steps: int):
-        states = [i for i, s in enumerate(SCORED_STATES) if not dataset.unmeasured(s)]
-        self.error = FullModelError(dataset, starts, steps, states)
+        self.error = FullModelError(dataset, starts, steps, measured_states(dataset))
         self.bound = divergence_bound(dataset.arrays.states[:, list(SCORED_INDEX)])
 
     def score(self, model) -> tuple[int, float]:
         pred = model.simulate(self.error.dataset, self.error.starts, self.error.steps)
         n_div = int(diverged(pred, self.bound).sum())
         return n_div, float(np.sum(self.error.residuals_of(pred) ** 2))
-
-
-def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str]:
-    """Window starts and steps of `seconds` over the validation ranges (else training)."""
-    history = max(int(e.tree.delays.max()) for e in model.equations.values())
-    starts, steps = horizon_starts(dataset, dataset.validation, seconds, history, None)
-    if len(starts):
-        return starts, steps, "validation"
-    starts, steps = horizon_starts(dataset, dataset.train, seconds, history, None)
-    return starts, steps, "training"
 
 
 def _swap(model, target: str, equation):
