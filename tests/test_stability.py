@@ -90,3 +90,38 @@ def test_finish_model_repairs_only_with_the_option(raw_dataset):
     assert on.equations["q_dot"].text() == equation("q_dot", TRUTH["q_dot"], raw_dataset).text()
     again = DiscoveredModel.from_dict(on.to_dict())  # the report is kept in model.json
     assert again.stability == on.stability
+
+
+def test_front_selection_swaps_an_equation_that_flies_significantly_worse(raw_dataset):
+    """With select, a model that flies but carries a wrong a_x (no drag term) takes the
+    front's truth, which flies better on every validation window; without, it stays."""
+    wrong = "9.0*theta"
+    model = model_of(dict(TRUTH, a_x=wrong), raw_dataset,
+                     {"a_x": ["10.0*theta", TRUTH["a_x"]]})
+    kept, plain = stability.repair_stability(model, raw_dataset)
+    assert plain["swaps"] == [] and kept is model
+    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
+    assert report["diverged_before"] == 0 and report["select"] is True
+    assert [(s["target"], s["why"]) for s in report["swaps"]] == [("a_x", "error")]
+    assert chosen.equations["a_x"].text() == equation("a_x", TRUTH["a_x"], raw_dataset).text()
+    assert report["error_after"] < 0.5 * report["error_before"]
+    assert "a_x" in stability.stability_summary(report)
+
+
+def test_front_selection_keeps_the_truth_against_worse_alternatives(raw_dataset):
+    """The check can fail the other way: the truth's fronts hold only worse equations and
+    slightly perturbed copies, and nothing is swapped."""
+    fronts = {"a_x": ["10.0*theta", TRUTH["a_x"].replace("0.6", "0.61")],
+              "q_dot": ["-9.8*u_P"]}
+    model = model_of(TRUTH, raw_dataset, fronts)
+    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
+    assert report["swaps"] == [] and report["error_after"] == report["error_before"]
+    assert all(chosen.equations[t].text() == model.equations[t].text() for t in TRUTH)
+    assert "fly significantly better: none" in stability.stability_summary(report)
+
+
+def test_front_selection_alone_turns_the_swaps_on(raw_dataset):
+    model = model_of(dict(TRUTH, a_x="9.0*theta"), raw_dataset, {"a_x": [TRUTH["a_x"]]})
+    on = finish.finish_model(model, raw_dataset,
+                             dataclasses.replace(EvolutionConfig(), front_selection=True))
+    assert on.stability["select"] and on.stability["swaps"][0]["why"] == "error"

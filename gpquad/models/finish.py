@@ -14,12 +14,13 @@ from gpquad.models.stability import repair_stability
 
 def finish_model(model, dataset, evolution):
     """The model after the full-model steps the config asks for, when all six equations
-    are there: the stability repair (`evolution.stability_repair`, its report in
-    model.stability), then the joint refit (`evolution.joint_fit`, model.joint_fit); with
+    are there: the stability repair (`evolution.stability_repair`) and full-model front
+    selection (`evolution.front_selection`), their report in model.stability, then the joint refit (`evolution.joint_fit`, model.joint_fit); with
     the significant digits its printed equations need."""
     if all(t in model.equations for t in TARGET_NAMES):
-        if evolution.stability_repair:
-            repaired, report = repair_stability(model, dataset)
+        if evolution.stability_repair or evolution.front_selection:
+            repaired, report = repair_stability(model, dataset,
+                                                select=evolution.front_selection)
             model = dataclasses.replace(repaired, stability=report)
         if evolution.joint_fit:
             refitted, report = joint_refit(model, dataset)

@@ -1,4 +1,4 @@
-"""Full-model stability repair: a model whose equations diverge when flown together.
+"""Full-model front swaps: a model whose equations diverge, or fly badly, together.
 
 Each equation is identified with the other accelerations taken from the data, so each can
 be stable alone and the six together unstable: with `angle_tangents` the attitude loops
@@ -14,9 +14,18 @@ refit's longest horizon), each equation's size/error front (`Equation.candidates
 run's other climbers) is searched greedily: every single swap of one equation for one of
 its front's alternatives is flown, the swap with the fewest diverged windows (then the
 lowest full-model error, `FullModelError`) is kept if it beats the current model, and
-the search repeats until no window diverges or no swap helps. A model that does not
-diverge is returned unchanged: the repair never trades an identified structure for
-accuracy alone. No random draw: the result is a function of model and data.
+the search repeats until no window diverges or no swap helps. Without `select`, a model
+that does not diverge is returned unchanged.
+
+With `select` (`front_selection`, issue 9 lever 4: the final equations chosen by
+full-model validation rollouts), the search goes on once nothing diverges: a swap is kept
+when it diverges on no more windows and lowers the full-model error of the judged windows
+significantly (`joint_fit.significant_drop`: mean paired drop > 2 standard errors), the
+largest drop first. Each equation's own BIC selection saw the other five accelerations
+from the data; this sees them flown. An alternative that only fits the judged windows'
+noise does not pass the paired test, so an identified structure is not traded for
+accuracy the windows cannot tell apart. No random draw: the result is a function of model
+and data.
 """
 
 from __future__ import annotations
@@ -31,6 +40,7 @@ from gpquad.models.joint_fit import (
     FullModelError,
     judged_windows,
     measured_states,
+    significant_drop,
 )
 from gpquad.models.scoring import SCORED_INDEX, diverged, divergence_bound
 
@@ -46,9 +56,15 @@ class FullModelFlights:
         self.bound = divergence_bound(dataset.arrays.states[:, list(SCORED_INDEX)])
 
     def score(self, model) -> tuple[int, float]:
+        n_div, windows = self.windows(model)
+        return n_div, float(windows.sum())
+
+    def windows(self, model) -> tuple[int, np.ndarray]:
+        """(diverged windows, each window's share of the full-model error)."""
         pred = model.simulate(self.error.dataset, self.error.starts, self.error.steps)
         n_div = int(diverged(pred, self.bound).sum())
-        return n_div, float(np.sum(self.error.residuals_of(pred) ** 2))
+        r = self.error.residuals_of(pred).reshape(len(self.error.starts), -1)
+        return n_div, (r * r).sum(axis=1)
 
 
 def _swap(model, target: str, equation):
@@ -57,13 +73,16 @@ def _swap(model, target: str, equation):
     return dataclasses.replace(model, equations={**model.equations, target: kept})
 
 
-def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1]):
+def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
+                     select: bool = False):
     """(model, report): the model with equations swapped for front alternatives until its
-    full-model flights stop diverging (or no swap helps); unchanged when none diverges.
+    full-model flights stop diverging (or no swap helps); with `select`, also while a swap
+    lowers the full-model error significantly. Unchanged when no swap is needed or helps.
 
     report: {"horizon_s", "judged_on", "windows", "diverged_before", "diverged_after",
-    "error_before", "error_after", "swaps": [{"target", "from", "to"}], "flights"}; None
-    when the model lacks an equation or no window fits.
+    "error_before", "error_after", "swaps": [{"target", "from", "to", "why"}], "flights",
+    "select"}; why is "diverged" or "error". None when the model lacks an equation or no
+    window fits.
     """
     if not all(t in model.equations for t in TARGET_NAMES):
         return model, None
@@ -71,27 +90,36 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1]):
     if len(starts) == 0:
         return model, None
     flights = FullModelFlights(dataset, starts, steps)
-    best = flights.score(model)
+    n_div, per_window = flights.windows(model)
+    best = (n_div, float(per_window.sum()))
     report = {"horizon_s": float(seconds), "judged_on": judged_on, "windows": int(len(starts)),
-              "diverged_before": best[0], "error_before": best[1], "swaps": [], "flights": 1}
+              "diverged_before": best[0], "error_before": best[1], "swaps": [], "flights": 1,
+              "select": bool(select)}
     alternatives = ({t: model.equations[t].alternatives() for t in TARGET_NAMES}
-                    if best[0] else {})
-    for _ in range(MAX_ROUNDS):
-        if best[0] == 0:
+                    if best[0] or select else {})
+    for _ in range(MAX_ROUNDS if not select else MAX_ROUNDS + len(TARGET_NAMES)):
+        if best[0] == 0 and not select:
             break
         pick = None
         for target in TARGET_NAMES:
             for alt in alternatives[target]:
-                score = flights.score(_swap(model, target, alt))
+                swapped = _swap(model, target, alt)
+                alt_div, alt_windows = flights.windows(swapped)
                 report["flights"] += 1
-                if score < (pick[0] if pick else best):
-                    pick = (score, target, alt)
+                score = (alt_div, float(alt_windows.sum()))
+                if best[0] > 0:
+                    better = score < (pick[0] if pick else best)
+                else:  # nothing diverges: only a significant drop, never a new divergence
+                    better = (alt_div == 0 and significant_drop(per_window, alt_windows)
+                              and score[1] < (pick[0][1] if pick else best[1]))
+                if better:
+                    pick = (score, target, alt, alt_windows)
         if pick is None:
             break
-        score, target, alt = pick
+        score, target, alt, alt_windows = pick
         report["swaps"].append({"target": target, "from": model.equations[target].text(),
-                                "to": alt.text()})
-        model, best = _swap(model, target, alt), score
+                                "to": alt.text(), "why": "diverged" if best[0] else "error"})
+        model, best, per_window = _swap(model, target, alt), score, alt_windows
     report.update(diverged_after=best[0], error_after=best[1])
     return model, report
 
@@ -99,8 +127,14 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1]):
 def stability_summary(report: dict) -> str:
     """One line for the user: what the repair did."""
     n, before, after = report["windows"], report["diverged_before"], report["diverged_after"]
+    chosen = [s["target"] for s in report["swaps"] if s.get("why") == "error"]
     if not before:
-        return f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
+        line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
+        if report.get("select"):
+            line += (f"; front alternatives that fly significantly better: "
+                     f"{', '.join(chosen) or 'none'} (error {report['error_before']:.4g} -> "
+                     f"{report['error_after']:.4g})")
+        return line
     swapped = ", ".join(s["target"] for s in report["swaps"]) or "none"
     return (f"full model diverged in {before} of {n} {report['horizon_s']:g} s "
             f"{report['judged_on']} flights; equations swapped for front alternatives: "

@@ -162,6 +162,10 @@ class EvolutionConfig:
     # of the joint refit's horizon), swap equations for their front's alternatives until
     # they stop (gpquad.models.stability); runs before the joint refit.
     stability_repair: bool = False
+    # Not in the paper: after the stability repair, keep swapping equations for their
+    # front's alternatives while the full model's validation flights get significantly
+    # better (paired test over the windows; gpquad.models.stability).
+    front_selection: bool = False
     # Not in the paper: taps per input: an equation may read each input at up to this many
     # evolvable delays, e.g. 110 u_R(t-1) - 70 u_R(t-3) for a lagging motor
     # (gpquad.engine.taps). 1 = the paper's one delay per input and equation. Either one
