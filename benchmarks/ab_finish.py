@@ -34,17 +34,20 @@ from gpquad.benchmark.cells import _recovery_gpquad, cell_path, load_cell
 from gpquad.benchmark.engine import engine_config, fit_gpquad
 from gpquad.benchmark.paired import paired
 from gpquad.benchmark.scenarios import build_scenario, repo_root
+from gpquad.models import stability
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.finish import finish_model
 
 HORIZONS_S = (1.0, 7.0, 30.0)
-#: Finishing variants: EvolutionConfig fields set on top of the engine's.
+#: Finishing variants: EvolutionConfig fields set on top of the engine's; "term_drops"
+#: sets gpquad.models.stability.TERM_DROPS (front selection offers term drops or not).
 VARIANTS = {
     "none": {"stability_repair": False, "front_selection": False, "joint_fit": False},
-    "repair+joint (recommended before)": {"stability_repair": True, "front_selection": False,
-                                          "joint_fit": True},
-    "repair+select+joint": {"stability_repair": True, "front_selection": True,
-                            "joint_fit": True},
+    "repair+joint": {"stability_repair": True, "front_selection": False, "joint_fit": True},
+    "repair+front+joint": {"stability_repair": True, "front_selection": True,
+                           "joint_fit": True, "term_drops": False},
+    "repair+front+drops+joint": {"stability_repair": True, "front_selection": True,
+                                 "joint_fit": True, "term_drops": True},
 }
 
 
@@ -62,7 +65,7 @@ def raw_model(sub, name: str, group: str, seed: int, engine: dict, out: Path):
     if path.exists():
         return DiscoveredModel.from_dict(json.loads(path.read_text()))
     cfg, _ = engine_config(repo_root() / "experiments", seed)
-    ev = dataclasses.replace(cfg.evolution, **engine, **VARIANTS["none"])
+    ev = dataclasses.replace(cfg.evolution, **engine, **VARIANTS["none"])  # no full-model step
     t0 = time.perf_counter()
     model = fit_gpquad(sub.fit, dataclasses.replace(cfg, evolution=ev))
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -80,6 +83,8 @@ def run_seed(name: str, seed: int, engine: dict, out: Path) -> list[dict]:
     cfg, _ = engine_config(repo_root() / "experiments", seed)
     rows = []
     for variant, fields in VARIANTS.items():
+        fields = dict(fields)
+        stability.TERM_DROPS = fields.pop("term_drops", True)
         ev = dataclasses.replace(cfg.evolution, **engine, **fields)
         t0 = time.perf_counter()
         models = {g: finish_model(raws[g], groups[g].fit, ev) for g in groups}

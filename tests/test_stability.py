@@ -125,3 +125,16 @@ def test_front_selection_alone_turns_the_swaps_on(raw_dataset):
     on = finish.finish_model(model, raw_dataset,
                              dataclasses.replace(EvolutionConfig(), front_selection=True))
     assert on.stability["select"] and on.stability["swaps"][0]["why"] == "error"
+
+
+def test_front_selection_drops_a_term_that_spoils_the_full_model(raw_dataset):
+    """No front at all: a_y with a spurious roll-rate term flies worse than without it, and
+    selection drops that term (constants as they were); the option off keeps it."""
+    spoiled = TRUTH["a_y"] + " + 2.0*p"
+    model = model_of(dict(TRUTH, a_y=spoiled), raw_dataset)
+    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
+    assert [(s["target"], s["why"]) for s in report["swaps"]] == [("a_y", "error")]
+    assert chosen.equations["a_y"].text() == equation("a_y", TRUTH["a_y"], raw_dataset).text()
+    assert stability.term_drops(chosen.equations["r_dot"])[0].tree.size < \
+        chosen.equations["r_dot"].tree.size
+    assert stability.term_drops(equation("a_x", "10.0*theta", raw_dataset)) == []

@@ -15,7 +15,8 @@ from gpquad.models.stability import repair_stability
 def finish_model(model, dataset, evolution):
     """The model after the full-model steps the config asks for, when all six equations
     are there: the stability repair (`evolution.stability_repair`) and full-model front
-    selection (`evolution.front_selection`), their report in model.stability, then the joint refit (`evolution.joint_fit`, model.joint_fit); with
+    selection (`evolution.front_selection`), their report in model.stability, then the
+    joint refit (`evolution.joint_fit`, model.joint_fit); with
     the significant digits its printed equations need."""
     if all(t in model.equations for t in TARGET_NAMES):
         if evolution.stability_repair or evolution.front_selection:

@@ -21,8 +21,10 @@ With `select` (`front_selection`, issue 9 lever 4: the final equations chosen by
 full-model validation rollouts), the search goes on once nothing diverges: a swap is kept
 when it diverges on no more windows and lowers the full-model error of the judged windows
 significantly (`joint_fit.significant_drop`: mean paired drop > 2 standard errors), the
-largest drop first. Each equation's own BIC selection saw the other five accelerations
-from the data; this sees them flown. An alternative that only fits the judged windows'
+largest drop first; besides the front, each equation without one of its additive terms is
+offered (a product that fitted the one-equation problem and destabilises the others).
+Each equation's own BIC selection saw the other five accelerations from the data; this
+sees them flown. An alternative that only fits the judged windows'
 noise does not pass the paired test, so an identified structure is not traded for
 accuracy the windows cannot tell apart. No random draw: the result is a function of model
 and data.
@@ -34,6 +36,8 @@ import dataclasses
 
 import numpy as np
 
+from gpquad.engine.evolve.term_search import model_terms
+from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import (
     JOINT_HORIZONS_S,
@@ -46,6 +50,22 @@ from gpquad.models.scoring import SCORED_INDEX, diverged, divergence_bound
 
 #: At most this many rounds of single swaps (each round flies every alternative once).
 MAX_ROUNDS = 6
+#: Front selection also offers each equation without one of its additive terms (its
+#: monomials when it multiplies out), constants as they are.
+TERM_DROPS = True
+
+
+def term_drops(equation) -> list:
+    """The equation without each one of its additive terms (none for a single term)."""
+    terms = model_terms(equation.tree)
+    out = []
+    for k in range(len(terms) if len(terms) > 1 else 0):
+        prefix = shallow_sum(terms[:k] + terms[k + 1:])
+        tree = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
+                               equation.tree.delays)
+        out.append(dataclasses.replace(equation, tree=tree, candidates=[],
+                                       validation_error=np.nan))
+    return out
 
 
 class FullModelFlights:
@@ -102,7 +122,8 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
             break
         pick = None
         for target in TARGET_NAMES:
-            for alt in alternatives[target]:
+            drops = term_drops(model.equations[target]) if select and TERM_DROPS else []
+            for alt in alternatives[target] + drops:
                 swapped = _swap(model, target, alt)
                 alt_div, alt_windows = flights.windows(swapped)
                 report["flights"] += 1

@@ -100,6 +100,9 @@ class EvolutionConfig:
     suite_size: int = 6
     window_steps: int = 750
     max_depth: int = 5
+    # Not in the paper: the highest polynomial degree of an equation (x y is 2, x y z 3, a
+    # quotient counts both sides); 0 = no limit. Mutations above it are drawn again.
+    max_degree: int = 0
     p_leaf: float = 0.7
     p_constant_leaf: float = 0.25
     const_low: float = -5.0

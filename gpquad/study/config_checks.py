@@ -49,6 +49,9 @@ def validate(cfg: Config, source: str = "config") -> Config:
             raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
     if not 1 <= ev.max_depth <= 8:
         raise GpquadError("must be between 1 and 8", source=source, field="evolution.max_depth")
+    if not 0 <= ev.max_degree <= 16:
+        raise GpquadError("must be between 0 (no limit) and 16", source=source,
+                          field="evolution.max_degree")
     if ev.n_models < 2:
         raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
                           source=source, field="evolution.n_models")

@@ -73,7 +73,7 @@ def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> Var
     return VariationParams(
         n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
         taps=cfg.input_taps,
-        max_depth=cfg.max_depth,
+        max_depth=cfg.max_depth, max_degree=cfg.max_degree,
         p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
         const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
         p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
@@ -277,7 +277,8 @@ class Coevolution:
             self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
             self.params.variables if self.params.variables is not None
             else self.params.n_variables, cfg.max_depth, cfg.term_min_gain,
-            self.regain_fitter(max(cfg.gradient_steps // 4, 1)), self.extra_taps())
+            self.regain_fitter(max(cfg.gradient_steps // 4, 1)), self.extra_taps(),
+            self.params.allows)
 
     def extra_taps(self) -> dict[int, int]:
         """Variable index of every input tap k >= 1 -> the variable of its input (tap 0)."""

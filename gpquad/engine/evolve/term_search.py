@@ -149,15 +149,18 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
 
 def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variables: int,
                   max_depth: int, min_gain: float, regain_fit=None,
-                  taps: dict[int, int] | None = None) -> tuple[Tree, float]:
+                  taps: dict[int, int] | None = None, allows=None) -> tuple[Tree, float]:
     """Best of the regain candidates and the single-term insertions (constants fitted by
     fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
-    sits in another basin of the long-window error, which a growing horizon leaves."""
+    sits in another basin of the long-window error, which a growing horizon leaves.
+    allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
-    candidates = regain + term_candidates(model, n_variables, max_depth,
-                                          term_contributions(ev, model, suite), taps)
+    candidates = regain + [t for t in term_candidates(model, n_variables, max_depth,
+                                                      term_contributions(ev, model, suite),
+                                                      taps)
+                           if allows is None or allows(t.codes)]
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, VAR_BASE
+from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, SUB, VAR_BASE
 
 
 def max_nodes(max_depth: int) -> int:
@@ -97,6 +97,23 @@ def node_depths(codes) -> list[int]:
 def tree_depth(codes) -> int:
     """Largest node depth."""
     return max(node_depths(codes))
+
+
+def tree_degree(codes) -> int:
+    """Polynomial degree of a prefix tree: a variable 1, a constant 0, + and - the larger of
+    their children's, * and / the sum (a quotient counts its denominator's variables, so
+    1 / x is degree 1: an upper bound that keeps the rule one of counting)."""
+    stack: list[int] = []
+    for c in reversed(list(codes)):
+        c = int(c)
+        if c == CONST:
+            stack.append(0)
+        elif c >= VAR_BASE:
+            stack.append(1)
+        else:
+            a, b = stack.pop(), stack.pop()
+            stack.append(max(a, b) if c in (ADD, SUB) else a + b)
+    return stack[0]
 
 
 def is_valid(codes) -> bool:

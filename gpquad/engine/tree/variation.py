@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpquad.engine.taps import initial_delays
-from gpquad.engine.tree.encoding import Tree, node_depths, subtree_end
+from gpquad.engine.tree.encoding import Tree, node_depths, subtree_end, tree_degree
 from gpquad.engine.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
 from gpquad.engine.tree.random_stream import RandomStream, as_stream
 
@@ -35,6 +35,17 @@ class VariationParams:
     max_delay: int = 5
     #: Taps per input (gpquad.engine.taps): n_inputs counts every tap of every input.
     taps: int = 1
+    #: Highest polynomial degree of a tree (encoding.tree_degree); 0 = no limit (the paper).
+    max_degree: int = 0
+
+    def allows(self, codes) -> bool:
+        """True when a structure is within the degree limit."""
+        return self.max_degree <= 0 or tree_degree(codes) <= self.max_degree
+
+
+#: Draws of a structural mutation (or a new tree) before the degree limit gives up and the
+#: parent's structure is kept.
+DEGREE_TRIES = 20
 
 
 def random_leaf(rng: RandomStream, params: VariationParams):
@@ -74,7 +85,7 @@ def random_tree(rng, params: VariationParams) -> Tree:
     delays = initial_delays(params.n_inputs // params.taps, params.taps, params.max_delay)
     while True:
         codes, values = random_subtree(rng, params, params.max_depth)
-        if len(codes) > 1 or params.max_depth == 0:
+        if (len(codes) > 1 or params.max_depth == 0) and params.allows(codes):
             return Tree.from_lists(codes, values, delays)
 
 
@@ -119,14 +130,20 @@ def perturb_constant(rng, codes, values, sigma: float) -> list[float]:
 
 
 def mutate(rng, tree: Tree, params: VariationParams) -> Tree:
-    """The paper's mutation: macro or micro (p = 0.5 each), then constant and delay mutation."""
+    """The paper's mutation: macro or micro (p = 0.5 each), then constant and delay mutation.
+    With params.max_degree, a structure above it is drawn again (DEGREE_TRIES times)."""
     rng = as_stream(rng)
-    codes = tree.codes.tolist()
-    values = tree.values.tolist()
-    if rng.random() < 0.5:
-        codes, values = macro_mutation(rng, codes, values, params)
+    parent_codes = tree.codes.tolist()
+    parent_values = tree.values.tolist()
+    for _ in range(DEGREE_TRIES):  # one draw unless the degree limit refuses it
+        if rng.random() < 0.5:
+            codes, values = macro_mutation(rng, parent_codes, parent_values, params)
+        else:
+            codes, values = micro_mutation(rng, parent_codes, parent_values, params)
+        if params.allows(codes):
+            break
     else:
-        codes, values = micro_mutation(rng, codes, values, params)
+        codes, values = parent_codes, parent_values
     if rng.random() < params.p_const_perturb:
         values = perturb_constant(rng, codes, values, params.const_sigma)
     delays = tree.delays.tolist()
