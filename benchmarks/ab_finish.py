@@ -1,7 +1,8 @@
 """A/B of the full-model steps on the same identified equations (not a test).
 
     nice -n 5 python benchmarks/ab_finish.py rotorpy-angle rotorpy-angle-noisy --seeds 1 2 3 \\
-        --out results/ab-finish --jobs 2 [--engine max_depth=7] [--peers results/benchmark]
+        --out results/ab-finish --jobs 2 [--engine max_depth=7] [--variants all] \\
+        [--peers results/benchmark]
 
 The six per-equation searches are the expensive part of a benchmark cell; the steps after
 them (stability repair, front selection, joint refit: gpquad.models.finish) take seconds.
@@ -9,7 +10,8 @@ This script identifies each scenario's equations once per seed (per vehicle for 
 rotorpy scenarios) with the engine settings of experiments/recommended.toml (plus
 `--engine` overrides), keeps the six equations with their fronts in
 OUT/raw/<scenario>/<group>/seed<S>.json (a second run reuses them), then applies every
-variant of VARIANTS to the same equations and scores each exactly as the benchmark does
+variant asked for (--variants, of VARIANTS) to the same equations and scores each as the
+benchmark does
 (gpquad.benchmark.evaluate.score on the scenario's held-out test flights; each window flies
 its vehicle's model). With `--peers DIR`, a benchmark folder holding the scenarios' peer
 cells, each variant is also scored on the windows a diverging peer flew
@@ -75,15 +77,15 @@ def raw_model(sub, name: str, group: str, seed: int, engine: dict, out: Path):
     return model
 
 
-def run_seed(name: str, seed: int, engine: dict, out: Path) -> list[dict]:
+def run_seed(name: str, seed: int, engine: dict, out: Path, variants) -> list[dict]:
     scenario = build_scenario(name, out / "flights")
     groups = scenario.groups or {"all": scenario}
     offsets = scenario.group_offsets() if scenario.groups else {"all": (0, scenario.test.n_samples)}
     raws = {g: raw_model(sub, name, g, seed, engine, out) for g, sub in groups.items()}
     cfg, _ = engine_config(repo_root() / "experiments", seed)
     rows = []
-    for variant, fields in VARIANTS.items():
-        fields = dict(fields)
+    for variant in variants:
+        fields = dict(VARIANTS[variant])
         stability.TERM_DROPS = fields.pop("term_drops", True)
         ev = dataclasses.replace(cfg.evolution, **engine, **fields)
         t0 = time.perf_counter()
@@ -111,11 +113,11 @@ def run_seed(name: str, seed: int, engine: dict, out: Path) -> list[dict]:
     return rows
 
 
-def table(rows: list[dict]) -> str:
+def table(rows: list[dict], variants) -> str:
     lines = ["| scenario | variant | 1 s | 7 s | 30 s | diverged | exact per seed | "
              "swaps (seed: group target) |", "|---|---|---|---|---|---|---|---|"]
     for name in dict.fromkeys(r["scenario"] for r in rows):
-        for variant in VARIANTS:
+        for variant in variants:
             rs = [r for r in rows if r["scenario"] == name and r["variant"] == variant]
             cells = []
             for h in HORIZONS_S:
@@ -131,13 +133,13 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def paired_table(rows: list[dict], peers_dir: Path) -> str:
+def paired_table(rows: list[dict], peers_dir: Path, variants) -> str:
     lines = ["| scenario | variant | peer | horizon | peer RSE | gpquad RSE (min-max) |",
              "|---|---|---|---|---|---|"]
     for name in dict.fromkeys(r["scenario"] for r in rows):
         peer_cells = [c for p in ("sindy", "ols") for c in
                       [load_cell(cell_path(peers_dir, name, p, 0))] if c]
-        for variant in VARIANTS:
+        for variant in variants:
             ours = [{"scenario": name, "method": "gpquad", "seed": r["seed"],
                      "metrics": r["metrics"]} for r in rows
                     if r["scenario"] == name and r["variant"] == variant]
@@ -158,21 +160,28 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/ab-finish"))
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--peers", type=Path, help="benchmark folder with the peer cells")
+    parser.add_argument("--variants", default="none,repair+joint",
+                        help=f"comma-separated, or 'all' ({', '.join(VARIANTS)})")
     args = parser.parse_args()
+    variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        parser.error(f"unknown variants {unknown}; choose from {list(VARIANTS)} or 'all'")
     engine = parse_fields(args.engine)
     args.out.mkdir(parents=True, exist_ok=True)
     for name in args.scenarios:  # build (and cache) the flights once, before the workers
         build_scenario(name, args.out / "flights")
     jobs = [(n, s) for n in args.scenarios for s in args.seeds]
-    results = Parallel(n_jobs=args.jobs)(delayed(run_seed)(n, s, engine, args.out)
+    results = Parallel(n_jobs=args.jobs)(delayed(run_seed)(n, s, engine, args.out, variants)
                                          for n, s in jobs)
     rows = [r for rs in results for r in rs]
     (args.out / "ab_finish.json").write_text(json.dumps(
-        {"engine_overrides": engine, "variants": VARIANTS, "rows": rows}, default=float))
-    print(table(rows))
+        {"engine_overrides": engine, "variants": {v: VARIANTS[v] for v in variants},
+         "rows": rows}, default=float))
+    print(table(rows, variants))
     if args.peers:
         print()
-        print(paired_table(rows, args.peers))
+        print(paired_table(rows, args.peers, variants))
 
 
 if __name__ == "__main__":

@@ -86,3 +86,26 @@ def test_config_refuses_a_degree_out_of_range(value):
     cfg = Config(evolution=dataclasses.replace(EvolutionConfig(), max_degree=value))
     with pytest.raises(GpquadError, match="evolution.max_degree"):
         validate(cfg, "x.toml")
+
+
+def test_depth_and_degree_tables_per_target():
+    from gpquad.study.config import config_from_dict
+
+    ev = config_from_dict({"evolution": {"max_depth": {"p_dot": 7}, "max_degree": {"p_dot": 2}}},
+                          "x.toml").evolution
+    assert (ev.depth_for("p_dot"), ev.depth_for("a_x")) == (7, 5)  # left out: the paper's 5
+    assert (ev.degree_for("p_dot"), ev.degree_for("a_x")) == (2, 0)  # left out: no limit
+    resolved = ev.for_target("p_dot")
+    assert (resolved.max_depth, resolved.max_degree, resolved.input_taps) == (7, 2, 1)
+
+
+@pytest.mark.parametrize("table, field", [
+    ({"max_depth": {"p_dt": 7}}, "evolution.max_depth.p_dt"),
+    ({"max_depth": {"a_x": 9}}, "evolution.max_depth.a_x"),
+    ({"max_degree": {"r_dot": -1}}, "evolution.max_degree.r_dot"),
+    ({"max_depth": True}, "evolution.max_depth")])
+def test_tables_name_the_bad_key(table, field):
+    from gpquad.study.config import config_from_dict
+
+    with pytest.raises(GpquadError, match=field.replace(".", r"\.")):
+        config_from_dict({"evolution": table}, "x.toml")

@@ -99,10 +99,12 @@ class EvolutionConfig:
     n_tests: int = 5
     suite_size: int = 6
     window_steps: int = 750
-    max_depth: int = 5
+    # One number, or a table per target such as {p_dot = 7} (a target left out gets 5).
+    max_depth: int | dict[str, int] = 5
     # Not in the paper: the highest polynomial degree of an equation (x y is 2, x y z 3, a
-    # quotient counts both sides); 0 = no limit. Mutations above it are drawn again.
-    max_degree: int = 0
+    # quotient counts both sides); 0 = no limit. Mutations above it are drawn again. One
+    # number, or a table per target (a target left out gets 0).
+    max_degree: int | dict[str, int] = 0
     p_leaf: float = 0.7
     p_constant_leaf: float = 0.25
     const_low: float = -5.0
@@ -189,9 +191,28 @@ class EvolutionConfig:
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""
-        if isinstance(self.input_taps, dict):
-            return int(self.input_taps.get(target, 1))
-        return int(self.input_taps)
+        return per_target(self.input_taps, target, 1)
+
+    def depth_for(self, target: str) -> int:
+        """Largest tree depth of `target`'s equation."""
+        return per_target(self.max_depth, target, 5)
+
+    def degree_for(self, target: str) -> int:
+        """Largest polynomial degree of `target`'s equation (0: no limit)."""
+        return per_target(self.max_degree, target, 0)
+
+    def for_target(self, target: str) -> EvolutionConfig:
+        """This config with the per-target tables resolved for `target`."""
+        return dataclasses.replace(self, input_taps=self.taps_for(target),
+                                   max_depth=self.depth_for(target),
+                                   max_degree=self.degree_for(target))
+
+
+def per_target(value, target: str, left_out: int) -> int:
+    """One number for every target, or a {target: number} table (left_out if absent)."""
+    if isinstance(value, dict):
+        return int(value.get(target, left_out))
+    return int(value)
 
 
 @dataclass(frozen=True)

@@ -47,11 +47,9 @@ def validate(cfg: Config, source: str = "config") -> Config:
                  "test_offset_max"):
         if getattr(ev, name) < 0:
             raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
-    if not 1 <= ev.max_depth <= 8:
-        raise GpquadError("must be between 1 and 8", source=source, field="evolution.max_depth")
-    if not 0 <= ev.max_degree <= 16:
-        raise GpquadError("must be between 0 (no limit) and 16", source=source,
-                          field="evolution.max_degree")
+    _check_table(ev.max_depth, "max_depth", 1, 8, "must be between 1 and 8", source)
+    _check_table(ev.max_degree, "max_degree", 0, 16, "must be between 0 (no limit) and 16",
+                 source)
     if ev.n_models < 2:
         raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
                           source=source, field="evolution.n_models")
@@ -76,16 +74,9 @@ def validate(cfg: Config, source: str = "config") -> Config:
                           source=source, field="evolution.attitude_weight")
     if not 0.0 <= ev.term_min_gain < 1.0:
         raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
-    taps = ev.input_taps if isinstance(ev.input_taps, dict) else {"": ev.input_taps}
-    for target, k in taps.items():
-        where = "evolution.input_taps" + (f".{target}" if target else "")
-        if target and target not in TARGET_NAMES:
-            raise GpquadError(f"unknown target; the table's keys are targets {list(TARGET_NAMES)}",
-                              source=source, field=where)
-        if not 1 <= k <= min(MAX_TAPS, ev.max_delay + 1):
-            raise GpquadError(f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
-                              f"({ev.max_delay + 1}): each tap needs its own delay",
-                              source=source, field=where)
+    _check_table(ev.input_taps, "input_taps", 1, min(MAX_TAPS, ev.max_delay + 1),
+                 f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
+                 f"({ev.max_delay + 1}): each tap needs its own delay", source)
     if ev.gradient_steps < 0:
         raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
     if ev.linear_seed and ev.constant_fit != "gauss-newton":
@@ -203,3 +194,16 @@ def validate_inputs(d: DataConfig, source: str = "config") -> None:
                           source=source, field="data.validation")
     if d.max_attitude_step_deg <= 0:
         raise GpquadError("must be > 0", source=source, field="data.max_attitude_step_deg")
+
+
+def _check_table(value, name: str, low: int, high: int, message: str, source) -> None:
+    """One number in [low, high], or a {target: number} table of them (per-target fields:
+    input_taps, max_depth, max_degree); the error names the key."""
+    table = value if isinstance(value, dict) else {"": value}
+    for target, k in table.items():
+        where = f"evolution.{name}" + (f".{target}" if target else "")
+        if target and target not in TARGET_NAMES:
+            raise GpquadError(f"unknown target; the table's keys are targets {list(TARGET_NAMES)}",
+                              source=source, field=where)
+        if isinstance(k, bool) or not isinstance(k, int) or not low <= k <= high:
+            raise GpquadError(message, source=source, field=where)

@@ -94,9 +94,9 @@ class Coevolution:
     """Coevolutionary identification of one target's equation."""
 
     def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
-        # this target's taps (input_taps may be a per-target table); with taps, the kernels
-        # see every input once per tap (gpquad.engine.taps)
-        cfg = dataclasses.replace(cfg, input_taps=cfg.taps_for(target))
+        # this target's taps, depth and degree (each may be a per-target table); with taps,
+        # the kernels see every input once per tap (gpquad.engine.taps)
+        cfg = cfg.for_target(target)
         self.dataset = dataset = with_taps(dataset, cfg.input_taps)
         self.target = target
         self.cfg = cfg
