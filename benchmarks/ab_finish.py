@@ -32,24 +32,20 @@ import tomllib
 from joblib import Parallel, delayed
 
 from gpquad.benchmark import evaluate
-from gpquad.benchmark.cells import _recovery_gpquad, cell_path, load_cell
+from gpquad.benchmark.cells import cell_path, load_cell, recovery_gpquad
 from gpquad.benchmark.engine import engine_config, fit_gpquad
 from gpquad.benchmark.paired import paired
 from gpquad.benchmark.scenarios import build_scenario, repo_root
-from gpquad.models import stability
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.finish import finish_model
 
 HORIZONS_S = (1.0, 7.0, 30.0)
-#: Finishing variants: EvolutionConfig fields set on top of the engine's; "term_drops"
-#: sets gpquad.models.stability.TERM_DROPS (front selection offers term drops or not).
+#: Finishing variants: EvolutionConfig fields set on top of the engine's.
 VARIANTS = {
     "none": {"stability_repair": False, "front_selection": False, "joint_fit": False},
     "repair+joint": {"stability_repair": True, "front_selection": False, "joint_fit": True},
     "repair+front+joint": {"stability_repair": True, "front_selection": True,
-                           "joint_fit": True, "term_drops": False},
-    "repair+front+drops+joint": {"stability_repair": True, "front_selection": True,
-                                 "joint_fit": True, "term_drops": True},
+                           "joint_fit": True},
 }
 
 
@@ -85,9 +81,7 @@ def run_seed(name: str, seed: int, engine: dict, out: Path, variants) -> list[di
     cfg, _ = engine_config(repo_root() / "experiments", seed)
     rows = []
     for variant in variants:
-        fields = dict(VARIANTS[variant])
-        stability.TERM_DROPS = fields.pop("term_drops", True)
-        ev = dataclasses.replace(cfg.evolution, **engine, **fields)
+        ev = dataclasses.replace(cfg.evolution, **engine, **VARIANTS[variant])
         t0 = time.perf_counter()
         models = {g: finish_model(raws[g], groups[g].fit, ev) for g in groups}
         finish_s = time.perf_counter() - t0
@@ -104,7 +98,7 @@ def run_seed(name: str, seed: int, engine: dict, out: Path, variants) -> list[di
         metrics = evaluate.score(simulate, scenario.test, scenario.measured, HORIZONS_S)
         swaps = {g: [s["target"] + ":" + s.get("why", "diverged")
                      for s in (m.stability or {}).get("swaps", [])] for g, m in models.items()}
-        exact = (_recovery_gpquad(models["all"], scenario) if "all" in models else None) or {}
+        exact = (recovery_gpquad(models["all"], scenario) if "all" in models else None) or {}
         rows.append({"scenario": name, "seed": seed, "variant": variant, "metrics": metrics,
                      "exact": sum(exact.values()) if exact else None,
                      "swaps": swaps, "finish_s": finish_s,

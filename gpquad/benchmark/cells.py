@@ -39,7 +39,7 @@ def load_cell(path: Path, fingerprint: str | None = None) -> dict | None:
     return cell
 
 
-def _recovery_gpquad(model, scenario) -> dict | None:
+def recovery_gpquad(model, scenario) -> dict | None:
     if not scenario.truth:
         return None
     from gpquad.models.analysis import compare_to_truth
@@ -93,7 +93,7 @@ def _fit_one(method: str, scenario, seed: int, engine_dir: Path):
                   "equations_raw_inputs": {t: e.text(raw=True)
                                            for t, e in model.equations.items()},
                   "settings": {"engine_config": source, "evolution": cfg.to_dict()["evolution"]},
-                  "recovery": _recovery_gpquad(model, scenario), "joint_fit": model.joint_fit}
+                  "recovery": recovery_gpquad(model, scenario), "joint_fit": model.joint_fit}
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
     peer, fit_time = peers.fit_peer(method, scenario.fit, seed)
     record = {"equations": peer.equations, "settings": peer.settings,
