@@ -22,8 +22,8 @@ OTHER_ROLL = "20.0*u_R(t-1) - 8.0*p"
 def _fake_module(tmp_path, calls):
     """Stands in for gpquad.benchmark.rotorpy_flights: two vehicles a and b whose roll
     equations differ, 2 training, 1 validation and 1 test flight each."""
-    def ensure_flights(mode, noisy, cache_dir):
-        calls.append((mode, noisy, str(cache_dir)))
+    def ensure_flights(mode, noisy, cache_dir, fleet="tuned"):
+        calls.append((mode, noisy, str(cache_dir)) + (() if fleet == "tuned" else (fleet,)))
         paths, flights = {"train": [], "validation": [], "test": []}, []
         for vehicle in ("a", "b"):
             sim = SimulatorConfig(duration_s=20.0)
@@ -80,7 +80,7 @@ def test_rotorpy_scenario_is_skipped_when_generator_or_rotorpy_missing(tmp_path,
         scenarios.build_scenario("rotorpy-rate", tmp_path)
     module = types.ModuleType("gpquad.benchmark.rotorpy_flights")
 
-    def no_rotorpy(mode, noisy, cache_dir):
+    def no_rotorpy(mode, noisy, cache_dir, fleet="tuned"):
         raise ModuleNotFoundError("No module named 'rotorpy'")
 
     module.ensure_flights = no_rotorpy
@@ -100,8 +100,14 @@ def test_every_rotorpy_scenario_asks_for_its_mode_and_noise(tmp_path, monkeypatc
     calls = []
     monkeypatch.setitem(sys.modules, "gpquad.benchmark.rotorpy_flights",
                         _fake_module(tmp_path, calls))
-    for name in ("rotorpy-angle", "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy"):
+    names = ("rotorpy-angle", "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy",
+             "rotorpy-heldout-angle", "rotorpy-heldout-angle-noisy", "rotorpy-heldout-rate",
+             "rotorpy-heldout-rate-noisy")
+    for name in names:
         assert name in scenarios.SCENARIOS
-        scenarios.build_scenario(name, tmp_path / "cache")
-    assert [c[:2] for c in calls] == [("angle", False), ("angle", True), ("rate", False),
-                                      ("rate", True)]
+        assert scenarios.build_scenario(name, tmp_path / "cache").source.get("fleet") == \
+            ("heldout" if "heldout" in name else None)
+    assert [(c[0], c[1]) + c[3:] for c in calls] == [
+        ("angle", False), ("angle", True), ("rate", False), ("rate", True),
+        ("angle", False, "heldout"), ("angle", True, "heldout"), ("rate", False, "heldout"),
+        ("rate", True, "heldout")]

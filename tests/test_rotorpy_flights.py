@@ -23,6 +23,7 @@ from gpquad.errors import GpquadError  # noqa: E402
 from gpquad.study.config import config_from_dict  # noqa: E402
 
 VEHICLES = list(rf.VEHICLES)
+ALL_VEHICLES = [v for fleet in rf.FLEETS.values() for v in fleet]
 
 
 def random_state(rng, params):
@@ -33,7 +34,7 @@ def random_state(rng, params):
     return s
 
 
-@pytest.mark.parametrize("vehicle", VEHICLES)
+@pytest.mark.parametrize("vehicle", ALL_VEHICLES)
 def test_port_matches_rotorpy_derivative_low_level_laws_and_se3(vehicle):
     params, _ = rf.vehicle_params(vehicle)
     veh = model.vehicle_arrays(params)
@@ -72,7 +73,8 @@ def test_port_matches_rotorpy_derivative_low_level_laws_and_se3(vehicle):
 
 
 @pytest.mark.parametrize("vehicle, mode", [("hummingbird", "cmd_ctatt"),
-                                           ("crazyflie", "cmd_ctbr")])
+                                           ("crazyflie", "cmd_ctbr"),
+                                           ("crazyfliebrushless", "cmd_ctatt")])
 def test_closed_loop_matches_rotorpy_step(vehicle, mode):
     """0.2 s of rotorpy's own Multirotor.step (solve_ivp, tight tolerances) at rotorpy's 2 ms
     step, set-points changing, the low-level law recomputed every step, against the kernels:
@@ -138,9 +140,12 @@ def sign_gains(ds):
     return g_y, g_x, k_t
 
 
-@pytest.mark.parametrize("mode", ["angle", "rate"])
-def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_path, mode):
-    _, frame, checks = short_flight(tmp_path, mode)
+@pytest.mark.parametrize("mode, vehicle", [("angle", "hummingbird"), ("rate", "hummingbird"),
+                                           ("angle", "crazyfliebrushless"),
+                                           ("rate", "crazyfliebrushless")])
+def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_path, mode,
+                                                                           vehicle):
+    _, frame, checks = short_flight(tmp_path, mode, vehicle)
     assert checks["min_altitude_m"] > 1.0 and checks["max_tilt_deg"] < 45.0
     flights, ds = pipeline_dataset(frame, tmp_path)
     check = integration_check(flights, 250, 0.05)
@@ -245,3 +250,22 @@ def test_ensure_flights_caches_regenerates_bit_identically_and_adds_noise(tmp_pa
 def test_unknown_mode_is_a_one_line_error(tmp_path):
     with pytest.raises(GpquadError, match="unknown mode 'yaw'"):
         rf.ensure_flights("yaw", False, tmp_path)
+    with pytest.raises(GpquadError, match="unknown fleet 'spare'"):
+        rf.ensure_flights("angle", False, tmp_path, fleet="spare")
+
+
+def test_heldout_fleet_has_its_own_vehicle_seeds_and_folder(tmp_path, monkeypatch):
+    """The held-out vehicle is none of the tuned fleet's, shares no flight seed with it in
+    either mode, and its flights are cached beside (not over) the tuned fleet's."""
+    assert not set(rf.FLEETS["heldout"]) & set(rf.FLEETS["tuned"])
+    tuned = {s.seed for m in rf.MODES for s in rf.flight_plan(m)}
+    held = {s.seed for m in rf.MODES for s in rf.flight_plan(m, "heldout")}
+    assert held and not tuned & held
+    monkeypatch.setattr(rf, "PLAN", (("train", 1, 6.0), ("validation", 1, 6.0),
+                                     ("test", 1, 6.0)))
+    res = rf.ensure_flights("rate", True, tmp_path, fleet="heldout")
+    assert res["vehicles"] == ["crazyfliebrushless"]
+    assert all("/heldout-rate-noisy/" in p for p in res["train"] + res["test"])
+    assert (tmp_path / "heldout-rate" / "manifest.json").is_file()
+    assert not (tmp_path / "rate").exists()
+    assert res["seeds"] == [s.seed for s in rf.flight_plan("rate", "heldout")]

@@ -1,5 +1,11 @@
 """Flights of rotorpy's vehicles for the benchmark's `rotorpy-*` scenarios.
 
+Two fleets: "tuned", rotorpy's crazyflie and hummingbird (the `rotorpy-*` scenarios, on which
+the engine settings of experiments/recommended.toml were measured and chosen), and
+"heldout", rotorpy's brushless crazyflie (the `rotorpy-heldout-*` scenarios: a vehicle that no
+setting was chosen on; its attitude loop, kp_att 3265 and kd_att 362, is six to eight times
+stiffer than the tuned fleet's, its motor lag 50 ms).
+
 Each flight: rotorpy's SE3 controller follows a slow random reference around a hover point;
 a band-limited, pilot-like excitation (second-order Butterworth-filtered Gaussian noise) is
 added to its set-points; the vehicle (rotorpy's crazyflie or hummingbird, aero effects and
@@ -41,11 +47,18 @@ from gpquad.study.store import atomic_write_bytes, atomic_write_text, provenance
 #: Bump when the generator's output changes: cached flights of another version are remade.
 GENERATOR_VERSION = 1
 MODES = {"angle": model.CTATT, "rate": model.CTBR}
-#: rotorpy vehicles flown, with overrides of rotorpy's cmd_ctbr body-rate gain k_w (1/s):
-#: rotorpy's hummingbird has k_w = 1, a 1 s rate loop that cannot hold an attitude under the
-#: SE3 position loop; 40 is close to its cmd_ctatt damping gain kd_att = 46.6.
-VEHICLES = {"crazyflie": ("rotorpy.vehicles.crazyflie_params", None),
-            "hummingbird": ("rotorpy.vehicles.hummingbird_params", 40.0)}
+#: rotorpy vehicles flown per fleet, with overrides of rotorpy's cmd_ctbr body-rate gain k_w
+#: (1/s): rotorpy's hummingbird has k_w = 1, a 1 s rate loop that cannot hold an attitude
+#: under the SE3 position loop; 40 is close to its cmd_ctatt damping gain kd_att = 46.6. The
+#: brushless crazyflie's k_w = 5.27 tilts it beyond 60 degrees within a minute of rate-mode
+#: excitation; it gets the same 40.
+FLEETS = {"tuned": {"crazyflie": ("rotorpy.vehicles.crazyflie_params", None),
+                    "hummingbird": ("rotorpy.vehicles.hummingbird_params", 40.0)},
+          "heldout": {"crazyfliebrushless": ("rotorpy.vehicles.crazyfliebrushless_params",
+                                             40.0)}}
+VEHICLES = FLEETS["tuned"]
+#: Added to the flight seeds of a fleet, so that no two fleets share a seed.
+FLEET_SEED_OFFSET = {"tuned": 0, "heldout": 500}
 INPUT_NAMES = ("u_P", "u_R", "u_Y", "u_T")
 LOG_HZ = 100.0
 SUB_STEPS = 5  # physics at 500 Hz
@@ -89,22 +102,27 @@ class FlightSpec:
         return f"{self.vehicle}_{self.role}{self.index}"
 
 
-def flight_plan(mode: str) -> list[FlightSpec]:
-    """Every flight of a mode with its fixed seed (mode digit, vehicle, role, index)."""
+def flight_plan(mode: str, fleet: str = "tuned") -> list[FlightSpec]:
+    """Every flight of a mode and fleet with its fixed seed (fleet offset, mode digit,
+    vehicle, role, index)."""
     if mode not in MODES:
         raise GpquadError(f"unknown mode '{mode}'; choose {sorted(MODES)}", field="mode")
+    if fleet not in FLEETS:
+        raise GpquadError(f"unknown fleet '{fleet}'; choose {sorted(FLEETS)}", field="fleet")
     specs = []
-    for v, vehicle in enumerate(VEHICLES):
+    for v, vehicle in enumerate(FLEETS[fleet]):
         for r, (role, count, duration) in enumerate(PLAN):
             for i in range(count):
-                seed = 8000 + 1000 * list(MODES).index(mode) + 100 * v + 10 * r + i
+                seed = (8000 + FLEET_SEED_OFFSET[fleet] + 1000 * list(MODES).index(mode)
+                        + 100 * v + 10 * r + i)
                 specs.append(FlightSpec(mode, vehicle, role, i, seed, duration))
     return specs
 
 
 def vehicle_params(vehicle: str) -> tuple[dict, float | None]:
-    """rotorpy's parameter dict of a vehicle and the cmd_ctbr gain override (or None)."""
-    module, k_w = VEHICLES[vehicle]
+    """rotorpy's parameter dict of a vehicle (of any fleet) and the cmd_ctbr gain override
+    (or None)."""
+    module, k_w = next(f[vehicle] for f in FLEETS.values() if vehicle in f)
     return importlib.import_module(module).quad_params, k_w
 
 
@@ -220,11 +238,13 @@ def add_sensor_noise(frame: pd.DataFrame, seed: int) -> pd.DataFrame:
     return out
 
 
-def settings(mode: str, noisy: bool) -> dict:
+def settings(mode: str, noisy: bool, fleet: str = "tuned") -> dict:
     """Everything that determines the files (compared with a cache's manifest)."""
+    vehicles = FLEETS[fleet]
     return {"generator_version": GENERATOR_VERSION, "mode": mode, "noisy": noisy,
-            "plan": [asdict(s) for s in flight_plan(mode)], "vehicles": list(VEHICLES),
-            "ctbr_k_w_override": {v: k for v, (_, k) in VEHICLES.items()},
+            **({} if fleet == "tuned" else {"fleet": fleet}),
+            "plan": [asdict(s) for s in flight_plan(mode, fleet)], "vehicles": list(vehicles),
+            "ctbr_k_w_override": {v: k for v, (_, k) in vehicles.items()},
             "excitation": EXCITATION[mode], "ramp_s": RAMP_S, "reference": REFERENCE,
             "log_hz": LOG_HZ, "physics_hz": LOG_HZ * SUB_STEPS, "limits": LIMITS,
             "noise": {**NOISE, "gyro_bias_sd": GYRO_BIAS_SD} if noisy else None,
@@ -241,7 +261,8 @@ def _result(folder: Path, specs: list[FlightSpec], mode: str, noisy: bool) -> di
     out = {role: [str(folder / f"{s.name}.parquet") for s in specs if s.role == role]
            for role in ROLES}
     out.update({"input_names": INPUT_NAMES, "config": dict(DATA_CONFIG),
-                "vehicles": list(VEHICLES), "seeds": [s.seed for s in specs],
+                "vehicles": list(dict.fromkeys(s.vehicle for s in specs)),
+                "seeds": [s.seed for s in specs],
                 "flights": [{"path": str(folder / f"{s.name}.parquet"), "vehicle": s.vehicle,
                              "role": s.role, "seed": s.seed, "duration_s": s.duration_s}
                             for s in specs],
@@ -261,10 +282,12 @@ def _cached(folder: Path, wanted: dict, specs: list[FlightSpec]) -> bool:
         (folder / f"{s.name}.parquet").is_file() for s in specs)
 
 
-def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None) -> dict:
-    """The rotorpy flights of a mode, generated once and cached under cache_dir/<mode>[-noisy].
+def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
+                   fleet: str = "tuned") -> dict:
+    """The rotorpy flights of a mode and fleet, generated once and cached under
+    cache_dir/[<fleet>-]<mode>[-noisy] (no prefix for the tuned fleet).
 
-    mode "angle" or "rate". Returns {"train", "validation", "test": [absolute paths],
+    mode "angle" or "rate"; fleet a key of FLEETS. Returns {"train", "validation", "test": [absolute paths],
     "input_names", "config": [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per
     flight, in the order train, validation, test per vehicle), "flights" (path, vehicle, role,
     seed, duration_s of each), "mode", "noisy"}.
@@ -272,17 +295,19 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None)
     flights plus sensor noise. Each file and then the manifest are written atomically; a
     cache made with other settings is regenerated. progress: optional callable(str).
     """
-    specs = flight_plan(mode)
-    folder = Path(cache_dir).resolve() / (f"{mode}-noisy" if noisy else mode)
-    wanted = settings(mode, noisy)
+    specs = flight_plan(mode, fleet)
+    clean_name = mode if fleet == "tuned" else f"{fleet}-{mode}"
+    clean_folder = Path(cache_dir).resolve() / clean_name
+    folder = clean_folder.with_name(f"{clean_name}-noisy") if noisy else clean_folder
+    wanted = settings(mode, noisy, fleet)
     if _cached(folder, wanted, specs):
         return _result(folder, specs, mode, noisy)
     flights = {}
     if noisy:
-        clean = ensure_flights(mode, False, cache_dir, progress)
+        clean = ensure_flights(mode, False, cache_dir, progress, fleet)
         clean_meta = json.loads((Path(clean["train"][0]).parent / "manifest.json").read_text())
         for s in specs:
-            frame = pd.read_parquet(Path(cache_dir).resolve() / mode / f"{s.name}.parquet")
+            frame = pd.read_parquet(clean_folder / f"{s.name}.parquet")
             atomic_write_bytes(folder / f"{s.name}.parquet",
                                _parquet_bytes(add_sensor_noise(frame, s.seed)))
             flights[s.name] = clean_meta["flights"][s.name]

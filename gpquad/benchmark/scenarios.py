@@ -15,6 +15,10 @@ held-out flights that every method is scored on (same trim as `fit`).
   hummingbird: 544, 46.6), so no one lumped model describes both: each method is fitted
   per vehicle (`groups`) and each vehicle's model flies that vehicle's test flight; the
   scenario's RSE is taken over the windows of both;
+- rotorpy-heldout-angle, rotorpy-heldout-angle-noisy, rotorpy-heldout-rate,
+  rotorpy-heldout-rate-noisy: the same flights of rotorpy's brushless crazyflie, a vehicle
+  that no engine setting was chosen on (`rotorpy_flights.FLEETS`): how the recommended
+  engine does on a vehicle it was not tuned to;
 - px4-s250, px4-aquaquad: the real logs of `experiments/px4_*.toml`, first 70 % of the
   flight time trains, the last 30 % tests; only measured states are scored;
 - a user's TOML: its training part trains, its held-out part (data.validation_fraction of
@@ -41,10 +45,13 @@ TEST_SEEDS = (1001, 1002)
 TEST_DURATION_S = 180.0
 TRAIN_FRACTION = 0.7
 SCENARIOS = ("median", "median-noisy", "rigid-body", "rigid-body-noisy", "rotorpy-angle",
-             "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy", "px4-s250",
-             "px4-aquaquad")
-ROTORPY = {"rotorpy-angle": ("angle", False), "rotorpy-angle-noisy": ("angle", True),
-           "rotorpy-rate": ("rate", False), "rotorpy-rate-noisy": ("rate", True)}
+             "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy",
+             "rotorpy-heldout-angle", "rotorpy-heldout-angle-noisy", "rotorpy-heldout-rate",
+             "rotorpy-heldout-rate-noisy", "px4-s250", "px4-aquaquad")
+#: rotorpy scenario -> (mode, noisy, fleet of gpquad.benchmark.rotorpy_flights.FLEETS).
+ROTORPY = {f"rotorpy-{prefix}{mode}{suffix}": (mode, bool(suffix), fleet)
+           for prefix, fleet in (("", "tuned"), ("heldout-", "heldout"))
+           for mode in ("angle", "rate") for suffix in ("", "-noisy")}
 
 
 class Skipped(Exception):
@@ -169,13 +176,13 @@ def _from_log(name: str, path: Path) -> Scenario:
 
 
 def _rotorpy(name: str, cache_dir: Path) -> Scenario:
-    mode, noisy = ROTORPY[name]
+    mode, noisy, fleet = ROTORPY[name]
     try:
         rotorpy_flights = importlib.import_module("gpquad.benchmark.rotorpy_flights")
     except ImportError as exc:
         raise Skipped(f"{name}: gpquad.benchmark.rotorpy_flights unavailable ({exc})") from None
     try:
-        made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir)
+        made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir, fleet=fleet)
     except ImportError as exc:
         raise Skipped(f"{name}: rotorpy is not installed ({exc})") from None
     from gpquad.data.io import load_flights
@@ -199,7 +206,9 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
             roles[role] += flights[role]
         groups[vehicle] = make_scenario(f"{name}/{vehicle}", flights["train"], flights["test"],
                                         validation=flights["validation"], **trim)
-    source = {"kind": "rotorpy", "mode": mode, "noisy": noisy, "vehicles": made.get("vehicles"),
+    source = {"kind": "rotorpy", "mode": mode, "noisy": noisy,
+              **({} if fleet == "tuned" else {"fleet": fleet}),  # the tuned cells' fingerprint
+              "vehicles": made.get("vehicles"),
               "seeds": made.get("seeds"), "config": data, "fitted": "per vehicle"}
     pooled = make_scenario(name, roles["train"], roles["test"], validation=roles["validation"],
                            source=source, **trim)
