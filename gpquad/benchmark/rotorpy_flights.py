@@ -287,8 +287,8 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
     """The rotorpy flights of a mode and fleet, generated once and cached under
     cache_dir/[<fleet>-]<mode>[-noisy] (no prefix for the tuned fleet).
 
-    mode "angle" or "rate"; fleet a key of FLEETS. Returns {"train", "validation", "test": [absolute paths],
-    "input_names", "config": [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per
+    mode "angle" or "rate"; fleet a key of FLEETS. Returns {"train", "validation", "test":
+    [absolute paths], "input_names", "config": [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per
     flight, in the order train, validation, test per vehicle), "flights" (path, vehicle, role,
     seed, duration_s of each), "mode", "noisy"}.
     Files are 100 Hz gpquad "table" logs (Parquet, NED/FRD); the noisy variant is the clean
