@@ -288,9 +288,9 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
     cache_dir/[<fleet>-]<mode>[-noisy] (no prefix for the tuned fleet).
 
     mode "angle" or "rate"; fleet a key of FLEETS. Returns {"train", "validation", "test":
-    [absolute paths], "input_names", "config": [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per
-    flight, in the order train, validation, test per vehicle), "flights" (path, vehicle, role,
-    seed, duration_s of each), "mode", "noisy"}.
+    [absolute paths], "input_names", "config": [data] fields for gpquad's pipeline,
+    "vehicles", "seeds" (one per flight, in the order train, validation, test per vehicle),
+    "flights" (path, vehicle, role, seed, duration_s of each), "mode", "noisy"}.
     Files are 100 Hz gpquad "table" logs (Parquet, NED/FRD); the noisy variant is the clean
     flights plus sensor noise. Each file and then the manifest are written atomically; a
     cache made with other settings is regenerated. progress: optional callable(str).
