@@ -7,17 +7,9 @@ import pandas as pd
 import pytest
 
 from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
-from gpquad.data.pipeline import (
-    LogTable,
-    Stream,
-    check_stream_time,
-    flights_from_log,
-    in_flight_mask,
-    lowpass_taps,
-    resample,
-    runs,
-    zero_phase_fir,
-)
+from gpquad.data.pipeline import LogTable, flights_from_log, lowpass_taps, zero_phase_fir
+from gpquad.data.plausibility import check_stream_time, runs
+from gpquad.data.streams import Stream, in_flight_mask, resample
 from gpquad.errors import GpquadError
 from gpquad.study.config import DataConfig
 

@@ -24,9 +24,10 @@ import numpy as np
 from gpquad.data.dataflash import DataFlashLog
 from gpquad.data.flight import Flight
 from gpquad.data.levels import check_input_rates, paper_names, resolve_inputs
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.pipeline import LogTable, flights_from_log
 from gpquad.data.plausibility import check_rate_peak, check_rate_units
 from gpquad.data.resets import reset_mask
+from gpquad.data.streams import Stream, in_flight_mask, resample
 from gpquad.engine.kernels.quaternion import quat_from_euler
 from gpquad.errors import GpquadError
 

@@ -30,8 +30,9 @@ import pandas as pd
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight, flip_body
 from gpquad.data.levels import paper_names, resolve_inputs
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.pipeline import LogTable, flights_from_log
 from gpquad.data.plausibility import runs
+from gpquad.data.streams import Stream, in_flight_mask, resample
 from gpquad.engine.kernels.integrator import body_accelerations, integrate
 from gpquad.engine.kernels.quaternion import quat_from_euler
 from gpquad.errors import GpquadError

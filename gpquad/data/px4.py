@@ -27,11 +27,12 @@ import pandas as pd
 
 from gpquad.data.flight import Flight
 from gpquad.data.levels import check_input_rates, resolve_inputs
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.pipeline import LogTable, flights_from_log
 from gpquad.data.plausibility import check_rate_peak, check_rate_units
 from gpquad.data.px4_signals import UNITS, counter_labels, optional_streams, torque_stream
 from gpquad.data.px4_signals import levels as px4_levels
 from gpquad.data.resets import reset_mask
+from gpquad.data.streams import Stream, in_flight_mask, resample
 from gpquad.errors import GpquadError
 
 #: PX4's ARMING_STATE_ARMED (2016 and later).

@@ -21,8 +21,9 @@ from gpquad.data.flight import (
     flip_body,
     flip_world,
 )
-from gpquad.data.pipeline import LogTable, Stream, flights_from_log, in_flight_mask, resample
+from gpquad.data.pipeline import LogTable, flights_from_log
 from gpquad.data.plausibility import check_rate_peak, check_rate_units
+from gpquad.data.streams import Stream, in_flight_mask, resample
 from gpquad.engine.variables import (
     BODY_VEL_COLUMNS,
     POSITION_COLUMNS,
