@@ -115,6 +115,16 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     summary = text[text.index("## Summary"):text.index("## Per state")]
     assert "| tiny | gpquad |" in summary and "| tiny | zero |" in summary
     assert "/6, " in summary  # exact equations of each gpquad seed (the truth is known)
+    assert "| parameters | fit s |" in summary
+    # the zero model fits no number; gpquad's count is its cells' (fitted numbers of the
+    # printed equations), shown in the summary beside the fit time
+    assert agg["tiny"]["zero"]["parameters"]["mean"] == 0
+    counts = [json.loads(c.read_text())["n_parameters"] for c in cells[:2]]
+    assert all(n > 0 for n in counts)
+    assert agg["tiny"]["gpquad"]["parameters"]["mean"] == sum(counts) / 2
+    assert table.parameters({"n_parameters": {"a": 3, "b": 4}}) == 7
+    assert table.parameters({"n_parameters": {"a": 3, "b": None}}) is None
+    assert table.parameters({}) is None
     saved = json.loads((out2 / "results.json").read_text())
     assert saved["benchmark"]["engine_config"].endswith("quickstart.toml")
 

@@ -59,6 +59,10 @@ def gp_run(tmp_path_factory):
 def test_gp_run_with_true_equations_scores_zero(gp_run):
     info = load_run(gp_run)
     assert info.kind == "gp" and info.fit_time_s == 12.5 and info.max_delay == 5
+    # fitted numbers of the printed equations: two each, and a_z = 28.2 u_T(t-5) - 1.0 w
+    # + 0.06 in the trimmed u_T (28.2 x 0.35 - 9.81) has three
+    assert info.n_parameters == 13
+    assert {t: e.n_constants for t, e in info.model.equations.items()}["a_z"] == 3
     dataset = run_dataset(gp_run)
     assert dataset.trim == {n: 0.0 for n in INPUTS}
     score = score_model(info.model, dataset, 50, info.trim, info.max_delay)

@@ -93,7 +93,8 @@ def _fit_one(method: str, scenario, seed: int, engine_dir: Path):
                   "equations_raw_inputs": {t: e.text(raw=True)
                                            for t, e in model.equations.items()},
                   "settings": {"engine_config": source, "evolution": cfg.to_dict()["evolution"]},
-                  "recovery": recovery_gpquad(model, scenario), "joint_fit": model.joint_fit}
+                  "recovery": recovery_gpquad(model, scenario), "joint_fit": model.joint_fit,
+                  "n_parameters": model.n_parameters}
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
     peer, fit_time = peers.fit_peer(method, scenario.fit, seed)
     record = {"equations": peer.equations, "settings": peer.settings,

@@ -24,6 +24,15 @@ def _stats(values) -> dict | None:
             "n": len(vals)}
 
 
+def parameters(cell: dict) -> int | None:
+    """A cell's fitted numbers: its n_parameters, summed over the vehicles of a per-vehicle
+    scenario; None for cells that did not record it."""
+    n = cell.get("n_parameters")
+    if isinstance(n, dict):
+        return int(sum(n.values())) if n and None not in n.values() else None
+    return None if n is None else int(n)
+
+
 def aggregate(cells: list[dict]) -> dict:
     """{scenario: {method: {"seeds", "horizons": {h: {...}}, "recovery", "cost"}}}."""
     out: dict = {}
@@ -51,6 +60,7 @@ def aggregate(cells: list[dict]) -> dict:
             result[scenario][method] = {
                 "seeds": [c["seed"] for c in group], "version": group[0].get("version"),
                 "horizons": horizons, "recovery": recovery, "exact_per_seed": exact_per_seed,
+                "parameters": _stats([parameters(c) for c in group]),
                 "cost": {"fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
                          "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
                          "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group])}}
@@ -68,11 +78,12 @@ def _num(stats, spread: bool = False) -> str:
 
 def summary_markdown(agg: dict) -> str:
     """One compact table of every scenario: mean RSE per horizon (mean over seeds, min-max),
-    diverged windows, exact equations per seed (where the truth is known) and fit time."""
+    diverged windows, exact equations per seed (where the truth is known), fitted numbers
+    (summed over the six equations and, per-vehicle scenarios, the vehicles) and fit time."""
     horizons = sorted({h for ms in agg.values() for m in ms.values() for h in m["horizons"]},
                       key=lambda h: float(h.rstrip("s")))
     head = ["scenario", "method"] + [f"mean RSE {h}" for h in horizons] + ["exact equations",
-                                                                            "fit s"]
+                                                                            "parameters", "fit s"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for scenario, methods in agg.items():
         for method, m in methods.items():
@@ -92,7 +103,7 @@ def summary_markdown(agg: dict) -> str:
                 per_seed = m.get("exact_per_seed")
                 rec = (", ".join(f"{k}/6" for k in per_seed) if per_seed
                        else f"{sum(m['recovery'].values())}/{6 * n}")
-            cells += [rec, _num(m["cost"]["fit_time_s"])]
+            cells += [rec, _num(m.get("parameters"), spread=True), _num(m["cost"]["fit_time_s"])]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -91,6 +91,11 @@ class Equation:
                 first[key] = sym
         return simplify(expr.xreplace(reps) if reps else expr)
 
+    @property
+    def n_constants(self) -> int:
+        """Fitted numbers in the printed equation (each occurrence of a float in sympy())."""
+        return sum(1 for a in sp.preorder_traversal(self.sympy()) if isinstance(a, sp.Float))
+
     def sympy_raw(self) -> sp.Expr:
         """The same equation in the raw (not trim-subtracted) inputs."""
         expr = self.sympy()
@@ -177,6 +182,11 @@ class DiscoveredModel:
     joint_fit: dict | None = None
     #: The full-model stability repair's report (gpquad.models.stability), or None.
     stability: dict | None = None
+
+    @property
+    def n_parameters(self) -> int:
+        """Fitted numbers in the printed equations (Equation.n_constants, summed)."""
+        return sum(e.n_constants for e in self.equations.values())
 
     def to_dict(self) -> dict:
         out = {

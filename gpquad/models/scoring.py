@@ -138,15 +138,13 @@ def load_run(run_dir) -> RunInfo:
         model = from_model_dict(d)
         return RunInfo(run_dir, d["method"], model, model.n_parameters,
                        float(info.get("fit_time_s", np.nan)), {}, 0)
-    from gpquad.engine.tree.operators import CONST
     from gpquad.models.equations import DiscoveredModel
 
     model = DiscoveredModel.from_dict(d)
-    n_const = sum(int(np.sum(e.tree.codes[: e.tree.size] == CONST))
-                  for e in model.equations.values())
     max_delay = max([int(np.max(e.tree.delays, initial=0)) for e in model.equations.values()]
                     + [0])
-    return RunInfo(run_dir, "gp", model, n_const, float(info.get("wall_time_s", np.nan)),
+    return RunInfo(run_dir, "gp", model, model.n_parameters,
+                   float(info.get("wall_time_s", np.nan)),
                    dict(model.trim), max_delay)
 
 
