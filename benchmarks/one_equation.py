@@ -6,7 +6,8 @@
         --library "1,psi,r,u_Y0,u_Y1,u_Y2,u_Y3,u_Y4,u_Y5,theta*u_R0,phi*u_P0,phi*theta,u_P0*u_R0"
 
 Flies one acceleration equation on the scenario's held-out test flight with every other
-state taken from the data: only the equation's own state (r for r_dot) is integrated, from
+state taken from the data (and, for a_x, a_y, a_z, the data's rotation between samples, as
+the integrator's V_{t+1} = R (V_t + a dt)): only the equation's own state is integrated, from
 the recorded value at each window start (every STRIDE samples), over `--horizon` seconds.
 Error: RSE of that state (gpquad.models.scoring.rse's definition: squared error over the
 windows / squared deviation of the recorded values from their mean). This separates an
@@ -60,12 +61,20 @@ def rollout_rse(ds, target: str, rhs, seconds: float) -> float:
     x = ds.arrays.states[starts, state].copy()
     err = np.zeros(len(starts))
     recorded = []
+    translational = TARGET_NAMES.index(target) < 3
     for k in range(steps):
         rows = starts + k
         view = dict(cols)
         view[STATE_NAMES[state]] = np.zeros(len(cols["1"]))
         view[STATE_NAMES[state]][rows] = x
         x = x + ds.dt * rhs(view, rows)
+        if translational:  # the integrator's V_{t+1} = R (V_t + a_t dt), R = rot of the data
+            rot = ds.arrays.rot[rows].reshape(-1, 3, 3)
+            # V_t + a_t dt of the data is R^T V_{t+1}; the equation's own component replaces
+            # its part
+            before = np.einsum("wji,wj->wi", rot, ds.arrays.states[rows + 1, 3:6])
+            before[:, state - 3] = x
+            x = np.einsum("wj,wj->w", rot[:, state - 3], before)
         truth = ds.arrays.states[rows + 1, state]
         err += (x - truth) ** 2
         recorded.append(truth)
