@@ -1,4 +1,5 @@
-"""Generate every rotorpy flight of the benchmark (angle and rate mode, clean and noisy).
+"""Generate every rotorpy flight of the benchmark (both fleets, angle and rate mode, clean and
+noisy).
 
     python benchmarks/make_rotorpy_flights.py [--out results/benchmark_data/rotorpy]
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from gpquad.benchmark.rotorpy_flights import ensure_flights
+from gpquad.benchmark.rotorpy_flights import FLEETS, ensure_flights
 
 DEFAULT_OUT = "results/benchmark_data/rotorpy"
 
@@ -21,15 +22,17 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"cache folder (default {DEFAULT_OUT})")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    for mode in ("angle", "rate"):
-        for noisy in (False, True):
-            t0 = time.perf_counter()
-            res = ensure_flights(mode, noisy, args.out, progress=lambda m: print(" ", m,
-                                                                                 flush=True))
-            n = sum(len(res[r]) for r in ("train", "validation", "test"))
-            print(f"rotorpy-{mode}{'-noisy' if noisy else ''}: {n} flights, seeds "
-                  f"{res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
-                  f"{res['train'][0].rsplit('/', 1)[0]}", flush=True)
+    for fleet in FLEETS:
+        prefix = "" if fleet == "tuned" else f"{fleet}-"
+        for mode in ("angle", "rate"):
+            for noisy in (False, True):
+                t0 = time.perf_counter()
+                res = ensure_flights(mode, noisy, args.out, fleet=fleet,
+                                     progress=lambda m: print(" ", m, flush=True))
+                n = sum(len(res[r]) for r in ("train", "validation", "test"))
+                print(f"rotorpy-{prefix}{mode}{'-noisy' if noisy else ''}: {n} flights, seeds "
+                      f"{res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
+                      f"{res['train'][0].rsplit('/', 1)[0]}", flush=True)
     print(f"total {time.perf_counter() - start:.1f} s")
     return 0
 
