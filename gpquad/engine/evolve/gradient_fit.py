@@ -1,6 +1,6 @@
 """Constants by gradient through the integrator (an optional memetic step, not in the paper).
 
-Levenberg-Marquardt (scipy.optimize.least_squares, MINPACK) on the integrated-state
+Levenberg-Marquardt (MINPACK through gpquad.engine.evolve.lm) on the integrated-state
 residuals of a tree over data windows, with the Jacobian from the forward-mode sensitivity
 kernel (gpquad.engine.kernels.sensitivity). This is the gradient operator of
 ../shared/seeds/ga-gradient-parameter-identification.txt carried into GP: a coefficient
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import qr
-from scipy.optimize import least_squares
 
 from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.lm import levenberg_marquardt
 from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
 from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree
@@ -115,14 +115,13 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
         return x
 
     try:
-        fit = least_squares(lambda x: evaluate(full(x))[0], x0[free],
-                            jac=lambda x: evaluate(full(x))[1][:, free],
-                            method="lm", max_nfev=max_steps, x_scale="jac")
+        x_fit = levenberg_marquardt(lambda x: evaluate(full(x))[0], x0[free],
+                                    lambda x: evaluate(full(x))[1][:, free], max_steps)
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - non-finite steps
         return model, error
-    if not np.all(np.isfinite(fit.x)) or np.array_equal(fit.x, x0[free]):
+    if not np.all(np.isfinite(x_fit)) or np.array_equal(x_fit, x0[free]):
         return model, error
-    fitted = with_values(full(fit.x))
+    fitted = with_values(full(x_fit))
     fitted_error = float(error_of(fitted))
     if fitted_error < error:
         return fitted, fitted_error
