@@ -11,6 +11,8 @@ norms of the first Jacobian, what mode 1 starts from.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.optimize import leastsq
 
@@ -21,6 +23,11 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
     x0 = np.asarray(x0, dtype=float)
     norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
     diag = np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
-    # full_output=False: no covariance (it overflows on the stiff fits and is not used)
-    x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1, diag=diag)
+    # full_output=False: no covariance (it overflows on the stiff fits and is not used); the
+    # budget is meant to run out, so leastsq's "reached maxfev" warning is not shown
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Number of calls to function has reached",
+                                category=RuntimeWarning)
+        x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1,
+                       diag=diag)
     return np.atleast_1d(np.asarray(x, dtype=float))
