@@ -12,7 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from gpquad.benchmark.rotorpy_flights import FLEETS, ensure_flights
+from gpquad.benchmark.rotorpy_flights import ensure_flights
+from gpquad.benchmark.scenarios import ROTORPY
 
 DEFAULT_OUT = "results/benchmark_data/rotorpy"
 
@@ -22,17 +23,13 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"cache folder (default {DEFAULT_OUT})")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    for fleet in FLEETS:
-        prefix = "" if fleet == "tuned" else f"{fleet}-"
-        for mode in ("angle", "rate"):
-            for noisy in (False, True):
-                t0 = time.perf_counter()
-                res = ensure_flights(mode, noisy, args.out, fleet=fleet,
-                                     progress=lambda m: print(" ", m, flush=True))
-                n = sum(len(res[r]) for r in ("train", "validation", "test"))
-                print(f"rotorpy-{prefix}{mode}{'-noisy' if noisy else ''}: {n} flights, seeds "
-                      f"{res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
-                      f"{res['train'][0].rsplit('/', 1)[0]}", flush=True)
+    for name, (mode, noisy, fleet) in ROTORPY.items():
+        t0 = time.perf_counter()
+        res = ensure_flights(mode, noisy, args.out, fleet=fleet,
+                             progress=lambda m: print(" ", m, flush=True))
+        n = sum(len(res[r]) for r in ("train", "validation", "test"))
+        print(f"{name}: {n} flights, seeds {res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
+              f"{res['train'][0].rsplit('/', 1)[0]}", flush=True)
     print(f"total {time.perf_counter() - start:.1f} s")
     return 0
 

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gpquad.engine.evolve.lm import levenberg_marquardt
 
@@ -57,11 +58,16 @@ def replay_is_stable(solver: str) -> bool:
 
 
 def test_lm_result_does_not_depend_on_earlier_fits():
-    """The bad case is scipy 1.17's own LM on the same inputs: after an unrelated fit it
-    steps elsewhere (benchmarks/lm_state.py). Ours, with fixed scaling, does not."""
+    """Ours, with fixed scaling, steps the same after unrelated fits."""
     assert replay_is_stable("ours")
-    assert not replay_is_stable("scipy"), ("this scipy's LM no longer depends on earlier "
-                                           "fits here; keep the test of ours, drop this line")
+
+
+def test_the_replay_catches_scipys_lm():
+    """The bad case: scipy 1.17's own LM on the same inputs steps elsewhere after unrelated
+    fits (benchmarks/lm_state.py), so the replay above can fail. A scipy that no longer does
+    so skips this test; the one above then checks nothing that could have failed here."""
+    if replay_is_stable("scipy"):
+        pytest.skip("this scipy's LM does not depend on earlier fits in this replay")
 
 
 def test_lm_solves_a_linear_problem_like_lstsq():

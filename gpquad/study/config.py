@@ -191,28 +191,30 @@ class EvolutionConfig:
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""
-        return per_target(self.input_taps, target, 1)
+        return self._per_target("input_taps", target)
 
     def depth_for(self, target: str) -> int:
         """Largest tree depth of `target`'s equation."""
-        return per_target(self.max_depth, target, 5)
+        return self._per_target("max_depth", target)
 
     def degree_for(self, target: str) -> int:
         """Largest polynomial degree of `target`'s equation (0: no limit)."""
-        return per_target(self.max_degree, target, 0)
+        return self._per_target("max_degree", target)
+
+    def _per_target(self, name: str, target: str) -> int:
+        """Field `name` for `target`: one number for every target, or a {target: number}
+        table whose left-out targets get the field's default."""
+        value = getattr(self, name)
+        if isinstance(value, dict):
+            default = next(f.default for f in dataclasses.fields(self) if f.name == name)
+            return int(value.get(target, default))
+        return int(value)
 
     def for_target(self, target: str) -> EvolutionConfig:
         """This config with the per-target tables resolved for `target`."""
         return dataclasses.replace(self, input_taps=self.taps_for(target),
                                    max_depth=self.depth_for(target),
                                    max_degree=self.degree_for(target))
-
-
-def per_target(value, target: str, left_out: int) -> int:
-    """One number for every target, or a {target: number} table (left_out if absent)."""
-    if isinstance(value, dict):
-        return int(value.get(target, left_out))
-    return int(value)
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,10 @@ from scipy.optimize import leastsq
 
 
 def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
-    """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals),
-    at most about max_nfev residual evaluations; returns x (x0 when MINPACK stops at once)."""
+    """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals);
+    returns x (x0 when MINPACK stops at once). MINPACK gets max_nfev + 1 evaluations, one
+    more than the `least_squares` call this replaced gave it (the measured setting). jac(x0)
+    is called once more than MINPACK calls it: a caller that caches it pays nothing."""
     x0 = np.asarray(x0, dtype=float)
     norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
     diag = np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
