@@ -76,3 +76,41 @@ def test_lm_solves_a_linear_problem_like_lstsq():
     b = rng.standard_normal(200)
     x = levenberg_marquardt(lambda x: a @ x - b, np.zeros(5), lambda x: a, 50)
     np.testing.assert_allclose(x, np.linalg.lstsq(a, b, rcond=None)[0], rtol=1e-8)
+
+
+def test_forward_difference_matches_the_analytic_jacobian_and_remembers():
+    """forward_difference: the Jacobian of a nonlinear residual to the step's accuracy
+    (relative step 1.5e-8: error about sqrt(eps) times the second derivative's scale), at
+    one evaluation per column, each point evaluated once however often LM asks."""
+    from gpquad.engine.evolve.lm import forward_difference
+
+    calls = []
+
+    def fun(x):
+        calls.append(x.copy())
+        return np.array([x[0] ** 2 - 3.0 * x[1], np.sin(x[1]) * x[2], 544.0 * x[2] - x[0]])
+
+    def exact(x):
+        return np.array([[2 * x[0], -3.0, 0.0], [0.0, np.cos(x[1]) * x[2], np.sin(x[1])],
+                         [-1.0, 0.0, 544.0]])
+
+    value, jac = forward_difference(fun)
+    x = np.array([-2.0, 0.3, 47.0])
+    np.testing.assert_allclose(jac(x), exact(x), rtol=1e-6, atol=1e-6)
+    assert len(calls) == 4  # f(x) and one per column
+    value(x), jac(x), value(x.copy())
+    assert len(calls) == 4
+    with pytest.raises(AssertionError):  # the check can fail: a wrong Jacobian is caught
+        np.testing.assert_allclose(jac(x), exact(x + 0.1), rtol=1e-6, atol=1e-6)
+
+
+def test_lm_without_analytic_jacobian_fits_a_nonlinear_problem():
+    """LM on forward differences fits y = a exp(-b t) + c to noiseless data from a far start."""
+    from gpquad.engine.evolve.lm import forward_difference
+
+    t = np.linspace(0.0, 4.0, 60)
+    truth = np.array([2.5, 1.3, -0.4])
+    y = truth[0] * np.exp(-truth[1] * t) + truth[2]
+    value, jac = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
+    x = levenberg_marquardt(value, np.array([1.0, 0.5, 0.0]), jac, 200)
+    np.testing.assert_allclose(x, truth, rtol=1e-6)

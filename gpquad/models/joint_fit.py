@@ -9,8 +9,9 @@ of the full model, every state integrated:
     minimise  sum_s  sum_{w,k} (x_s[w,k] - data_s[w,k])^2 / sum_{w,k} (data_s - mean)^2
 
 over the measured states s of (u, v, w, p, q, r): the sum of the benchmark's RSEs. It is a
-Levenberg-Marquardt fit (scipy.optimize.least_squares, MINPACK, finite-difference
-Jacobian: one rollout per constant) on non-overlapping training windows of a growing
+Levenberg-Marquardt fit (MINPACK with fixed scaling, `gpquad.engine.evolve.lm`, whose
+result does not depend on earlier fits in the process; forward-difference Jacobian: one
+rollout per constant) on non-overlapping training windows of a growing
 horizon (JOINT_HORIZONS_S, each fit starting from the last, so that the short windows keep
 it in the basin of the per-equation constants); each later fit keeps the shorter windows'
 residuals beside its own, so that the model stays right over one second as well as over
@@ -34,8 +35,8 @@ import dataclasses
 import time
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from gpquad.engine.evolve.lm import forward_difference, levenberg_marquardt
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -46,8 +47,8 @@ from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 JOINT_HORIZONS_S = (1.0, 10.0)
 #: At most this many windows per horizon (evenly spread over the training data).
 MAX_WINDOWS = 120
-#: LM's budget per horizon: residual evaluations (scipy's max_nfev, which for "lm" does not
-#: count the n rollouts of each finite-difference Jacobian) as a multiple of (constants + 1).
+#: LM's budget per horizon: residual evaluations (not counting the n rollouts of each
+#: finite-difference Jacobian) as a multiple of (constants + 1).
 EVALS_PER_CONSTANT = 12
 #: A residual entry is clipped to this many state SDs, so that a window that diverges
 #: while a constant is perturbed gives a large, finite error rather than NaN.
@@ -188,11 +189,13 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
             m = with_constants(model, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
-        fit = least_squares(residuals, x, method="lm", x_scale="jac",
-                            max_nfev=EVALS_PER_CONSTANT * (x.size + 1))
-        r0 = residuals(x)
-        if np.all(np.isfinite(fit.x)) and fit.cost <= 0.5 * float(r0 @ r0):
-            x = fit.x
+        value, jacobian = forward_difference(residuals)
+        r0 = value(x)
+        x_fit = levenberg_marquardt(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1))
+        if np.all(np.isfinite(x_fit)):
+            r1 = value(x_fit)
+            if float(r1 @ r1) <= float(r0 @ r0):
+                x = x_fit
     refitted = with_constants(model, slots, x)
     after_w = judge.window_errors(refitted)
     after = float(after_w.sum())

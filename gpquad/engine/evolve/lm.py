@@ -6,7 +6,9 @@ bit-identical inputs depending on which least-squares fits ran before in the pro
 (`benchmarks/lm_state.py` reproduces it on one of the engine's problems); the search
 amplifies that into other equations for the same seed in another process. With `diag`
 given (mode 2: fixed scaling) the same replay is stable. The scaling here is the column
-norms of the first Jacobian, what mode 1 starts from.
+norms of the first Jacobian, what mode 1 starts from. Without an analytic Jacobian,
+`forward_difference` gives one (scipy's '2-point' step) whose result is also a function of
+the inputs alone.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ import warnings
 
 import numpy as np
 from scipy.optimize import leastsq
+
+#: Relative step of the forward differences: sqrt(machine epsilon), scipy's '2-point' step.
+FD_STEP = float(np.sqrt(np.finfo(float).eps))
 
 
 def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
@@ -33,3 +38,32 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
         x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1,
                        diag=diag)
     return np.atleast_1d(np.asarray(x, dtype=float))
+
+
+def forward_difference(fun):
+    """(value, jac) for a residual function without an analytic Jacobian: value(x) is fun(x)
+    remembered at the last point asked, jac(x) the forward-difference Jacobian there with
+    step FD_STEP * max(1, |x_j|) (signed like x_j, as scipy's '2-point'), also remembered,
+    so that LM's repeated requests at one point cost one evaluation each."""
+    memo: dict[str, tuple[bytes, np.ndarray]] = {}
+
+    def remembered(name, x, compute):
+        key = np.asarray(x, dtype=float).tobytes()
+        if name not in memo or memo[name][0] != key:
+            memo[name] = (key, compute(np.array(x, dtype=float)))
+        return memo[name][1]
+
+    def value(x):
+        return remembered("f", x, lambda v: np.asarray(fun(v), dtype=float))
+
+    def jacobian(x):
+        f0 = value(x)
+        h = FD_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+        columns = []
+        for j in range(x.size):
+            shifted = x.copy()
+            shifted[j] += h[j]
+            columns.append((np.asarray(fun(shifted), dtype=float) - f0) / (shifted[j] - x[j]))
+        return np.column_stack(columns) if columns else np.zeros((f0.size, 0))
+
+    return value, (lambda x: remembered("jac", x, jacobian))
