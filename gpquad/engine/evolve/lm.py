@@ -22,9 +22,12 @@ from scipy.optimize import leastsq
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
 
 
-def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
+def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int,
+                        ftol: float = 1.49012e-08) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals);
-    returns x (x0 when MINPACK stops at once). MINPACK gets max_nfev + 1 evaluations, one
+    returns x (x0 when MINPACK stops at once). It also stops when a step lowers the sum by
+    less than the fraction ftol, and is predicted to (MINPACK's ftol; its default here).
+    MINPACK gets max_nfev + 1 evaluations, one
     more than the `least_squares` call this replaced gave it (the measured setting). jac(x0)
     is called once more than MINPACK calls it: a caller that caches it pays nothing."""
     x0 = np.asarray(x0, dtype=float)
@@ -36,7 +39,7 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
         warnings.filterwarnings("ignore", message="Number of calls to function has reached",
                                 category=RuntimeWarning)
         x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1,
-                       diag=diag)
+                       diag=diag, ftol=ftol)
     return np.atleast_1d(np.asarray(x, dtype=float))
 
 
