@@ -67,7 +67,7 @@ def test_a_refit_that_does_not_help_is_not_kept(raw_dataset, monkeypatch):
         return value, None
 
     monkeypatch.setattr(joint_fit, "forward_difference", training_says_better)
-    monkeypatch.setattr(joint_fit, "levenberg_marquardt", lambda fun, x, jac, n, **kw: x * 1.05)
+    monkeypatch.setattr(joint_fit, "trust_region", lambda fun, x, jac, n, ftol: x * 1.05)
     kept, report = joint_fit.joint_refit(model, raw_dataset)
     assert not report["accepted"]
     assert report["error_after"] > report["error_before"]

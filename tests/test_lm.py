@@ -114,3 +114,28 @@ def test_lm_without_analytic_jacobian_fits_a_nonlinear_problem():
     value, jac = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
     x = levenberg_marquardt(value, np.array([1.0, 0.5, 0.0]), jac, 200)
     np.testing.assert_allclose(x, truth, rtol=1e-6)
+
+
+def test_trust_region_fits_a_nonlinear_problem_the_same_way_every_time():
+    """trust_region (the joint refit's solver) fits y = a exp(-b t) + c from a far start,
+    and gives the bit-identical x with its Jacobian callable wrapped and after other fits
+    (what changed MINPACK's trial points in the joint refit)."""
+    from scipy.optimize import least_squares
+
+    from gpquad.engine.evolve.lm import forward_difference, trust_region
+
+    t = np.linspace(0.0, 4.0, 60)
+    truth = np.array([2.5, 1.3, -0.4])
+    y = truth[0] * np.exp(-truth[1] * t) + truth[2]
+
+    def fit(wrap):
+        value, jac = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
+        return trust_region(value, np.array([1.0, 0.5, 0.0]),
+                            (lambda x: np.array(jac(x))) if wrap else jac, 200, 1e-12)
+
+    first = fit(False)
+    np.testing.assert_allclose(first, truth, rtol=1e-6)
+    rng = np.random.default_rng(2)
+    a, b = rng.standard_normal((500, 9)), rng.standard_normal(500)
+    least_squares(lambda x: a @ x - b, np.zeros(9), jac=lambda x: a, method="lm", max_nfev=5)
+    assert np.array_equal(fit(True), first)

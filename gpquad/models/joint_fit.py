@@ -9,10 +9,10 @@ of the full model, every state integrated:
     minimise  sum_s  sum_{w,k} (x_s[w,k] - data_s[w,k])^2 / sum_{w,k} (data_s - mean)^2
 
 over the measured states s of (u, v, w, p, q, r): the sum of the benchmark's RSEs. It is a
-Levenberg-Marquardt fit (MINPACK with fixed scaling, `gpquad.engine.evolve.lm`, whose
-result does not depend on earlier fits in the process; forward-difference Jacobian: one
-rollout per constant) on non-overlapping training windows of a growing
-horizon (JOINT_HORIZONS_S, each fit starting from the last, so that the short windows keep
+trust-region fit (scipy's trust-region reflective method through
+`gpquad.engine.evolve.lm.trust_region`, whose result does not depend on earlier fits in
+the process, as MINPACK's LM did; forward-difference Jacobian: one rollout per constant)
+on non-overlapping training windows of a growing horizon (JOINT_HORIZONS_S, each fit starting from the last, so that the short windows keep
 it in the basin of the per-equation constants); each later fit keeps the shorter windows'
 residuals beside its own, so that the model stays right over one second as well as over
 ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE of p, q
@@ -36,7 +36,7 @@ import time
 
 import numpy as np
 
-from gpquad.engine.evolve.lm import forward_difference, levenberg_marquardt
+from gpquad.engine.evolve.lm import forward_difference, trust_region
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -47,13 +47,13 @@ from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 JOINT_HORIZONS_S = (1.0, 10.0)
 #: At most this many windows per horizon (evenly spread over the training data).
 MAX_WINDOWS = 120
-#: LM's budget per horizon: residual evaluations (not counting the n rollouts of each
+#: The fit's budget per horizon: residual evaluations (not counting the n rollouts of each
 #: finite-difference Jacobian) as a multiple of (constants + 1).
 EVALS_PER_CONSTANT = 12
-#: LM stops when a step lowers the objective by less than this fraction (MINPACK's ftol).
-#: Measured on rotorpy-angle, hummingbird, seed 1 (80 constants): MINPACK's default 1.5e-8
-#: ran the whole budget (108952 rollouts, 556 s) to a validation error 0.004900; 1e-5 stops
-#: after 3020 rollouts (15 s) at 0.004917, 1e-4 at 0.004921, 1e-6 at 0.004909 (78 s).
+#: The fit stops when a step lowers the objective by less than this fraction (ftol).
+#: Measured on rotorpy-angle, hummingbird, seed 1 (80 constants, with MINPACK's LM, which
+#: this fit used before): ftol 1.5e-8 ran the whole budget (108952 rollouts, 556 s) to a
+#: validation error 0.004900; 1e-5 stopped after 3020 rollouts (15 s) at 0.004917.
 FTOL = 1e-5
 #: A residual entry is clipped to this many state SDs, so that a window that diverges
 #: while a constant is perturbed gives a large, finite error rather than NaN.
@@ -196,8 +196,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
 
         value, jacobian = forward_difference(residuals)
         r0 = value(x)
-        x_fit = levenberg_marquardt(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1),
-                                    ftol=FTOL)
+        x_fit = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL)
         if np.all(np.isfinite(x_fit)):
             r1 = value(x_fit)
             if float(r1 @ r1) <= float(r0 @ r0):
