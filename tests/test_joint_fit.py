@@ -168,6 +168,26 @@ def test_significant_drop_needs_more_than_the_windows_spread():
                                                                                         [1.1])
 
 
+def test_a_large_skewed_drop_in_every_window_is_kept_and_a_small_one_is_not():
+    """The held-out vehicle's case (rotorpy-heldout-angle seed 3, validation windows of 10 s):
+    every window lower, one holding most of the drop; the t statistic is below 2, the sum
+    falls to a quarter. Kept; the same windows with the sum falling only to 60 %, or one
+    window worse, are not."""
+    before = np.array([0.0050, 0.0068, 0.0131, 0.0160, 0.0020, 0.0778, 0.0040, 0.0068,
+                       0.0032, 0.0020, 0.0072])
+    after = np.array([0.0042, 0.0030, 0.0028, 0.0042, 0.0015, 0.0032, 0.0025, 0.0059,
+                      0.0024, 0.0012, 0.0053])
+    drop = before - after
+    assert drop.mean() < joint_fit.SIGNIFICANCE * drop.std(ddof=1) / np.sqrt(drop.size)
+    assert joint_fit.significant_drop(before, after)
+    to_60_percent = before - drop * (0.4 * before.sum() / drop.sum())  # same t statistic
+    assert np.all(to_60_percent < before)
+    assert not joint_fit.significant_drop(before, to_60_percent)
+    one_worse = after.copy()
+    one_worse[0] = before[0] + 1e-4
+    assert not joint_fit.significant_drop(before, one_worse)
+
+
 def test_refit_is_the_same_after_unrelated_fits(raw_dataset):
     """Same model and data => bit-identical constants, whatever least-squares fits ran before
     in the process (scipy 1.17's own LM does not promise this: tests/test_lm.py shows it

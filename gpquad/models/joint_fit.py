@@ -20,12 +20,17 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 
 The refit is kept only if it lowers the same error on the validation windows (or, with
 no validation data, on the training windows) at the longest horizon, by more than the
-windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors); the
-report says which windows, with both errors. A marginal drop is not enough because the
+windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors, or
+every window lower and the sum at most half), the report says which windows, with both
+errors. A marginal drop is not enough because the
 refit moves every constant: where one equation has a wrong term, the refit shifts the
 others' constants to make up for it (measured on rigid-body, seed 3: a_y kept a
 substitute term, the refit lowered the validation error by 11 % and moved the exact
-0.7 p q of r_dot to 0.741). No random draw: the result is a function of model and data.
+0.7 p q of r_dot to 0.741). The second way in is for drops that the t statistic
+misses because they are skewed: on the held-out vehicle (rotorpy-heldout-angle, seed 3)
+the refit lowered all 11 validation windows, 0.144 -> 0.036 in sum, but one window held
+three quarters of the drop and the t statistic was 1.5; refused, the model flew r to RSE
+2.5 at 7 s on the test flight. No random draw: the result is a function of model and data.
 Equations whose state the log does not measure keep their constants.
 """
 
@@ -61,6 +66,8 @@ RESIDUAL_CLIP = 1e3
 #: The refit is kept when the paired drop of the judged windows' errors is this many
 #: standard errors above zero (a one-sided test at about 2.5 %).
 SIGNIFICANCE = 2.0
+#: ... or when every judged window's error dropped and their sum fell to this fraction.
+LARGE_DROP = 0.5
 
 
 def _slots(model) -> list[tuple[str, np.ndarray]]:
@@ -115,10 +122,14 @@ class FullModelError:
 
 def significant_drop(before: np.ndarray, after: np.ndarray) -> bool:
     """True when the windows' errors dropped by more than their spread explains: the mean
-    paired drop exceeds SIGNIFICANCE standard errors (one window: it must drop)."""
-    drop = np.asarray(before) - np.asarray(after)
+    paired drop exceeds SIGNIFICANCE standard errors, or every window dropped and the sum
+    fell to at most LARGE_DROP of itself (one window: it must drop)."""
+    before, after = np.asarray(before, dtype=float), np.asarray(after, dtype=float)
+    drop = before - after
     if drop.size < 2:
         return bool(drop.sum() > 0)
+    if np.all(drop > 0) and after.sum() <= LARGE_DROP * before.sum():
+        return True
     return bool(drop.mean() > SIGNIFICANCE * drop.std(ddof=1) / np.sqrt(drop.size))
 
 
