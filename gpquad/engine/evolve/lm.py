@@ -1,4 +1,5 @@
-"""Levenberg-Marquardt whose result is a function of its inputs (MINPACK mode 2).
+"""Least-squares fits whose result is a function of their inputs: MINPACK mode 2 LM for the
+search's short constant fits, scipy's trust-region reflective solver for long fits.
 
 scipy 1.17.1's `least_squares(method="lm")` and `leastsq` without `diag` (MINPACK mode 1,
 scaling from the Jacobian's column norms, updated as it goes) take other trial points for
@@ -29,12 +30,9 @@ from scipy.optimize import least_squares, leastsq
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
 
 
-def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int,
-                        ftol: float = 1.49012e-08) -> np.ndarray:
+def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals);
-    returns x (x0 when MINPACK stops at once). It also stops when a step lowers the sum by
-    less than the fraction ftol, and is predicted to (MINPACK's ftol; its default here).
-    MINPACK gets max_nfev + 1 evaluations, one
+    returns x (x0 when MINPACK stops at once). MINPACK gets max_nfev + 1 evaluations, one
     more than the `least_squares` call this replaced gave it (the measured setting). jac(x0)
     is called once more than MINPACK calls it: a caller that caches it pays nothing."""
     x0 = np.asarray(x0, dtype=float)
@@ -46,7 +44,7 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int,
         warnings.filterwarnings("ignore", message="Number of calls to function has reached",
                                 category=RuntimeWarning)
         x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1,
-                       diag=diag, ftol=ftol)
+                       diag=diag)
     return np.atleast_1d(np.asarray(x, dtype=float))
 
 
