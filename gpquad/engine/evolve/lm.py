@@ -6,7 +6,11 @@ scaling from the Jacobian's column norms, updated as it goes) take other trial p
 bit-identical inputs depending on which least-squares fits ran before in the process
 (`benchmarks/lm_state.py` reproduces it on one of the engine's problems); the search
 amplifies that into other equations for the same seed in another process. With `diag`
-given (mode 2: fixed scaling) the same replay is stable. The scaling here is the column
+given (mode 2: fixed scaling) the same replay is usually stable, not always (it stepped
+elsewhere in one of about fifteen runs, once in CI); the search's short fits use it (p_dot
+of rotorpy-angle crazyflie seed 1 came out bit-identical after three process histories),
+and moving them to `trust_region` is the next step (it changes the search's trajectories,
+so it needs the benchmark re-measured). The scaling here is the column
 norms of the first Jacobian, what mode 1 starts from. Without an analytic Jacobian,
 `forward_difference` gives one (scipy's '2-point' step) whose result is also a function of
 the inputs alone.
