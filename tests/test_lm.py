@@ -144,3 +144,21 @@ def test_trust_region_fits_a_nonlinear_problem_the_same_way_every_time():
     a, b = rng.standard_normal((500, 9)), rng.standard_normal(500)
     least_squares(lambda x: a @ x - b, np.zeros(9), jac=lambda x: a, method="lm", max_nfev=5)
     assert np.array_equal(fit(True), first)
+
+
+def test_trust_region_never_returns_a_point_worse_than_its_start():
+    """The joint refit takes trust_region's x as it is: from a start near a steep valley,
+    with budgets of 1 to 4 evaluations (where a first step may overshoot), the sum of
+    squares at the returned x is never above the start's."""
+    from gpquad.engine.evolve.lm import forward_difference, trust_region
+
+    def rosenbrock(p):
+        return np.array([10.0 * (p[1] - p[0] ** 2), 1.0 - p[0]])
+
+    for start in ([-1.2, 1.0], [2.0, -3.0], [0.5, 5.0]):
+        x0 = np.array(start)
+        cost0 = float(rosenbrock(x0) @ rosenbrock(x0))
+        for budget in (1, 2, 3, 4):
+            value, jac = forward_difference(rosenbrock)
+            x = trust_region(value, x0, jac, budget, 1e-8)
+            assert float(rosenbrock(x) @ rosenbrock(x)) <= cost0

@@ -7,7 +7,7 @@ bit-identical inputs depending on which least-squares fits ran before in the pro
 (`benchmarks/lm_state.py` reproduces it on one of the engine's problems); the search
 amplifies that into other equations for the same seed in another process. With `diag`
 given (mode 2: fixed scaling) the same replay is usually stable, not always (it stepped
-elsewhere in one of about fifteen runs, once in CI); the search's short fits use it (p_dot
+elsewhere in one of about twenty runs, once in CI); the search's short fits use it (p_dot
 of rotorpy-angle crazyflie seed 1 came out bit-identical after three process histories),
 and moving them to `trust_region` is the next step (it changes the search's trajectories,
 so it needs the benchmark re-measured). The scaling here is the column
@@ -34,14 +34,20 @@ from scipy.optimize import least_squares, leastsq
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
 
 
+def column_norms(jac, x0: np.ndarray) -> np.ndarray:
+    """The fixed variable scaling of both fits: the column norms of jac(x0), 1 where a column
+    is zero or not finite."""
+    norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
+    return np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
+
+
 def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals);
     returns x (x0 when MINPACK stops at once). MINPACK gets max_nfev + 1 evaluations, one
     more than the `least_squares` call this replaced gave it (the measured setting). jac(x0)
     is called once more than MINPACK calls it: a caller that caches it pays nothing."""
     x0 = np.asarray(x0, dtype=float)
-    norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
-    diag = np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
+    diag = column_norms(jac, x0)
     # full_output=False: no covariance (it overflows on the stiff fits and is not used); the
     # budget is meant to run out, so leastsq's "reached maxfev" warning is not shown
     with warnings.catch_warnings():
@@ -56,12 +62,11 @@ def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.nda
     """Minimise sum(fun(x)^2) from x0 with scipy's trust-region reflective method (no
     bounds, exact SVD steps) and the variables scaled, fixed, by the first Jacobian's column
     norms; at most max_nfev residual evaluations (jac's are not counted); stops when a step
-    lowers the sum by less than the fraction ftol. Returns x."""
+    lowers the sum by less than the fraction ftol. Returns x, whose sum is never above
+    x0's (a step is taken only when it lowers the sum)."""
     x0 = np.asarray(x0, dtype=float)
-    norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
-    scale = 1.0 / np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
-    fit = least_squares(fun, x0, jac=jac, method="trf", tr_solver="exact", x_scale=scale,
-                        ftol=ftol, max_nfev=int(max_nfev))
+    fit = least_squares(fun, x0, jac=jac, method="trf", tr_solver="exact",
+                        x_scale=1.0 / column_norms(jac, x0), ftol=ftol, max_nfev=int(max_nfev))
     return np.asarray(fit.x, dtype=float)
 
 
@@ -89,6 +94,6 @@ def forward_difference(fun):
             shifted = x.copy()
             shifted[j] += h[j]
             columns.append((np.asarray(fun(shifted), dtype=float) - f0) / (shifted[j] - x[j]))
-        return np.column_stack(columns) if columns else np.zeros((f0.size, 0))
+        return np.column_stack(columns)
 
     return value, (lambda x: remembered("jac", x, jacobian))
