@@ -1,8 +1,8 @@
 """Constants by gradient through the integrator (an optional memetic step, not in the paper).
 
-Levenberg-Marquardt (MINPACK through gpquad.engine.evolve.lm) on the integrated-state
-residuals of a tree over data windows, with the Jacobian from the forward-mode sensitivity
-kernel (gpquad.engine.kernels.sensitivity). This is the gradient operator of
+Levenberg-Marquardt (gpquad.engine.evolve.lm: MINPACK's algorithm in numba loops) on the
+integrated-state residuals of a tree over data windows, with the Jacobian from the
+forward-mode sensitivity kernel (gpquad.engine.kernels.sensitivity). This is the gradient operator of
 ../shared/seeds/ga-gradient-parameter-identification.txt carried into GP: a coefficient
 such as 28.2 or 544 is reached in a few steps instead of by Gaussian steps from U(-5, 5).
 

@@ -1,61 +1,148 @@
-"""Least-squares fits whose result is a function of their inputs: MINPACK mode 2 LM for the
-search's short constant fits, scipy's trust-region reflective solver for long fits.
+"""Least-squares fits whose result is a function of their inputs: gpquad's own
+Levenberg-Marquardt for the search's constant fits, scipy's trust-region reflective solver
+for the joint refit.
 
-scipy 1.17.1's `least_squares(method="lm")` and `leastsq` without `diag` (MINPACK mode 1,
-scaling from the Jacobian's column norms, updated as it goes) take other trial points for
-bit-identical inputs depending on which least-squares fits ran before in the process
-(`benchmarks/lm_state.py` reproduces it on one of the engine's problems); the search
-amplifies that into other equations for the same seed in another process. With `diag`
-given (mode 2: fixed scaling) the same replay is usually stable, not always (it stepped
-elsewhere in one of about twenty runs, once in CI); the search's short fits use it (p_dot
-of rotorpy-angle crazyflie seed 1 came out bit-identical after three process histories),
-and moving them to `trust_region` is the next step (it changes the search's trajectories,
-so it needs the benchmark re-measured). The scaling here is the column
-norms of the first Jacobian, what mode 1 starts from. Without an analytic Jacobian,
-`forward_difference` gives one (scipy's '2-point' step) whose result is also a function of
-the inputs alone.
+scipy 1.17.1's `least_squares(method="lm")` and `leastsq` (MINPACK) take other trial points
+for bit-identical inputs depending on which least-squares fits ran before in the process
+(`benchmarks/lm_state.py` reproduces it on one of the engine's problems; with fixed
+scaling, MINPACK mode 2, about one replay in twenty, once in CI); the search amplifies that
+into other equations for the same seed in another process. `levenberg_marquardt` is
+therefore gpquad's own: MINPACK's algorithm in mode 2 (Moré's trust-region LM, variables
+scaled, fixed, by the first Jacobian's column norms), rewritten with every reduction, QR
+and solve in numba loops of fixed order (gpquad.engine.kernels.least_squares): no BLAS, whose
+summation order may change with the thread count or memory alignment.
 
-Mode 2 is not enough for long fits: the joint refit's LM (80 constants, about 50 MINPACK
-evaluations) took another trial point at its 19th evaluation, after bit-identical
-residuals and Jacobians, when the process had run other fits before, or when the Jacobian
-callable was wrapped (rotorpy-angle, crazyflie, seed 2: p_dot's -23.0351 p against -23.1587
-p). `trust_region` therefore uses scipy's trust-region reflective solver, which is numpy
-code (an SVD per step) with no state outside the call, for such fits.
+The joint refit (80 constants, forward-difference Jacobian) uses scipy's trust-region
+reflective solver (`trust_region`, numpy code with no state outside the call: the same
+constants in a fresh process and after other fits), whose LAPACK SVD is fast at that size.
+Without an analytic Jacobian, `forward_difference` gives one (scipy's '2-point' step) whose
+result is also a function of the inputs alone.
 """
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from scipy.optimize import least_squares, leastsq
+from scipy.optimize import least_squares
+
+from gpquad.engine.kernels import least_squares as kernels
 
 #: Relative step of the forward differences: sqrt(machine epsilon), scipy's '2-point' step.
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
+#: Stopping tolerances of the LM: MINPACK's defaults in scipy's leastsq (sqrt(eps)).
+FTOL = XTOL = 1.49012e-8
+#: MINPACK's trust-region settings: first radius factor, acceptance ratio, Newton
+#: corrections of the damping per step.
+RADIUS_FACTOR = 100.0
+ACCEPT_RATIO = 1e-4
+MU_ITERATIONS = 10
 
 
 def column_norms(jac, x0: np.ndarray) -> np.ndarray:
     """The fixed variable scaling of both fits: the column norms of jac(x0), 1 where a column
     is zero or not finite."""
-    norms = np.linalg.norm(np.asarray(jac(x0), dtype=float), axis=0)
-    return np.where(np.isfinite(norms) & (norms > 0.0), norms, 1.0)
+    j = np.ascontiguousarray(jac(x0), dtype=float)
+    out = np.empty(j.shape[1])
+    kernels.column_norms(j, out)
+    return out
 
 
-def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int) -> np.ndarray:
-    """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals);
-    returns x (x0 when MINPACK stops at once). MINPACK gets max_nfev + 1 evaluations, one
-    more than the `least_squares` call this replaced gave it (the measured setting). jac(x0)
-    is called once more than MINPACK calls it: a caller that caches it pays nothing."""
-    x0 = np.asarray(x0, dtype=float)
-    diag = column_norms(jac, x0)
-    # full_output=False: no covariance (it overflows on the stiff fits and is not used); the
-    # budget is meant to run out, so leastsq's "reached maxfev" warning is not shown
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Number of calls to function has reached",
-                                category=RuntimeWarning)
-        x, _ = leastsq(fun, x0, Dfun=jac, full_output=False, maxfev=int(max_nfev) + 1,
-                       diag=diag)
-    return np.atleast_1d(np.asarray(x, dtype=float))
+def _norm(v: np.ndarray) -> float:
+    return float(np.sqrt(kernels.sum_squares(np.ascontiguousarray(v))))
+
+
+def _damping_for_radius(r, qtr, radius: float, mu: float, h: np.ndarray) -> float:
+    """Moré's (1978) choice of the damping mu: the Gauss-Newton step (mu = 0) when it lies
+    within 1.1 radius, else mu with |h(mu)| within 10 % of the radius (at most
+    MU_ITERATIONS Newton corrections, safeguarded by bounds). Writes the step into h."""
+    z2 = kernels.damped_step(r, qtr, 0.0, h)
+    step = _norm(h) if z2 >= 0.0 else np.inf
+    if step <= 1.1 * radius:
+        return 0.0
+    lower = (step - radius) / radius * step * step / z2 if z2 > 0.0 and np.isfinite(step) \
+        else 0.0
+    upper = kernels.gradient_norm(r, qtr) / radius
+    if upper <= 0.0:
+        upper = np.finfo(float).tiny / min(radius, 0.1)
+    mu = min(max(mu, lower), upper)
+    if mu == 0.0:
+        mu = upper * 1e-3
+    for _ in range(MU_ITERATIONS):
+        z2 = kernels.damped_step(r, qtr, mu, h)
+        step = _norm(h)
+        excess = step - radius
+        if abs(excess) <= 0.1 * radius or z2 <= 0.0:
+            break
+        if excess > 0.0:
+            lower = max(lower, mu)
+        else:
+            upper = min(upper, mu)
+        mu = max(lower, mu + step * step / z2 * excess / radius)
+    return mu
+
+
+def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = FTOL,
+                        xtol: float = XTOL) -> np.ndarray:
+    """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals),
+    at most max_nfev evaluations of fun after the one at x0; jac is asked only at x0 and at
+    accepted points, after fun there (a caller that computes both at once pays nothing).
+
+    MINPACK's lmder in mode 2 (Moré 1978): a trust region in the variables scaled by the
+    first Jacobian's column norms, RADIUS_FACTOR x the scaled |x0| at first; the step is
+    the Gauss-Newton step when it fits, else the damped step of the radius's length; taken
+    when the actual drop of the sum is at least ACCEPT_RATIO of the predicted one; the
+    radius halves (or shrinks to a tenth after a blow-up) when that ratio is below 1/4 and
+    doubles the step when it is above 3/4. Stops when the actual and predicted relative
+    drops are at most ftol, or the radius is at most xtol of the scaled |x|. Returns x; its
+    sum is never above x0's."""
+    x = np.array(x0, dtype=float)
+    f = np.ascontiguousarray(fun(x), dtype=float)
+    cost = kernels.sum_squares(f)
+    n = x.size
+    if not np.isfinite(cost) or cost == 0.0 or n == 0:
+        return x
+    j = np.ascontiguousarray(jac(x), dtype=float)
+    if not np.isfinite(kernels.sum_squares(j.ravel())):
+        return x
+    scale = np.empty(n)
+    kernels.column_norms(j, scale)
+    r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    kernels.triangularize(j / scale, f, r, qtr)
+    radius = RADIUS_FACTOR * (_norm(x * scale) or 1.0)
+    mu = 0.0
+    for evaluation in range(int(max_nfev)):
+        mu = _damping_for_radius(r, qtr, radius, mu, h)
+        step = _norm(h)
+        if evaluation == 0:
+            radius = min(radius, step)
+        trial = x + h / scale
+        f_trial = np.ascontiguousarray(fun(trial), dtype=float)
+        cost_trial = kernels.sum_squares(f_trial)
+        blown = not (np.isfinite(cost_trial) and cost_trial < 100.0 * cost)
+        actual = -1.0 if blown else 1.0 - cost_trial / cost
+        drop, jh2 = kernels.predicted_drop(r, qtr, h)
+        predicted = drop / cost
+        ratio = actual / predicted if predicted > 0.0 else 0.0
+        if ratio <= 0.25:
+            slope = -(jh2 + mu * step * step) / cost
+            shrink = 0.5 if actual >= 0.0 else 0.5 * slope / (slope + 0.5 * actual)
+            shrink = 0.1 if blown or shrink < 0.1 else min(shrink, 0.5)
+            radius = shrink * min(radius, step / 0.1)
+            mu /= shrink
+        elif mu == 0.0 or ratio >= 0.75:
+            radius = step / 0.5
+            mu *= 0.5
+        if ratio >= ACCEPT_RATIO:
+            x, f, cost = trial, f_trial, cost_trial
+            if cost == 0.0:
+                break
+            j = np.ascontiguousarray(jac(x), dtype=float)
+            if not np.isfinite(kernels.sum_squares(j.ravel())):
+                break
+            kernels.triangularize(j / scale, f, r, qtr)
+        if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or \
+                radius <= xtol * _norm(x * scale):
+            break
+    return x
 
 
 def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.ndarray:

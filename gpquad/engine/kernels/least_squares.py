@@ -1,0 +1,154 @@
+"""Linear algebra of the Levenberg-Marquardt step, in loops of fixed order (no BLAS).
+
+The constant fits call these for every step (gpquad.engine.evolve.lm). BLAS and LAPACK
+may sum in another order for another thread count or memory alignment, and scipy 1.17's
+MINPACK took other trial points for bit-identical inputs after other fits in the process
+(benchmarks/lm_state.py); with plain loops the result is a function of the inputs alone,
+whatever ran before and however many threads or jobs.
+
+Flat arrays in, flat arrays out:
+- `triangularize(jac, res, r, qtr)`: Householder QR of jac (m, n), m >= n; r (n, n) gets R,
+  qtr (n,) the first n entries of Q^T res. Cost m n^2.
+- `damped_step(r, qtr, mu, h)`: the step h minimising |jac h + res|^2 + mu |h|^2, from R and
+  Q^T res alone (QR of [R; sqrt(mu) I], n^3), and what Newton's correction of mu needs.
+- `predicted_drop`, `gradient_norm`, `sum_squares`, `column_norms`: the reductions
+  around them.
+"""
+
+import numpy as np
+
+from gpquad.engine.numba_config import njit
+
+
+@njit
+def _householder(a, b, n_rows, n_cols):
+    """In place: a (n_rows, n_cols) -> R in its upper triangle, b (n_rows,) -> Q^T b."""
+    for k in range(n_cols):
+        norm = 0.0
+        for i in range(k, n_rows):
+            norm += a[i, k] * a[i, k]
+        norm = np.sqrt(norm)
+        if norm == 0.0:
+            continue
+        alpha = -norm if a[k, k] >= 0.0 else norm
+        # v = a[k:, k] - alpha e_k, kept in a[k:, k]; H = I - 2 v v^T / (v^T v)
+        a[k, k] -= alpha
+        vtv = 0.0
+        for i in range(k, n_rows):
+            vtv += a[i, k] * a[i, k]
+        if vtv == 0.0:
+            a[k, k] = alpha
+            continue
+        for j in range(k + 1, n_cols):
+            dot = 0.0
+            for i in range(k, n_rows):
+                dot += a[i, k] * a[i, j]
+            scale = 2.0 * dot / vtv
+            for i in range(k, n_rows):
+                a[i, j] -= scale * a[i, k]
+        dot = 0.0
+        for i in range(k, n_rows):
+            dot += a[i, k] * b[i]
+        scale = 2.0 * dot / vtv
+        for i in range(k, n_rows):
+            b[i] -= scale * a[i, k]
+        a[k, k] = alpha
+
+
+@njit
+def triangularize(jac, res, r, qtr):
+    """R (upper triangle of r) and the first n entries of Q^T res for jac = Q R."""
+    m, n = jac.shape
+    a = jac.copy()
+    b = res.copy()
+    _householder(a, b, m, n)
+    for i in range(n):
+        qtr[i] = b[i]
+        for j in range(n):
+            r[i, j] = a[i, j] if j >= i else 0.0
+
+
+@njit
+def damped_step(r, qtr, mu, h):
+    """h = argmin |R h + qtr|^2 + mu |h|^2 (then |jac h + res|^2 differs by a constant).
+    Returns h^T (R^T R + mu I)^-1 h (>= 0: Newton's correction of mu in the trust-region
+    iteration), or -1 (h untouched) when the damped system is singular (mu = 0, R singular).
+    """
+    n = r.shape[0]
+    a = np.zeros((2 * n, n))
+    b = np.zeros(2 * n)
+    root = np.sqrt(mu)
+    for i in range(n):
+        b[i] = -qtr[i]
+        a[n + i, i] = root
+        for j in range(i, n):
+            a[i, j] = r[i, j]
+    _householder(a, b, 2 * n, n)
+    for i in range(n):
+        if a[i, i] == 0.0:
+            return -1.0
+    for i in range(n - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, n):
+            acc -= a[i, j] * h[j]
+        h[i] = acc / a[i, i]
+    # z = S^-T h with S^T S = R^T R + mu I (S: the upper triangle of a)
+    z = np.zeros(n)
+    total = 0.0
+    for i in range(n):
+        acc = h[i]
+        for j in range(i):
+            acc -= a[j, i] * z[j]
+        z[i] = acc / a[i, i]
+        total += z[i] * z[i]
+    return total
+
+
+@njit
+def predicted_drop(r, qtr, h):
+    """(|res|^2 - |res + jac h|^2 as the linear model predicts it, |jac h|^2), from R and
+    Q^T res: (-2 (R h).qtr - |R h|^2, |R h|^2)."""
+    n = r.shape[0]
+    drop = 0.0
+    norm2 = 0.0
+    for i in range(n):
+        rh = 0.0
+        for j in range(i, n):
+            rh += r[i, j] * h[j]
+        drop -= 2.0 * rh * qtr[i] + rh * rh
+        norm2 += rh * rh
+    return drop, norm2
+
+
+@njit
+def gradient_norm(r, qtr):
+    """|R^T qtr| = |jac^T res|."""
+    n = r.shape[0]
+    total = 0.0
+    for j in range(n):
+        g = 0.0
+        for i in range(j + 1):
+            g += r[i, j] * qtr[i]
+        total += g * g
+    return np.sqrt(total)
+
+
+@njit
+def sum_squares(v):
+    """sum(v^2) in index order (inf or nan when v holds one)."""
+    total = 0.0
+    for i in range(v.size):
+        total += v[i] * v[i]
+    return total
+
+
+@njit
+def column_norms(jac, out):
+    """out[j] = |jac[:, j]|, 1 where a column is zero or not finite."""
+    m, n = jac.shape
+    for j in range(n):
+        total = 0.0
+        for i in range(m):
+            total += jac[i, j] * jac[i, j]
+        norm = np.sqrt(total)
+        out[j] = norm if (norm > 0.0 and np.isfinite(norm)) else 1.0

@@ -1,0 +1,78 @@
+"""The LM's linear algebra kernels (gpquad.engine.kernels.least_squares) against numpy."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gpquad.engine.kernels import least_squares as kernels
+
+
+def problem(seed: int, m: int, n: int, spread: float):
+    rng = np.random.default_rng(seed)
+    jac = rng.standard_normal((m, n)) * np.logspace(0.0, spread, n)
+    return jac, rng.standard_normal(m)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), m=st.integers(1, 60), n=st.integers(1, 8),
+       spread=st.floats(0.0, 4.0))
+def test_triangularize_is_a_qr_of_the_jacobian(seed, m, n, spread):
+    """R^T R = J^T J and R^T (Q^T res) = J^T res, R upper triangular (signs may differ from
+    numpy's QR, products do not)."""
+    m = max(m, n)
+    jac, res = problem(seed, m, n, spread)
+    r, qtr = np.zeros((n, n)), np.zeros(n)
+    kernels.triangularize(jac, res, r, qtr)
+    assert np.all(np.tril(r, -1) == 0.0)
+    scale = np.abs(jac).max() ** 2
+    np.testing.assert_allclose(r.T @ r, jac.T @ jac, atol=1e-10 * scale * m)
+    np.testing.assert_allclose(r.T @ qtr, jac.T @ res, atol=1e-10 * scale * m)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 8), mu=st.floats(1e-6, 1e3),
+       spread=st.floats(0.0, 2.0))
+def test_damped_step_solves_the_damped_normal_equations(seed, n, mu, spread):
+    """h solves (J^T J + mu I) h = -J^T res; the returned value is h^T (J^T J + mu I)^-1 h;
+    predicted_drop and gradient_norm are |res|^2 - |res + J h|^2, |J h|^2 and |J^T res|."""
+    jac, res = problem(seed, 3 * n + 2, n, spread)
+    r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    kernels.triangularize(jac, res, r, qtr)
+    z2 = kernels.damped_step(r, qtr, mu, h)
+    a = jac.T @ jac + mu * np.eye(n)
+    expected = np.linalg.solve(a, -jac.T @ res)
+    np.testing.assert_allclose(h, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+    np.testing.assert_allclose(z2, h @ np.linalg.solve(a, h), rtol=1e-7)
+    drop, jh2 = kernels.predicted_drop(r, qtr, h)
+    np.testing.assert_allclose(drop, res @ res - np.sum((res + jac @ h) ** 2),
+                               rtol=1e-7, atol=1e-9 * (res @ res))
+    np.testing.assert_allclose(jh2, np.sum((jac @ h) ** 2), rtol=1e-7)
+    np.testing.assert_allclose(kernels.gradient_norm(r, qtr), np.linalg.norm(jac.T @ res),
+                               rtol=1e-9)
+
+
+def test_damped_step_reports_a_singular_system():
+    """mu = 0 with a rank-deficient Jacobian (two equal columns) is singular: -1 and h
+    untouched; any mu > 0 solves it."""
+    jac, res = problem(1, 20, 3, 0.0)
+    jac[:, 2] = jac[:, 0]
+    r, qtr, h = np.zeros((3, 3)), np.zeros(3), np.full(3, 7.0)
+    kernels.triangularize(jac, res, r, qtr)
+    r[2, 2] = 0.0  # exactly singular (round-off leaves ~1e-16)
+    assert kernels.damped_step(r, qtr, 0.0, h) == -1.0
+    assert np.all(h == 7.0)
+    assert kernels.damped_step(r, qtr, 1e-3, h) >= 0.0
+    assert np.all(np.isfinite(h))
+
+
+@pytest.mark.parametrize("shape", [(5, 3), (1, 1), (40, 7)])
+def test_reductions(shape):
+    jac, res = problem(2, *shape, 1.0)
+    jac[:, 0] = 0.0
+    out = np.empty(shape[1])
+    kernels.column_norms(jac, out)
+    expected = np.linalg.norm(jac, axis=0)
+    np.testing.assert_allclose(out, np.where(expected > 0, expected, 1.0), rtol=1e-12)
+    np.testing.assert_allclose(kernels.sum_squares(res), res @ res, rtol=1e-12)
+    assert np.isinf(kernels.sum_squares(np.array([1.0, np.inf])))
