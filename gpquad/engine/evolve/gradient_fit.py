@@ -2,9 +2,10 @@
 
 Levenberg-Marquardt (gpquad.engine.evolve.lm: MINPACK's algorithm in numba loops) on the
 integrated-state residuals of a tree over data windows, with the Jacobian from the
-forward-mode sensitivity kernel (gpquad.engine.kernels.sensitivity). This is the gradient operator of
-../shared/seeds/ga-gradient-parameter-identification.txt carried into GP: a coefficient
-such as 28.2 or 544 is reached in a few steps instead of by Gaussian steps from U(-5, 5).
+forward-mode sensitivity kernel (gpquad.engine.kernels.sensitivity). This is the gradient
+operator of ../shared/seeds/ga-gradient-parameter-identification.txt carried into GP: a
+coefficient such as 28.2 or 544 is reached in a few steps instead of by Gaussian steps from
+U(-5, 5).
 
 LM minimises the squared residuals; the engine's fitness may be the mean absolute error,
 so the fitted tree is kept only if `error_of` (the engine's own fitness) improves.
