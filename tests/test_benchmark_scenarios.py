@@ -111,3 +111,17 @@ def test_every_rotorpy_scenario_asks_for_its_mode_and_noise(tmp_path, monkeypatc
         ("angle", False), ("angle", True), ("rate", False), ("rate", True),
         ("angle", False, "heldout"), ("angle", True, "heldout"), ("rate", False, "heldout"),
         ("rate", True, "heldout")]
+
+
+@pytest.mark.skipif(not (scenarios.repo_root().parent / "shared" / "data" / "betaflight")
+                    .is_dir(), reason="../shared/data/betaflight is not present")
+def test_betaflight_scenario_tests_on_another_flight(tmp_path):
+    """betaflight-gecko: every training segment comes from btfl_002.bbl, every test segment
+    from btfl_all.bbl (the config's data.validation file, another flight of the quad), and
+    only the gyro's p, q, r are measured."""
+    scenario = scenarios.build_scenario("betaflight-gecko", tmp_path)
+    assert scenario.fit.n_samples > 1000 and scenario.test.n_samples > 1000
+    assert {info["name"].split(".")[0] for info in scenario.fit.flight_info} == {"btfl_002"}
+    assert {info["name"].split(".")[0] for info in scenario.test.flight_info} == {"btfl_all"}
+    assert scenario.measured == {"u": False, "v": False, "w": False, "p": True, "q": True,
+                                 "r": True}

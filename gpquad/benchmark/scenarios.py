@@ -21,6 +21,9 @@ held-out flights that every method is scored on (same trim as `fit`).
   engine does on a vehicle it was not tuned to;
 - px4-s250, px4-aquaquad: the real logs of `experiments/px4_*.toml`, first 70 % of the
   flight time trains, the last 30 % tests; only measured states are scored;
+- betaflight-gecko: `experiments/betaflight_gecko.toml`, a 5" quad's Betaflight blackbox
+  log trains, another flight of the same quad (its `data.validation` file) tests; only p,
+  q, r are measured and scored;
 - a user's TOML: its training part trains, its held-out part (data.validation_fraction of
   each flight) tests.
 """
@@ -47,7 +50,7 @@ TRAIN_FRACTION = 0.7
 SCENARIOS = ("median", "median-noisy", "rigid-body", "rigid-body-noisy", "rotorpy-angle",
              "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy",
              "rotorpy-heldout-angle", "rotorpy-heldout-angle-noisy", "rotorpy-heldout-rate",
-             "rotorpy-heldout-rate-noisy", "px4-s250", "px4-aquaquad")
+             "rotorpy-heldout-rate-noisy", "px4-s250", "px4-aquaquad", "betaflight-gecko")
 #: rotorpy scenario -> (mode, noisy, fleet of gpquad.benchmark.rotorpy_flights.FLEETS).
 ROTORPY = {f"rotorpy-{prefix}{mode}{suffix}": (mode, bool(suffix), fleet)
            for prefix, fleet in (("", "tuned"), ("heldout-", "heldout"))
@@ -164,15 +167,25 @@ def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
 
 
 def _from_log(name: str, path: Path) -> Scenario:
-    from gpquad.data.io import load_flights
+    """A real log's config: the files of `data.validation` (a list) are the test flights;
+    without one, the first TRAIN_FRACTION of the samples train and the rest tests."""
+    from gpquad.data.io import held_out_paths, load_flights
 
     cfg = load_config(path)
-    train, test = time_split(load_flights(cfg), TRAIN_FRACTION)
+    flights = load_flights(cfg)
+    held = {str(p) for p in held_out_paths(cfg)}
+    if held:
+        train = [f for f in flights if f.meta.get("file") not in held]
+        test = [f for f in flights if f.meta.get("file") in held]
+        split = f"{', '.join(cfg.data.files)} train; {', '.join(cfg.data.validation)} test"
+    else:
+        train, test = time_split(flights, TRAIN_FRACTION)
+        split = f"first {TRAIN_FRACTION:.0%} of the samples train"
     return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
                          validation_fraction=cfg.data.validation_fraction,
                          source={"kind": "log", "config": str(path), "config_text":
                                  Path(path).read_text(), "files": list(cfg.data.files),
-                                 "split": f"first {TRAIN_FRACTION:.0%} of the samples train"})
+                                 "split": split})
 
 
 def _rotorpy(name: str, cache_dir: Path) -> Scenario:
@@ -259,5 +272,7 @@ def build_scenario(name: str, cache_dir: Path) -> Scenario:
         return _from_log(name, root / "experiments" / "px4_s250.toml")
     if name == "px4-aquaquad":
         return _from_log(name, root / "experiments" / "px4_aquaquad.toml")
+    if name == "betaflight-gecko":
+        return _from_log(name, root / "experiments" / "betaflight_gecko.toml")
     raise GpquadError(f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a "
                       "config .toml", field="scenario")
