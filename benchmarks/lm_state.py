@@ -12,9 +12,10 @@ inputs; with scipy 1.17.1 (2026-11-25) the first replay, which follows the engin
 calls, and the one after the unrelated fit took other trial points than the two in
 between: MINPACK's result depends on what ran before it in the process. This is why the
 same seed gave other constants in another process (README, "Reproducibility").
-`scipy.optimize.leastsq` with an explicit `diag` (MINPACK mode 2) did not show it in the
-same replay; without `diag` (mode 1) it did. The engine's constant fit now uses the former
-(gpquad.engine.evolve.lm); this script keeps calling scipy's `least_squares` to show why.
+`scipy.optimize.leastsq` with an explicit `diag` (MINPACK mode 2) usually did not show it
+in the same replay (once in about twenty runs it did); without `diag` (mode 1) it did. The
+engine's constant fit is now gpquad's own LM in numba loops (gpquad.engine.evolve.lm); this
+script keeps calling scipy's `least_squares` to show why.
 """
 
 from __future__ import annotations
