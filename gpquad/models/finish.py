@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 
+from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import joint_refit
 from gpquad.models.precision import with_printed_digits
 from gpquad.models.stability import repair_stability
 
 
+@one_blas_thread
 def finish_model(model, dataset, evolution):
     """The model after the full-model steps the config asks for, when all six equations
     are there: the stability repair (`evolution.stability_repair`) and full-model front

@@ -13,6 +13,7 @@ import numpy as np
 from gpquad.data.dataset import Dataset
 from gpquad.data.io import load_dataset
 from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
@@ -58,6 +59,7 @@ class Progress:
             print(text, file=self.stream, flush=True)
 
 
+@one_blas_thread
 def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter | None = None,
              progress: Progress | None = None, state: RunState | None = None,
              checkpoint_path: Path | None = None, history_start: int | None = None

@@ -1,0 +1,48 @@
+"""BLAS runs on one thread inside the engine (gpquad.engine.threads), whatever --jobs."""
+
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from gpquad.engine.threads import one_blas_thread
+
+
+def blas_threads() -> set[int]:
+    return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+
+needs_blas = pytest.mark.skipif(not blas_threads(), reason="no BLAS that threadpoolctl sees")
+
+
+@needs_blas
+def test_wrapped_function_runs_on_one_thread_and_the_limit_is_lifted_after():
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads() == {2}  # the bad case the wrapper must change
+        inside = one_blas_thread(blas_threads)()
+        assert inside == {1}
+        assert blas_threads() == {2}
+
+
+@needs_blas
+def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
+    from gpquad.models import finish
+    from gpquad.study import runner
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def record(*args, **kwargs):
+        seen.append(blas_threads())
+        raise Stop
+
+    monkeypatch.setattr(runner, "Coevolution", record)
+    monkeypatch.setattr(finish, "repair_stability", record)
+    with threadpool_limits(limits=2, user_api="blas"):
+        with pytest.raises(Stop):
+            runner.identify(None, "p_dot", type("C", (), {"evolution": None})())
+        model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
+        evolution = type("E", (), {"stability_repair": True, "front_selection": False})()
+        with pytest.raises(Stop):
+            finish.finish_model(model, None, evolution)
+    assert seen == [{1}, {1}]
