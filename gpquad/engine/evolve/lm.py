@@ -114,7 +114,8 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = F
         step = _norm(h)
         if evaluation == 0:
             radius = min(radius, step)
-        trial = x + h / scale
+        with np.errstate(over="ignore", invalid="ignore"):  # a huge step: inf, rejected
+            trial = x + h / scale
         f_trial = np.ascontiguousarray(fun(trial), dtype=float)
         cost_trial = kernels.sum_squares(f_trial)
         blown = not (np.isfinite(cost_trial) and cost_trial < 100.0 * cost)
