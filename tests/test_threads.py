@@ -13,13 +13,20 @@ def blas_threads() -> set[int]:
 needs_blas = pytest.mark.skipif(not blas_threads(), reason="no BLAS that threadpoolctl sees")
 
 
+def blas_state() -> list[tuple[str, int]]:
+    return sorted((i["filepath"], i["num_threads"]) for i in threadpool_info()
+                  if i["user_api"] == "blas")
+
+
 @needs_blas
 def test_wrapped_function_runs_on_one_thread_and_the_limit_is_lifted_after():
     with threadpool_limits(limits=2, user_api="blas"):
-        assert blas_threads() == {2}  # the bad case the wrapper must change
+        outside = blas_state()
+        if 2 not in {n for _, n in outside}:
+            pytest.skip("no BLAS here runs on two threads")  # the bad case cannot be made
         inside = one_blas_thread(blas_threads)()
         assert inside == {1}
-        assert blas_threads() == {2}
+        assert blas_state() == outside
 
 
 @needs_blas
@@ -39,6 +46,8 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
     monkeypatch.setattr(runner, "Coevolution", record)
     monkeypatch.setattr(finish, "repair_stability", record)
     with threadpool_limits(limits=2, user_api="blas"):
+        if 2 not in blas_threads():
+            pytest.skip("no BLAS here runs on two threads")
         with pytest.raises(Stop):
             runner.identify(None, "p_dot", type("C", (), {"evolution": None})())
         model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
