@@ -148,3 +148,17 @@ def test_garbage_piece_overlapping_the_clock_is_dropped(monkeypatch):
     assert bf._overlapping([(0, 10), (10, 14)], np.r_[np.arange(10.0), 2.0, 3.0, 4.0, 5.0]) \
         == [1]
     assert bf._overlapping([(0, 10), (10, 14)], np.arange(14.0)) == []
+
+
+@needs_shared
+def test_rate_set_points_are_in_the_gyros_frame():
+    """At the rates level u_R, u_P, u_Y are the set-points of p, q, r in FRD: each follows
+    its own rate (correlation > 0.8 on a real flight). Left in Betaflight's FLU axes, as
+    before this test, u_P and u_Y correlated with q and r at about -0.9."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        flights = read_betaflight(SHARED / "btfl_002.bbl", DataConfig())
+    for f in flights:
+        names = list(f.input_names)
+        for rate, name in enumerate(("u_R", "u_P", "u_Y")):
+            assert np.corrcoef(f.inputs[:, names.index(name)], f.rates[:, rate])[0, 1] > 0.8

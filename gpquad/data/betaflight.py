@@ -10,7 +10,8 @@ damaged stretch) is split there. Signals and units:
 - rcCommand[0..2] (roll, pitch, yaw sticks, +-500) -> /500, the default u_R, u_P, u_Y;
   rcCommand[3] (throttle, 1000..2000 us) -> (x - 1000) / 1000, the default u_T. Sticks keep
   Betaflight's signs.
-- setpoint[0..2] deg/s -> rad/s (p_sp, q_sp, r_sp in Betaflight's axes), setpoint[3] / 1000;
+- setpoint[0..2] deg/s -> rad/s, turned into FRD like the gyro (p_sp, q_sp, r_sp: the
+  set-points of p, q, r), setpoint[3] / 1000;
   axisP/I/D/F (PID terms, raw); motor[0..3] DShot -> (x - motorOutput[0]) /
   (motorOutput[1] - motorOutput[0]); vbatLatest in 0.01 V -> V. The header fields are kept in
   the log table's notes (firmware, looptime, motor protocol limits, rates).
@@ -154,7 +155,10 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
     extra = {}
     if all(f"setpoint[{i}]" in df for i in range(4)):
         sp = np.column_stack([df[f"setpoint[{i}]"].to_numpy(float) for i in range(4)])
-        extra["setpoint"] = (np.column_stack([np.deg2rad(sp[:, :3]), sp[:, 3] / 1000.0]),
+        # rate set-points in FRD, like the gyro they command (Betaflight's PID compares them
+        # in its own FLU axes)
+        extra["setpoint"] = (np.column_stack([flip_body(np.deg2rad(sp[:, :3])),
+                                              sp[:, 3] / 1000.0]),
                              ("p_sp", "q_sp", "r_sp", "throttle_sp"))
     lo, hi = (headers.get("motorOutput") or [0, 2047])[:2]
     motors = [c for c in (f"motor[{i}]" for i in range(8)) if c in df]
