@@ -125,3 +125,18 @@ def test_betaflight_scenario_tests_on_another_flight(tmp_path):
     assert {info["name"].split(".")[0] for info in scenario.test.flight_info} == {"btfl_all"}
     assert scenario.measured == {"u": False, "v": False, "w": False, "p": True, "q": True,
                                  "r": True}
+
+
+def test_user_config_with_validation_files_tests_on_them(tmp_path):
+    """A user's config that holds b.parquet out whole (data.validation) is tested on b
+    alone and trained on a alone; before, each file's last validation_fraction tested."""
+    for name, seed in (("a", 1), ("b", 2)):
+        write_flight_file(simulate(SimulatorConfig(duration_s=30.0, seed=seed), INPUTS),
+                          tmp_path / f"{name}.parquet")
+    config = tmp_path / "mine.toml"
+    config.write_text('name = "mine"\nseed = 1\n[data]\nfiles = ["a.parquet"]\n'
+                      'validation = ["b.parquet"]\ntrim = "none"\n')
+    scenario = scenarios.user_scenario(config)
+    assert [f["name"] for f in scenario.fit.flight_info] == ["a.parquet"]
+    assert [f["name"] for f in scenario.test.flight_info] == ["b.parquet"]
+    assert scenario.fit.n_samples == scenario.test.n_samples == 750

@@ -177,6 +177,10 @@ def _from_log(name: str, path: Path) -> Scenario:
     if held:
         train = [f for f in flights if f.meta.get("file") not in held]
         test = [f for f in flights if f.meta.get("file") in held]
+        if not train or not test:
+            raise GpquadError(f"no usable flight in the {'test' if train else 'training'} "
+                              "files (data.validation lists the test files)",
+                              source=str(path), field="data.validation")
         split = f"{', '.join(cfg.data.files)} train; {', '.join(cfg.data.validation)} test"
     else:
         train, test = time_split(flights, TRAIN_FRACTION)
@@ -231,12 +235,15 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
 
 
 def user_scenario(path: Path) -> Scenario:
-    """A user's experiment config: each flight's held-out part is its test data."""
-    from gpquad.data.io import load_flights
+    """A user's experiment config: the files of `data.validation` (a list) are the test
+    flights; without one, each flight's held-out part (data.validation_fraction) is."""
+    from gpquad.data.io import held_out_paths, load_flights
 
     cfg = load_config(path)
     if not cfg.data.files:
         return _simulated(path.stem, cfg, noisy=False)
+    if held_out_paths(cfg):
+        return _from_log(path.stem, path)
     if cfg.data.validation_fraction <= 0:
         raise GpquadError("the benchmark tests on the held-out part of each flight; set "
                           "data.validation_fraction > 0", source=str(path),
