@@ -24,7 +24,8 @@ held-out flights that every method is scored on (same trim as `fit`).
 - betaflight-gecko: `experiments/betaflight_gecko.toml`, a 5" quad's Betaflight blackbox
   log trains, another flight of the same quad (its `data.validation` file) tests; only p,
   q, r are measured and scored;
-- a user's TOML: its training part trains, its held-out part (data.validation_fraction of
+- a user's TOML: the files of its data.validation list test and the others train; without
+  such a list its training part trains and its held-out part (data.validation_fraction of
   each flight) tests.
 """
 
