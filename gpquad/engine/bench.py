@@ -8,6 +8,10 @@
   target reading rates and inputs only; one reading an Euler angle and a velocity,
   which integrates attitude and velocity; a linear target);
 - generation_window_steps_per_s: the real pattern, 14 different random trees x 6 windows;
+- constant_fit_ms: one Levenberg-Marquardt fit of the rates-and-inputs tree's two
+  constants through the integrator (gpquad.engine.evolve.gradient_fit, 20 evaluations at
+  most, 6 windows of 750 steps, from constants 30 % off), and constant_fit_rollouts_per_s:
+  its residual-and-Jacobian rollouts (window-steps with sensitivities) per second;
 - paper_iteration_s: wall time of one paper-scale iteration (600 + 80 generations and
   a simplification) on the reference simulator's flight, target p_dot;
 - paper_run_s: 30 such iterations (measured with --full, else projected from one).
@@ -20,6 +24,7 @@ import numpy as np
 from gpquad.data.io import load_dataset
 from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, OPERATORS, VAR_BASE
 from gpquad.engine.tree.variation import random_tree
@@ -82,6 +87,30 @@ def _rate(func, steps_per_call: int, min_time: float = 1.0) -> float:
             return calls * steps_per_call / elapsed
 
 
+def constant_fit_speed(evaluator, input_names, starts, n_steps: int,
+                       min_time: float = 1.0) -> tuple[float, float]:
+    """(ms per LM fit, window-steps with sensitivities per s) of the rates-and-inputs
+    tree's constants fitted from 30 % off on `starts`."""
+    _, tree = path_trees(input_names)["rates_and_inputs"]
+    start = Tree(tree.codes, np.where(tree.codes == CONST, tree.values * 1.3, tree.values),
+                 tree.delays)
+
+    def error_of(t):
+        return float(evaluator.mean_errors([t], starts)[0])
+
+    def fit():
+        gauss_newton_constants(evaluator, start, error_of(start), starts, n_steps, error_of,
+                               20)
+
+    fit()  # compile / warm
+    before, fits, t0 = evaluator.evaluations, 0, time.perf_counter()
+    while time.perf_counter() - t0 < min_time:
+        fit()
+        fits += 1
+    elapsed = time.perf_counter() - t0
+    return 1e3 * elapsed / fits, (evaluator.evaluations - before) * n_steps / elapsed
+
+
 def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     cfg = Config()
     dataset = load_dataset(cfg)
@@ -103,6 +132,8 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     one_tree = _rate(all_targets, steps84 * len(TARGET_NAMES))
     trees = [random_tree(rng, co.params) for _ in range(14)]
     generation = _rate(lambda: evaluators["p_dot"].window_errors(trees, starts84[:6]), steps84)
+    fit_ms, fit_steps_per_s = constant_fit_speed(evaluators["p_dot"], dataset.input_names,
+                                                 starts84[:6], ev.window_steps)
     state = co.init_state(seed)
     t0 = time.perf_counter()
     co.iterate(state)
@@ -119,6 +150,8 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
         "window_steps_per_s": one_tree,
         "paths": paths,
         "generation_window_steps_per_s": generation,
+        "constant_fit_ms": fit_ms,
+        "constant_fit_rollouts_per_s": fit_steps_per_s,
         "paper_iteration_s": iteration,
         "paper_run_s": paper_run,
         "paper_run_measured": bool(full),
@@ -137,6 +170,9 @@ def format_report(result: dict) -> str:
     lines += [
         f"one generation, 14 random trees x 6 windows: "
         f"{result['generation_window_steps_per_s'] / 1e6:8.1f} M window-steps/s per core",
+        f"constant fit (LM through the integrator, 2 constants, 6 windows): "
+        f"{result['constant_fit_ms']:8.1f} ms per fit, "
+        f"{result['constant_fit_rollouts_per_s'] / 1e6:.1f} M window-steps/s",
         f"one paper-scale iteration (600 + 80 generations): {result['paper_iteration_s']:8.2f} s",
         f"paper-scale run, {result['iterations']} iterations ({kind}): "
         f"{result['paper_run_s']:8.1f} s",
