@@ -86,7 +86,10 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = F
     at most max_nfev evaluations of fun after the one at x0; jac is asked only at x0 and at
     accepted points, after fun there (a caller that computes both at once pays nothing).
 
-    MINPACK's lmder in mode 2 (Moré 1978): a trust region in the variables scaled by the
+    MINPACK's lmder in mode 2 (Moré 1978; one deviation: when the damping is 0 and the
+    Gauss-Newton step is too long, the Newton iteration starts from 1e-3 of its upper bound
+    where lmpar starts from |gradient| / |Gauss-Newton step|): a trust region in the
+    variables scaled by the
     first Jacobian's column norms, RADIUS_FACTOR x the scaled |x0| at first; the step is
     the Gauss-Newton step when it fits, else the damped step of the radius's length; taken
     when the actual drop of the sum is at least ACCEPT_RATIO of the predicted one; the
