@@ -4,7 +4,9 @@ Scoring flies a run's equations over the windows of another flight (or the held-
 one it trained on) with `gpquad.models.scoring`'s definition: RSE of the integrated states u, v, w,
 p, q, r over non-overlapping windows of `--horizon-s`, each from the recorded state with the
 recorded inputs. A state the log does not measure is NaN; a window is diverged when the
-prediction is non-finite or leaves 10 x the data's largest |state|.
+prediction is non-finite or leaves 10 x the data's largest |state|. Signals that leave the
+run's training range on more than 1 % of the scored samples are listed
+(gpquad.models.envelope).
 """
 
 from __future__ import annotations
@@ -89,6 +91,12 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         block = pred[:, :, SCORED_INDEX]
         diverged = ~np.isfinite(block).all(axis=(1, 2)) | (np.abs(block) > limit).any(axis=(1, 2))
     values = rse(pred, truth)
+    outside = []
+    if run.model.envelope:
+        from gpquad.models.envelope import outside_envelope
+
+        rows = np.unique(starts[:, None] + np.arange(steps + 1)[None, :])
+        outside = outside_envelope(run.model.envelope, model_view(dataset, run.trim), rows)
     scores = {}
     for s, v in zip(SCORED_STATES, values, strict=True):
         scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
@@ -96,7 +104,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
             "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
             "diverged": int(diverged.sum()), "rse": scores,
             "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
-            "dropped": dropped}
+            "dropped": dropped, "outside_training": outside}
 
 
 def format_score(result: dict) -> str:
@@ -109,4 +117,8 @@ def format_score(result: dict) -> str:
              f"{result['diverged']} diverged; NaN = not measured by the log",
              head, vals]
     lines.extend(f"warning: {d}" for d in result["dropped"])
+    lines.extend(f"note: {o['signal']} leaves the training range on {100 * o['fraction']:.1f} % "
+                 f"of the scored samples (training {o['training'][0]:.3g}..{o['training'][1]:.3g}"
+                 f", here {o['seen'][0]:.3g}..{o['seen'][1]:.3g}): the equations extrapolate "
+                 "there" for o in result.get("outside_training", []))
     return "\n".join(lines)

@@ -182,6 +182,8 @@ class DiscoveredModel:
     joint_fit: dict | None = None
     #: The full-model stability repair's report (gpquad.models.stability), or None.
     stability: dict | None = None
+    #: {signal: [min, max]} over the training samples (gpquad.models.envelope), or None.
+    envelope: dict | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -204,6 +206,8 @@ class DiscoveredModel:
             out["joint_fit"] = self.joint_fit
         if self.stability is not None:
             out["stability"] = self.stability
+        if self.envelope is not None:
+            out["envelope"] = self.envelope
         return out
 
     @classmethod
@@ -213,7 +217,7 @@ class DiscoveredModel:
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
                    d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
-                   d.get("stability"))
+                   d.get("stability"), d.get("envelope"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:

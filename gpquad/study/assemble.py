@@ -31,6 +31,7 @@ from gpquad.engine.evolve.windows import WindowSpace, tile
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.models import scoring
+from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
 from gpquad.models.scoring import diverged
@@ -111,7 +112,7 @@ def model_of(choice: dict[str, int], runs, dataset: Dataset, cfg: Config) -> Dis
     """The full model of the chosen repetitions (jointly refitted if evolution.joint_fit)."""
     eqs = {t: runs[t][k].equation for t, k in choice.items()}
     model = DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                            cfg.to_dict())
+                            cfg.to_dict(), envelope=training_envelope(dataset))
     return finish_model(model, dataset, cfg.evolution)
 
 

@@ -16,6 +16,7 @@ from gpquad.engine.evolve.coevolution import Coevolution, RunState
 from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_STATE
 from gpquad.errors import GpquadError
+from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
 from gpquad.models.joint_fit import joint_fit_summary
@@ -167,7 +168,7 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     history = HistoryWriter(run_dir / "history.csv")
     equations: dict[str, Equation] = {}
     model = DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                            cfg.to_dict())
+                            cfg.to_dict(), envelope=training_envelope(dataset))
     timings = {}
     done_dir = run_dir / "checkpoints"
     try:
