@@ -140,3 +140,21 @@ def test_user_config_with_validation_files_tests_on_them(tmp_path):
     assert [f["name"] for f in scenario.fit.flight_info] == ["a.parquet"]
     assert [f["name"] for f in scenario.test.flight_info] == ["b.parquet"]
     assert scenario.fit.n_samples == scenario.test.n_samples == 750
+
+
+def test_named_log_scenario_without_its_log_is_skipped(tmp_path, monkeypatch):
+    """A clone without ../shared/data skips px4-s250 and betaflight-gecko (as it skips the
+    rotorpy scenarios without rotorpy) instead of stopping the whole benchmark; a user's own
+    config with a missing file stays an error."""
+    config = tmp_path / "experiments" / "px4_s250.toml"
+    config.parent.mkdir()
+    config.write_text('name = "x"\nseed = 1\n[data]\nfiles = ["nowhere/S250"]\n'
+                      'format = "px4-csv"\n')
+    monkeypatch.setattr(scenarios, "repo_root", lambda: tmp_path)
+    with pytest.raises(scenarios.Skipped, match="not on this machine"):
+        scenarios.build_scenario("px4-s250", tmp_path)
+    from gpquad.errors import GpquadError
+
+    config.write_text(config.read_text() + 'validation = ["nowhere/other"]\n')
+    with pytest.raises(GpquadError):
+        scenarios.user_scenario(config)

@@ -167,12 +167,17 @@ def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
                                  "equations": dict(sim.equations)})
 
 
-def _from_log(name: str, path: Path) -> Scenario:
+def _from_log(name: str, path: Path, named: bool = True) -> Scenario:
     """A real log's config: the files of `data.validation` (a list) are the test flights;
-    without one, the first TRAIN_FRACTION of the samples train and the rest tests."""
+    without one, the first TRAIN_FRACTION of the samples train and the rest tests. A named
+    scenario whose logs are not on this machine (../shared/data) is skipped."""
     from gpquad.data.io import held_out_paths, load_flights
 
     cfg = load_config(path)
+    missing = [p for p in cfg.data_paths() + held_out_paths(cfg) if not Path(p).exists()]
+    if named and missing:
+        raise Skipped(f"{name}: its log {missing[0]} is not on this machine (the public logs "
+                      "of ../shared/data)")
     flights = load_flights(cfg)
     held = {str(p) for p in held_out_paths(cfg)}
     if held:
@@ -244,7 +249,7 @@ def user_scenario(path: Path) -> Scenario:
     if not cfg.data.files:
         return _simulated(path.stem, cfg, noisy=False)
     if held_out_paths(cfg):
-        return _from_log(path.stem, path)
+        return _from_log(path.stem, path, named=False)
     if cfg.data.validation_fraction <= 0:
         raise GpquadError("the benchmark tests on the held-out part of each flight; set "
                           "data.validation_fraction > 0", source=str(path),
