@@ -24,11 +24,7 @@ def test_envelope_covers_the_training_samples_only(dataset):
     assert env["p"] == [float(p.min()), float(p.max())]
     u_r = dataset.arrays.inputs[rows, list(dataset.input_names).index("u_R")]
     assert env["u_R"] == [float(u_r.min()), float(u_r.max())]
-    everything = np.arange(dataset.n_samples)
     assert outside_envelope(env, dataset, rows) == []  # the training samples are inside
-    # the validation part may leave it a little; never by more than its own share
-    for o in outside_envelope(env, dataset, everything):
-        assert o["fraction"] <= 1 - len(rows) / dataset.n_samples
 
 
 def test_a_shifted_signal_is_reported_with_its_ranges(dataset):

@@ -18,16 +18,20 @@ def problem(seed: int, m: int, n: int, spread: float):
 @given(seed=st.integers(0, 10_000), m=st.integers(1, 60), n=st.integers(1, 8),
        spread=st.floats(0.0, 4.0))
 def test_triangularize_is_a_qr_of_the_jacobian(seed, m, n, spread):
-    """R^T R = J^T J and R^T (Q^T res) = J^T res, R upper triangular (signs may differ from
-    numpy's QR, products do not)."""
+    """For J = jac / scale: R^T R = J^T J and R^T (Q^T res) = J^T res, R upper triangular
+    (signs may differ from numpy's QR, products do not)."""
     m = max(m, n)
     jac, res = problem(seed, m, n, spread)
+    columns = np.random.default_rng(seed).uniform(0.5, 20.0, n)  # the caller's scaling
+    kept = jac.copy()
     r, qtr = np.zeros((n, n)), np.zeros(n)
-    kernels.triangularize(jac, res, r, qtr)
+    kernels.triangularize(jac, columns, res, r, qtr)
+    assert np.array_equal(jac, kept)  # the input is not touched
     assert np.all(np.tril(r, -1) == 0.0)
-    scale = np.abs(jac).max() ** 2
-    np.testing.assert_allclose(r.T @ r, jac.T @ jac, atol=1e-10 * scale * m)
-    np.testing.assert_allclose(r.T @ qtr, jac.T @ res, atol=1e-10 * scale * m)
+    scaled = jac / columns
+    size = np.abs(scaled).max() ** 2
+    np.testing.assert_allclose(r.T @ r, scaled.T @ scaled, atol=1e-10 * size * m)
+    np.testing.assert_allclose(r.T @ qtr, scaled.T @ res, atol=1e-10 * size * m)
 
 
 @settings(max_examples=40, deadline=None)
@@ -38,7 +42,7 @@ def test_damped_step_solves_the_damped_normal_equations(seed, n, mu, spread):
     predicted_drop and gradient_norm are |res|^2 - |res + J h|^2, |J h|^2 and |J^T res|."""
     jac, res = problem(seed, 3 * n + 2, n, spread)
     r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
-    kernels.triangularize(jac, res, r, qtr)
+    kernels.triangularize(jac, np.ones(jac.shape[1]), res, r, qtr)
     z2 = kernels.damped_step(r, qtr, mu, h)
     a = jac.T @ jac + mu * np.eye(n)
     expected = np.linalg.solve(a, -jac.T @ res)
@@ -58,7 +62,7 @@ def test_damped_step_reports_a_singular_system():
     jac, res = problem(1, 20, 3, 0.0)
     jac[:, 2] = jac[:, 0]
     r, qtr, h = np.zeros((3, 3)), np.zeros(3), np.full(3, 7.0)
-    kernels.triangularize(jac, res, r, qtr)
+    kernels.triangularize(jac, np.ones(jac.shape[1]), res, r, qtr)
     r[2, 2] = 0.0  # exactly singular (round-off leaves ~1e-16)
     assert kernels.damped_step(r, qtr, 0.0, h) == -1.0
     assert np.all(h == 7.0)

@@ -37,12 +37,11 @@ ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
 
 
-def column_norms(jac, x0: np.ndarray) -> np.ndarray:
-    """The fixed variable scaling of both fits: the column norms of jac(x0), 1 where a column
-    is zero or not finite."""
-    j = np.ascontiguousarray(jac(x0), dtype=float)
+def column_norms(j: np.ndarray) -> np.ndarray:
+    """The fixed variable scaling of both fits: the column norms of the first Jacobian j, 1
+    where a column is zero or not finite."""
     out = np.empty(j.shape[1])
-    kernels.column_norms(j, out)
+    kernels.column_norms(np.ascontiguousarray(j, dtype=float), out)
     return out
 
 
@@ -106,10 +105,9 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = F
     j = np.ascontiguousarray(jac(x), dtype=float)
     if not np.isfinite(kernels.sum_squares(j.ravel())):
         return x
-    scale = np.empty(n)
-    kernels.column_norms(j, scale)
+    scale = column_norms(j)
     r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
-    kernels.triangularize(j / scale, f, r, qtr)
+    kernels.triangularize(j, scale, f, r, qtr)
     radius = RADIUS_FACTOR * (_norm(x * scale) or 1.0)
     mu = 0.0
     for evaluation in range(int(max_nfev)):
@@ -142,7 +140,7 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = F
             j = np.ascontiguousarray(jac(x), dtype=float)
             if not np.isfinite(kernels.sum_squares(j.ravel())):
                 break
-            kernels.triangularize(j / scale, f, r, qtr)
+            kernels.triangularize(j, scale, f, r, qtr)
         if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or \
                 radius <= xtol * _norm(x * scale):
             break
@@ -157,7 +155,8 @@ def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.nda
     x0's (a step is taken only when it lowers the sum)."""
     x0 = np.asarray(x0, dtype=float)
     fit = least_squares(fun, x0, jac=jac, method="trf", tr_solver="exact",
-                        x_scale=1.0 / column_norms(jac, x0), ftol=ftol, max_nfev=int(max_nfev))
+                        x_scale=1.0 / column_norms(jac(x0)), ftol=ftol,
+                        max_nfev=int(max_nfev))
     return np.asarray(fit.x, dtype=float)
 
 

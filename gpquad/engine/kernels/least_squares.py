@@ -7,8 +7,9 @@ MINPACK took other trial points for bit-identical inputs after other fits in the
 whatever ran before and however many threads or jobs.
 
 Flat arrays in, flat arrays out:
-- `triangularize(jac, res, r, qtr)`: Householder QR of jac (m, n), m >= n; r (n, n) gets R,
-  qtr (n,) the first n entries of Q^T res. Cost m n^2.
+- `triangularize(jac, scale, res, r, qtr)`: Householder QR of jac (m, n), m >= n, its
+  columns divided by scale; r (n, n) gets R, qtr (n,) the first n entries of Q^T res.
+  Cost m n^2.
 - `damped_step(r, qtr, mu, h)`: the step h minimising |jac h + res|^2 + mu |h|^2, from R and
   Q^T res alone (QR of [R; sqrt(mu) I], n^3), and what Newton's correction of mu needs.
 - `predicted_drop`, `gradient_norm`, `sum_squares`, `column_norms`: the reductions
@@ -56,10 +57,14 @@ def _householder(a, b, n_rows, n_cols):
 
 
 @njit
-def triangularize(jac, res, r, qtr):
-    """R (upper triangle of r) and the first n entries of Q^T res for jac = Q R."""
+def triangularize(jac, scale, res, r, qtr):
+    """R (upper triangle of r) and the first n entries of Q^T res for jac / scale = Q R
+    (each column j divided by scale[j]); jac and res are left as they are."""
     m, n = jac.shape
-    a = jac.copy()
+    a = np.empty((m, n))
+    for i in range(m):
+        for j in range(n):
+            a[i, j] = jac[i, j] / scale[j]
     b = res.copy()
     _householder(a, b, m, n)
     for i in range(n):
