@@ -150,7 +150,7 @@ def test_lm_takes_the_gauss_newton_step_on_the_engines_linearised_problem():
     """On the fixture's problem made linear (residual res + J dx: 14 constants whose scaled
     Jacobian has condition ~1e6), the first step is the Gauss-Newton step, as MINPACK's:
     one evaluation reaches lstsq's sum to 1e-8. A damped first step (Nielsen's mu = 1e-3 x
-    max diag, tried first) stayed at 246.85 for 20 evaluations."""
+    max diag with its step-size stop, tried first) stayed at 246.85 for 20 evaluations."""
     case = np.load(FIXTURE)
     res, jac, free, x0 = case["res"], case["jac"], case["free"], case["x0"]
     j = jac[:, free]
