@@ -13,17 +13,26 @@ from gpquad.models.precision import with_printed_digits
 from gpquad.models.stability import repair_stability
 
 
+def mirror_inputs(evolution, dataset) -> tuple[str, ...]:
+    """The inputs the stability repair flips in its mirrored flights (gpquad.data.mirror):
+    `evolution.mirror_inputs` when the dataset has all of them, else none (off)."""
+    names = tuple(evolution.mirror_inputs)
+    return names if names and all(n in dataset.input_names for n in names) else ()
+
+
 @one_blas_thread
 def finish_model(model, dataset, evolution):
     """The model after the full-model steps the config asks for, when all six equations
     are there: the stability repair (`evolution.stability_repair`) and full-model front
-    selection (`evolution.front_selection`), their report in model.stability, then the
+    selection (`evolution.front_selection`; with the mirrored flights of
+    `evolution.mirror_inputs`), their report in model.stability, then the
     joint refit (`evolution.joint_fit`, model.joint_fit); with
     the significant digits its printed equations need."""
     if all(t in model.equations for t in TARGET_NAMES):
         if evolution.stability_repair or evolution.front_selection:
             repaired, report = repair_stability(model, dataset,
-                                                select=evolution.front_selection)
+                                                select=evolution.front_selection,
+                                                mirror=mirror_inputs(evolution, dataset))
             model = dataclasses.replace(repaired, stability=report)
         if evolution.joint_fit:
             refitted, report = joint_refit(model, dataset)

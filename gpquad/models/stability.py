@@ -17,6 +17,13 @@ lowest full-model error, `FullModelError`) is kept if it beats the current model
 the search repeats until no window diverges or no swap helps. Without `select`, a model
 that does not diverge is returned unchanged.
 
+With `mirror` (`evolution.mirror_inputs`: the roll and yaw commands of a left-right
+symmetric vehicle), the judged windows are also flown mirrored (gpquad.data.mirror) and their
+divergences count after those of the recorded windows: a swap is scored by (diverged
+recorded windows, diverged mirrored windows, full-model error of the recorded windows), so
+the mirror never trades a recorded flight's accuracy for its own and only decides between
+models that fly the recorded flights equally.
+
 With `select` (`front_selection`, issue 9 lever 4: the final equations chosen by
 full-model validation rollouts), the search goes on once nothing diverges: a swap is kept
 when it diverges on no more windows and lowers the full-model error of the judged windows
@@ -37,6 +44,7 @@ import dataclasses
 
 import numpy as np
 
+from gpquad.data.mirror import mirror_dataset
 from gpquad.engine.evolve.term_search import model_terms
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.variables import TARGET_NAMES
@@ -89,15 +97,16 @@ def _swap(model, target: str, equation):
 
 
 def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
-                     select: bool = False):
+                     select: bool = False, mirror=()):
     """(model, report): the model with equations swapped for front alternatives until its
     full-model flights stop diverging (or no swap helps); with `select`, also while a swap
-    lowers the full-model error significantly. Unchanged when no swap is needed or helps.
+    lowers the full-model error significantly; with `mirror` (input names), the mirrored
+    flights count too (module notes). Unchanged when no swap is needed or helps.
 
     report: {"horizon_s", "judged_on", "windows", "diverged_before", "diverged_after",
     "error_before", "error_after", "swaps": [{"target", "from", "to", "why"}], "flights",
-    "select"}; why is "diverged" or "error". None when the model lacks an equation or no
-    window fits.
+    "select"}, with mirror also "mirrored", "mirrored_diverged_before" and "_after"; why is
+    "diverged" or "error". None when the model lacks an equation or no window fits.
     """
     if not all(t in model.equations for t in TARGET_NAMES):
         return model, None
@@ -105,38 +114,49 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
     if len(starts) == 0:
         return model, None
     flights = FullModelFlights(dataset, starts, steps)
-    n_div, per_window = flights.windows(model)
-    best = (n_div, float(per_window.sum()))
+    mirrored = (FullModelFlights(mirror_dataset(dataset, mirror), starts, steps)
+                if mirror else None)
+
+    def fly(candidate) -> tuple[tuple[int, int, float], np.ndarray]:
+        n_div, windows = flights.windows(candidate)
+        n_mirror = mirrored.windows(candidate)[0] if mirrored is not None else 0
+        return (n_div, n_mirror, float(windows.sum())), windows
+
+    best, per_window = fly(model)
     report = {"horizon_s": float(seconds), "judged_on": judged_on, "windows": int(len(starts)),
-              "diverged_before": best[0], "error_before": best[1], "swaps": [], "flights": 1,
+              "diverged_before": best[0], "error_before": best[2], "swaps": [], "flights": 1,
               "select": bool(select)}
+    if mirrored is not None:
+        report.update(mirrored=list(mirror), mirrored_diverged_before=best[1])
     alternatives = ({t: model.equations[t].alternatives() for t in TARGET_NAMES}
-                    if best[0] or select else {})
+                    if best[0] or best[1] or select else {})
     for _ in range(MAX_ROUNDS if not select else MAX_ROUNDS + len(TARGET_NAMES)):
-        if best[0] == 0 and not select:
+        if best[0] == 0 and best[1] == 0 and not select:
             break
         pick = None
         for target in TARGET_NAMES:
             drops = term_drops(model.equations[target]) if select else []
             for alt in alternatives[target] + drops:
-                swapped = _swap(model, target, alt)
-                alt_div, alt_windows = flights.windows(swapped)
+                score, alt_windows = fly(_swap(model, target, alt))
                 report["flights"] += 1
-                score = (alt_div, float(alt_windows.sum()))
-                if best[0] > 0:
+                if best[0] > 0 or best[1] > 0:
                     better = score < (pick[0] if pick else best)
                 else:  # nothing diverges: only a significant drop, never a new divergence
-                    better = (alt_div == 0 and significant_drop(per_window, alt_windows)
-                              and score[1] < (pick[0][1] if pick else best[1]))
+                    better = (score[0] == 0 and score[1] == 0
+                              and significant_drop(per_window, alt_windows)
+                              and score[2] < (pick[0][2] if pick else best[2]))
                 if better:
                     pick = (score, target, alt, alt_windows)
         if pick is None:
             break
         score, target, alt, alt_windows = pick
+        why = "diverged" if best[0] else "mirror diverged" if best[1] else "error"
         report["swaps"].append({"target": target, "from": model.equations[target].text(),
-                                "to": alt.text(), "why": "diverged" if best[0] else "error"})
+                                "to": alt.text(), "why": why})
         model, best, per_window = _swap(model, target, alt), score, alt_windows
-    report.update(diverged_after=best[0], error_after=best[1])
+    report.update(diverged_after=best[0], error_after=best[2])
+    if mirrored is not None:
+        report["mirrored_diverged_after"] = best[1]
     return model, report
 
 
@@ -144,14 +164,25 @@ def stability_summary(report: dict) -> str:
     """One line for the user: what the repair did."""
     n, before, after = report["windows"], report["diverged_before"], report["diverged_after"]
     chosen = [s["target"] for s in report["swaps"] if s.get("why") == "error"]
+    mirror = ""
+    if "mirrored" in report:
+        m_before, m_after = report["mirrored_diverged_before"], report["mirrored_diverged_after"]
+        mirror = (f"; mirrored ({', '.join(report['mirrored'])} flipped): "
+                  f"{m_before} diverged" + (f", {m_after} after" if m_before else ""))
     if not before:
         line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
         if report.get("select"):
             line += (f"; front alternatives that fly significantly better: "
                      f"{', '.join(chosen) or 'none'} (error {report['error_before']:.4g} -> "
                      f"{report['error_after']:.4g})")
+        if report.get("mirrored_diverged_before"):
+            swapped = ", ".join(s["target"] for s in report["swaps"]
+                                if s.get("why") == "mirror diverged") or "none"
+            line += f"{mirror}; swapped for front alternatives: {swapped}"
+        elif mirror:
+            line += mirror
         return line
     swapped = ", ".join(s["target"] for s in report["swaps"]) or "none"
     return (f"full model diverged in {before} of {n} {report['horizon_s']:g} s "
             f"{report['judged_on']} flights; equations swapped for front alternatives: "
-            f"{swapped}; diverged after: {after}")
+            f"{swapped}; diverged after: {after}{mirror}")

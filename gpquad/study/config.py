@@ -188,6 +188,12 @@ class EvolutionConfig:
     # flights it lets LM fit attitude loops so stiff that they diverge flown together
     # (gpquad.engine.kernels.sensitivity, README "Engine extensions").
     angle_tangents: bool = False
+    # Not in the paper: on a left-right symmetric vehicle, the inputs that change sign in
+    # the mirror image of a flight (the roll and yaw commands, e.g. ["u_R", "u_Y"]). The
+    # stability repair then also flies the mirrored validation flights, and an equation set
+    # that diverges there is swapped for front alternatives that do not, where the recorded
+    # flights allow (gpquad.data.mirror, gpquad.models.stability). [] = off.
+    mirror_inputs: tuple[str, ...] = ()
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

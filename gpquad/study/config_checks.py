@@ -69,6 +69,17 @@ def validate(cfg: Config, source: str = "config") -> Config:
             raise GpquadError(f"unknown variable '{name}'; choose from the states "
                               f"{list(STATE_NAMES)} or the inputs", source=source,
                               field=f"evolution.exclude_leaves[{i}]")
+    inputs = set(cfg.data.inputs if not isinstance(cfg.data.inputs, str) else DEFAULT_INPUTS)
+    for i, name in enumerate(ev.mirror_inputs):
+        if name not in inputs:
+            raise GpquadError(f"unknown input '{name}'; list the inputs that change sign in a "
+                              f"left-right mirror (roll and yaw commands) among "
+                              f"{sorted(inputs)}", source=source,
+                              field=f"evolution.mirror_inputs[{i}]")
+    if ev.mirror_inputs and not ev.stability_repair:
+        raise GpquadError("the mirrored flights are flown by the stability repair: set "
+                          "stability_repair = true", source=source,
+                          field="evolution.mirror_inputs")
     if not 0.0 <= ev.attitude_weight <= 100.0:
         raise GpquadError("must be in [0, 100] (1 counts the angle like the rate; 0 = off)",
                           source=source, field="evolution.attitude_weight")
