@@ -213,7 +213,8 @@ def test_export_then_run_gives_the_same_model(tmp_path):
     out = tmp_path / "e.parquet"
     assert main(["data", "export", str(reset_log()), "--out", str(out)]) == 0
     evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_steps": 100, "test_offset_max": 20}
+           "test_generations": 2, "window_steps": 100, "test_offset_max": 20,
+           "stability_repair": True, "mirror_inputs": ["u_R", "u_Y"]}
     runs = []
     for files, fmt in (([str(reset_log())], "px4-csv"), ([str(out)], "generic")):
         cfg = config_from_dict({"seed": 3, "data": {"files": files, "format": fmt},
@@ -241,7 +242,8 @@ def test_score_command(tmp_path, capsys):
     from gpquad.study.runner import run_experiment
 
     evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_steps": 100, "test_offset_max": 20}
+           "test_generations": 2, "window_steps": 100, "test_offset_max": 20,
+           "stability_repair": True, "mirror_inputs": ["u_R", "u_Y"]}
     cfg = config_from_dict({"seed": 1, "data": {"files": [str(reset_log())], "format": "px4-csv"},
                             "evolution": evo, "output": {"progress": False}})
     with warnings.catch_warnings():
@@ -252,9 +254,12 @@ def test_score_command(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     assert res["part"] == "validation" and res["steps"] == 50 and res["windows"] >= 1
     assert np.isnan(res["rse"]["u"]) and 0 <= res["rse"]["p"] < np.inf and res["diverged"] == 0
+    assert res["mirrored"] == {"inputs": ["u_R", "u_Y"], "diverged": 0}
     assert main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--part", "all",
                  "--horizon-s", "2"]) == 0
-    assert "RSE of the integrated states over" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "RSE of the integrated states over" in out
+    assert "mirrored left-right (u_R, u_Y flipped): 0 of" in out
     code = main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--format", "ulog"])
     assert code == 2 and "file not found" in capsys.readouterr().err
     code = main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--horizon-s", "-1"])

@@ -6,7 +6,9 @@ p, q, r over non-overlapping windows of `--horizon-s`, each from the recorded st
 recorded inputs. A state the log does not measure is NaN; a window is diverged when the
 prediction is non-finite or leaves 10 x the data's largest |state|. Signals that leave the
 run's training range on more than 1 % of the scored samples are listed
-(gpquad.models.envelope).
+(gpquad.models.envelope). When the run's config names `evolution.mirror_inputs`, the
+windows are also flown mirrored left-right (gpquad.data.mirror) and their diverged count is
+reported: an equation that holds only on the side of the flights the training log flew.
 """
 
 from __future__ import annotations
@@ -84,19 +86,23 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
                           "input level", source=str(log), field="data.inputs")
     steps = max(1, int(round(horizon_s / dataset.dt)))
     starts, steps = validation_windows(dataset, steps, run.max_delay)
-    pred = run.model.simulate(model_view(dataset, run.trim), starts, steps)
+    view = model_view(dataset, run.trim)
+    pred = run.model.simulate(view, starts, steps)
     truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
     limit = DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max()
-    with np.errstate(invalid="ignore"):
-        block = pred[:, :, SCORED_INDEX]
-        diverged = ~np.isfinite(block).all(axis=(1, 2)) | (np.abs(block) > limit).any(axis=(1, 2))
+    diverged = diverged_beyond(pred, limit)
     values = rse(pred, truth)
+    flipped = tuple(cfg.evolution.mirror_inputs)
+    mirrored = None
+    if flipped and all(n in dataset.input_names for n in flipped):
+        mirrored = {"inputs": list(flipped),
+                    "diverged": mirrored_diverged(run.model, view, starts, steps, limit, flipped)}
     outside = []
     if run.model.envelope:
         from gpquad.models.envelope import outside_envelope
 
         rows = np.unique(starts[:, None] + np.arange(steps + 1)[None, :])
-        outside = outside_envelope(run.model.envelope, model_view(dataset, run.trim), rows)
+        outside = outside_envelope(run.model.envelope, view, rows)
     scores = {}
     for s, v in zip(SCORED_STATES, values, strict=True):
         scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
@@ -104,7 +110,26 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
             "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
             "diverged": int(diverged.sum()), "rse": scores,
             "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
-            "dropped": dropped, "outside_training": outside}
+            "dropped": dropped, "outside_training": outside, "mirrored": mirrored}
+
+
+def diverged_beyond(pred: np.ndarray, limit: float) -> np.ndarray:
+    """Windows (n,) whose scored states are non-finite or beyond `limit` somewhere."""
+    from gpquad.models.scoring import SCORED_INDEX
+
+    with np.errstate(invalid="ignore"):
+        block = pred[:, :, SCORED_INDEX]
+        return ~np.isfinite(block).all(axis=(1, 2)) | (np.abs(block) > limit).any(axis=(1, 2))
+
+
+def mirrored_diverged(model, dataset, starts, steps: int, limit: float, flipped) -> int:
+    """Windows of `dataset` (the model's input view) that diverge flown mirrored left-right
+    with the inputs `flipped` changing sign (same limit as the recorded windows: a mirror
+    changes signs, not magnitudes)."""
+    from gpquad.data.mirror import mirror_dataset
+
+    pred = model.simulate(mirror_dataset(dataset, flipped), starts, steps)
+    return int(diverged_beyond(pred, limit).sum())
 
 
 def format_score(result: dict) -> str:
@@ -117,6 +142,14 @@ def format_score(result: dict) -> str:
              f"{result['diverged']} diverged; NaN = not measured by the log",
              head, vals]
     lines.extend(f"warning: {d}" for d in result["dropped"])
+    mirrored = result.get("mirrored")
+    if mirrored:
+        line = (f"mirrored left-right ({', '.join(mirrored['inputs'])} flipped): "
+                f"{mirrored['diverged']} of {result['windows']} window(s) diverged")
+        if mirrored["diverged"]:
+            line += ("; an equation holds only on the side of the flights the training log "
+                     "flew (README, mirror_inputs)")
+        lines.append(line)
     lines.extend(f"note: {o['signal']} leaves the training range on {100 * o['fraction']:.1f} % "
                  f"of the scored samples (training {o['training'][0]:.3g}..{o['training'][1]:.3g}"
                  f", here {o['seen'][0]:.3g}..{o['seen'][1]:.3g}): the equations extrapolate "
