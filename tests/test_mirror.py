@@ -11,7 +11,7 @@ from test_stability import equation, model_of
 
 from gpquad.data.dataset import build_dataset, flight_arrays
 from gpquad.data.flight import Flight
-from gpquad.data.mirror import mirror_arrays, mirror_dataset, with_mirrored_flights
+from gpquad.data.mirror import mirror_arrays, mirror_dataset
 from gpquad.data.simulator import simulate
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.errors import GpquadError
@@ -140,30 +140,6 @@ def test_score_counts_the_mirrored_windows_that_diverge(turning_dataset):
     assert mirrored_diverged(truth, ds, starts, steps, limit, FLIP) == 0
 
 
-def test_the_search_sees_every_flight_twice(short_flight):
-    """mirror_search's dataset: the recorded flights, then their mirror images, with the
-    same split; no window can span the two copies (they are separate segments)."""
-    ds = build_dataset([short_flight], validation_fraction=0.25, trim="none")
-    both = with_mirrored_flights(ds, FLIP)
-    n = ds.n_samples
-    assert both.n_samples == 2 * n and both.names == [ds.names[0], f"{ds.names[0]} (mirrored)"]
-    assert both.train == ds.train + [(a + n, b + n) for a, b in ds.train]
-    assert both.validation == ds.validation + [(a + n, b + n) for a, b in ds.validation]
-    assert both.segments[1] == (n, 2 * n) and len(both.flight_info) == 2
-    mirrored = mirror_arrays(ds.arrays, ds.input_names, FLIP)
-    for whole, first, second in zip(both.arrays[:-1], ds.arrays[:-1], mirrored[:-1],
-                                    strict=True):
-        np.testing.assert_array_equal(whole[:n], first)
-        np.testing.assert_array_equal(whole[n:], second)
-    # the median truth fits both halves (raw inputs: a mirror flips each input about its
-    # trim, and the truth is symmetric about zero)
-    from gpquad.engine.tree.export import from_sympy, parse_equation
-
-    tree = from_sympy(*parse_equation(TRUTH["r_dot"], ds.input_names), ds.input_names)
-    starts = np.array([20, 600, n + 20, n + 600], dtype=np.int64)
-    assert Evaluator(both, "r_dot", 300).mean_errors([tree], starts)[0] < 1e-9
-
-
 def test_config_checks_the_mirrored_inputs():
     ok = config_from_dict({"evolution": {"stability_repair": True, "mirror_inputs": list(FLIP)}})
     assert ok.evolution.mirror_inputs == FLIP
@@ -172,6 +148,4 @@ def test_config_checks_the_mirrored_inputs():
                                         "mirror_inputs": ["u_R", "u_Q"]}})
     with pytest.raises(GpquadError, match="stability_repair"):
         config_from_dict({"evolution": {"mirror_inputs": list(FLIP)}})
-    assert Config().evolution.mirror_inputs == () and not Config().evolution.mirror_search
-    with pytest.raises(GpquadError, match="mirror_search"):
-        config_from_dict({"evolution": {"stability_repair": True, "mirror_search": True}})
+    assert Config().evolution.mirror_inputs == ()
