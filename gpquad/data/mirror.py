@@ -51,26 +51,3 @@ def mirror_dataset(dataset, flipped):
     """The dataset with its flights mirrored (same ranges, names and trim)."""
     return dataclasses.replace(
         dataset, arrays=mirror_arrays(dataset.arrays, dataset.input_names, tuple(flipped)))
-
-
-def with_mirrored_flights(dataset, flipped):
-    """The dataset and its mirror image as one: every flight twice, the second time mirrored
-    (same training and validation split), for a search that must fit both sides
-    (`evolution.mirror_search`). Ranges of the mirrored copy follow the recorded ones."""
-    arrays, mirrored = dataset.arrays, mirror_arrays(dataset.arrays, dataset.input_names,
-                                                     tuple(flipped))
-    n = arrays.states.shape[0]
-    both = FlightArrays(*(np.ascontiguousarray(np.concatenate([a, b]))
-                          for a, b in zip(arrays[:-1], mirrored[:-1], strict=True)),
-                        dt=arrays.dt)
-
-    def shifted(ranges):
-        return list(ranges) + [(a + n, b + n) for a, b in ranges]
-
-    info = list(dataset.flight_info) + [{**i, "name": f"{i.get('name', '')} (mirrored)"}
-                                        for i in dataset.flight_info]
-    return dataclasses.replace(
-        dataset, arrays=both, segments=shifted(dataset.segments), train=shifted(dataset.train),
-        validation=shifted(dataset.validation),
-        names=list(dataset.names) + [f"{name} (mirrored)" for name in dataset.names],
-        flight_info=info)

@@ -194,11 +194,6 @@ class EvolutionConfig:
     # that diverges there is swapped for front alternatives that do not, where the recorded
     # flights allow (gpquad.data.mirror, gpquad.models.stability). [] = off.
     mirror_inputs: tuple[str, ...] = ()
-    # Not in the paper: each equation's search also flies the training and validation
-    # flights mirrored (mirror_inputs flipped), so that it must fit both sides of every
-    # manoeuvre (gpquad.data.mirror.with_mirrored_flights); the search's errors are then over
-    # both. Off by default (fifteenth round, README).
-    mirror_search: bool = False
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

@@ -76,9 +76,6 @@ def validate(cfg: Config, source: str = "config") -> Config:
                               f"left-right mirror (roll and yaw commands) among "
                               f"{sorted(inputs)}", source=source,
                               field=f"evolution.mirror_inputs[{i}]")
-    if ev.mirror_search and not ev.mirror_inputs:
-        raise GpquadError("the search's mirrored flights flip mirror_inputs: name them (e.g. "
-                          '["u_R", "u_Y"])', source=source, field="evolution.mirror_search")
     if ev.mirror_inputs and not ev.stability_repair:
         raise GpquadError("the mirrored flights are flown by the stability repair: set "
                           "stability_repair = true", source=source,

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gpquad.data.dataset import Dataset
-from gpquad.data.mirror import with_mirrored_flights
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
 from gpquad.engine.evolve.leaves import measured_variables
@@ -98,8 +97,6 @@ class Coevolution:
         # this target's taps, depth and degree (each may be a per-target table); with taps,
         # the kernels see every input once per tap (gpquad.engine.taps)
         cfg = cfg.for_target(target)
-        if cfg.mirror_search:  # every flight also mirrored left-right (gpquad.data.mirror)
-            dataset = with_mirrored_flights(dataset, cfg.mirror_inputs)
         self.dataset = dataset = with_taps(dataset, cfg.input_taps)
         self.target = target
         self.cfg = cfg
