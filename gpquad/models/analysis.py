@@ -21,12 +21,11 @@ def _samples(dataset: Dataset, max_delay: int) -> np.ndarray:
     return np.concatenate([np.arange(a + max_delay, b - 1) for a, b in dataset.train])
 
 
-def term_contributions(eq: Equation, dataset: Dataset, raw: bool = True) -> list[dict]:
-    """Every additive term with its coefficient and RMS share of the target's RMS.
-
-    raw=True analyses the equation in the log's raw inputs (trim added back).
-    Returns dicts {term, coefficient, share}, largest share first.
-    """
+def term_series(eq: Equation, dataset: Dataset, raw: bool = True):
+    """(terms, target RMS): every additive term of the expanded equation as (term, coefficient,
+    values of coefficient * term on the training samples), and the RMS of the data's
+    acceleration for the target on those samples. raw=True: in the log's raw inputs (trim
+    added back)."""
     expr = sp.expand(eq.sympy_raw() if raw else eq.sympy())
     delays = eq.delays
     idx = _samples(dataset, max(delays.values(), default=0))
@@ -38,15 +37,28 @@ def term_contributions(eq: Equation, dataset: Dataset, raw: bool = True) -> list
         column = dataset.arrays.inputs[idx - delays[name], j % n_in]
         values[name] = column + (dataset.trim.get(eq.input_names[j % n_in], 0.0) if raw else 0.0)
     target_rms = float(np.sqrt(np.mean(dataset.arrays.acc[idx, target_index(eq.target)] ** 2)))
-    rows = []
+    terms = []
     for term in sp.Add.make_args(expr):
         coeff, rest = term.as_coeff_Mul()
         symbols = sorted(rest.free_symbols, key=str)
         func = sp.lambdify(symbols, rest, "numpy")
         series = np.broadcast_to(np.asarray(func(*[values[str(s)] for s in symbols]), float),
                                  idx.shape)
-        rms = float(np.sqrt(np.mean((float(coeff) * series) ** 2)))
-        rows.append({"term": str(rest), "coefficient": float(coeff),
+        terms.append((str(rest), float(coeff), float(coeff) * series))
+    return terms, target_rms
+
+
+def term_contributions(eq: Equation, dataset: Dataset, raw: bool = True) -> list[dict]:
+    """Every additive term with its coefficient and RMS share of the target's RMS.
+
+    raw=True analyses the equation in the log's raw inputs (trim added back).
+    Returns dicts {term, coefficient, share}, largest share first.
+    """
+    terms, target_rms = term_series(eq, dataset, raw)
+    rows = []
+    for term, coeff, series in terms:
+        rms = float(np.sqrt(np.mean(series ** 2)))
+        rows.append({"term": term, "coefficient": coeff,
                      "share": rms / target_rms if target_rms > 0 else np.inf})
     return sorted(rows, key=lambda r: -r["share"])
 

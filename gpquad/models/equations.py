@@ -184,6 +184,8 @@ class DiscoveredModel:
     stability: dict | None = None
     #: {signal: [min, max]} over the training samples (gpquad.models.envelope), or None.
     envelope: dict | None = None
+    #: Terms of the wrong left-right parity (gpquad.models.symmetry), or None (not checked).
+    mirror_parity: dict | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -208,6 +210,8 @@ class DiscoveredModel:
             out["stability"] = self.stability
         if self.envelope is not None:
             out["envelope"] = self.envelope
+        if self.mirror_parity is not None:
+            out["mirror_parity"] = self.mirror_parity
         return out
 
     @classmethod
@@ -217,7 +221,7 @@ class DiscoveredModel:
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
                    d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
-                   d.get("stability"), d.get("envelope"))
+                   d.get("stability"), d.get("envelope"), d.get("mirror_parity"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:

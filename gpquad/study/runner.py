@@ -21,6 +21,7 @@ from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
 from gpquad.models.joint_fit import joint_fit_summary
 from gpquad.models.stability import stability_summary
+from gpquad.models.symmetry import mirror_odd_terms, parity_summary
 from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.loop import evolve, final_equation
@@ -209,6 +210,10 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
         report.say(stability_summary(model.stability))
     if model.joint_fit is not None:
         report.say(joint_fit_summary(model.joint_fit))
+    if ev.mirror_inputs:
+        found = mirror_odd_terms(model, dataset, ev.mirror_inputs)
+        model = dataclasses.replace(model, mirror_parity=found)
+        report.say(parity_summary(found, ev.mirror_inputs))
     write_model(run_dir, model)
     info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=time.time() - started,
                 target_time_s=timings)

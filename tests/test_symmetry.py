@@ -1,0 +1,62 @@
+"""Left-right parity of equations (gpquad.models.symmetry) on the median model, whose six
+equations have a symmetric vehicle's parity with u_R and u_Y flipped."""
+
+import numpy as np
+import pytest
+from test_stability import model_of
+
+from gpquad.data.dataset import build_dataset
+from gpquad.models.analysis import term_contributions
+from gpquad.models.equations import DiscoveredModel
+from gpquad.models.symmetry import mirror_odd_terms, parity_summary, term_parity
+from gpquad.study.config import SimulatorConfig
+
+TRUTH = dict(SimulatorConfig().equations)
+FLIP = ("u_R", "u_Y")
+
+
+@pytest.fixture(scope="module")
+def dataset(short_flight):
+    return build_dataset([short_flight], validation_fraction=0.25, trim="none")
+
+
+@pytest.mark.parametrize("term, parity", [
+    ("r", -1), ("q", 1), ("1", 1), ("r**2", 1), ("phi*u_R", 1), ("u_R*u_Y", 1),
+    ("u_Y__tap2", -1), ("p*q*r", 1), ("v*w", -1), ("theta*u_P", 1), ("psi*u_T", -1)])
+def test_term_parity(term, parity):
+    assert term_parity(term, FLIP) == parity
+
+
+def test_the_truth_has_a_symmetric_vehicles_parity(dataset):
+    model = model_of(TRUTH, dataset)
+    assert mirror_odd_terms(model, dataset, FLIP) == {}
+    assert "no equation" in parity_summary({}, FLIP)
+    # the bad case: with the pitch command flipped too, q_dot's -9.8 u_P is odd
+    wrong = mirror_odd_terms(model, dataset, ("u_R", "u_P", "u_Y"))
+    assert list(wrong) == ["q_dot"] and wrong["q_dot"]["share"] > 0.5
+
+
+def test_terms_of_the_wrong_parity_are_found_with_their_share(dataset):
+    model = model_of(dict(TRUTH, a_z=TRUTH["a_z"] + " + 2.0*r",
+                          p_dot=TRUTH["p_dot"] + " + 3.0*q + 0.001*q"), dataset)
+    found = mirror_odd_terms(model, dataset, FLIP)
+    assert set(found) == {"a_z", "p_dot"}
+    rows = {r["term"]: r["share"] for r in term_contributions(model.equations["a_z"], dataset,
+                                                              raw=False)}
+    assert found["a_z"]["share"] == pytest.approx(rows["r"], rel=1e-12)
+    assert found["a_z"]["text"] == "2.0*r"
+    assert [t["term"] for t in found["p_dot"]["terms"]] == ["q"]  # 3.0 q + 0.001 q
+    line = parity_summary(found, FLIP)
+    assert "a_z" in line and "p_dot" in line and "2.0*r" in line
+    # below the share threshold: not listed
+    small = model_of(dict(TRUTH, a_z=TRUTH["a_z"] + " + 0.001*r"), dataset)
+    assert mirror_odd_terms(small, dataset, FLIP) == {}
+
+
+def test_model_json_keeps_the_parity_report(dataset):
+    model = model_of(dict(TRUTH, a_z=TRUTH["a_z"] + " + 2.0*r"), dataset)
+    found = mirror_odd_terms(model, dataset, FLIP)
+    model.mirror_parity = found
+    again = DiscoveredModel.from_dict(model.to_dict())
+    assert again.mirror_parity == found
+    assert np.isclose(again.mirror_parity["a_z"]["share"], found["a_z"]["share"])
