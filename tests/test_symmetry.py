@@ -60,3 +60,40 @@ def test_model_json_keeps_the_parity_report(dataset):
     again = DiscoveredModel.from_dict(model.to_dict())
     assert again.mirror_parity == found
     assert np.isclose(again.mirror_parity["a_z"]["share"], found["a_z"]["share"])
+
+
+def test_symmetrize_drops_the_wrong_parity_and_refits(dataset):
+    """a_z with a yaw-rate term and wrong constants: the term goes, the refit finds the
+    truth's constants; constants themselves are kept (p_dot's offset), and an equation with
+    the right parity is left as it is."""
+    import dataclasses
+
+    from gpquad.models.symmetrize import symmetrize, without_wrong_parity
+    from gpquad.study.config import EvolutionConfig
+
+    model = model_of(dict(TRUTH, a_z="25.0*u_T(t-5) - 0.8*w - 9.0 + 2.0*r",
+                          p_dot=TRUTH["p_dot"] + " + 0.3"), dataset)
+    assert without_wrong_parity(model.equations["p_dot"], FLIP) is None
+    assert without_wrong_parity(model.equations["q_dot"], FLIP) is None
+    evolution = dataclasses.replace(EvolutionConfig(), window_steps=250, max_delay=5)
+    fixed, report = symmetrize(model, dataset, evolution, FLIP)
+    assert list(report) == ["a_z"] and report["a_z"]["dropped"] == ["2.0*r"]
+    assert fixed.equations["p_dot"] is model.equations["p_dot"]
+    got = {str(k): float(v) for k, v in
+           fixed.equations["a_z"].sympy().as_coefficients_dict().items()}
+    want = {"u_T": 28.2, "w": -1.0, "1": -9.81}
+    assert set(got) == set(want)
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, rel=1e-3), k
+    assert fixed.equations["a_z"].delays["u_T"] == 5
+
+
+def test_symmetric_equations_need_the_mirrored_inputs():
+    from gpquad.errors import GpquadError
+    from gpquad.study.config import config_from_dict
+
+    with pytest.raises(GpquadError, match="symmetric_equations"):
+        config_from_dict({"evolution": {"symmetric_equations": True}})
+    ok = config_from_dict({"evolution": {"symmetric_equations": True, "stability_repair": True,
+                                         "mirror_inputs": list(FLIP)}})
+    assert ok.evolution.symmetric_equations

@@ -186,6 +186,8 @@ class DiscoveredModel:
     envelope: dict | None = None
     #: Terms of the wrong left-right parity (gpquad.models.symmetry), or None (not checked).
     mirror_parity: dict | None = None
+    #: What gpquad.models.symmetrize removed from each equation, or None (not asked).
+    symmetrized: dict | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -212,6 +214,8 @@ class DiscoveredModel:
             out["envelope"] = self.envelope
         if self.mirror_parity is not None:
             out["mirror_parity"] = self.mirror_parity
+        if self.symmetrized is not None:
+            out["symmetrized"] = self.symmetrized
         return out
 
     @classmethod
@@ -221,7 +225,8 @@ class DiscoveredModel:
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
                    d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
-                   d.get("stability"), d.get("envelope"), d.get("mirror_parity"))
+                   d.get("stability"), d.get("envelope"), d.get("mirror_parity"),
+                   d.get("symmetrized"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:

@@ -11,6 +11,7 @@ from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import joint_refit
 from gpquad.models.precision import with_printed_digits
 from gpquad.models.stability import repair_stability
+from gpquad.models.symmetrize import symmetrize
 
 
 def mirror_inputs(evolution, dataset) -> tuple[str, ...]:
@@ -28,11 +29,15 @@ def finish_model(model, dataset, evolution):
     `evolution.mirror_inputs`), their report in model.stability, then the
     joint refit (`evolution.joint_fit`, model.joint_fit); with
     the significant digits its printed equations need."""
+    flipped = mirror_inputs(evolution, dataset)
+    if evolution.symmetric_equations and flipped:
+        model, report = symmetrize(model, dataset, evolution, flipped)
+        model = dataclasses.replace(model, symmetrized=report)
     if all(t in model.equations for t in TARGET_NAMES):
         if evolution.stability_repair or evolution.front_selection:
             repaired, report = repair_stability(model, dataset,
                                                 select=evolution.front_selection,
-                                                mirror=mirror_inputs(evolution, dataset))
+                                                mirror=flipped)
             model = dataclasses.replace(repaired, stability=report)
         if evolution.joint_fit:
             refitted, report = joint_refit(model, dataset)

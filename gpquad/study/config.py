@@ -194,6 +194,11 @@ class EvolutionConfig:
     # that diverges there is swapped for front alternatives that do not, where the recorded
     # flights allow (gpquad.data.mirror, gpquad.models.stability). [] = off.
     mirror_inputs: tuple[str, ...] = ()
+    # Not in the paper: the equations of a left-right symmetric vehicle. After the searches,
+    # each equation loses its terms of the wrong left-right parity (constants excepted) and
+    # its constants are refitted (gpquad.models.symmetrize); needs mirror_inputs. Off by
+    # default (fifteenth round, README).
+    symmetric_equations: bool = False
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

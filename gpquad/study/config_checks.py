@@ -76,6 +76,10 @@ def validate(cfg: Config, source: str = "config") -> Config:
                               f"left-right mirror (roll and yaw commands) among "
                               f"{sorted(inputs)}", source=source,
                               field=f"evolution.mirror_inputs[{i}]")
+    if ev.symmetric_equations and not ev.mirror_inputs:
+        raise GpquadError("the symmetric equations keep the parity of the mirror that flips "
+                          'mirror_inputs: name them (e.g. ["u_R", "u_Y"])', source=source,
+                          field="evolution.symmetric_equations")
     if ev.mirror_inputs and not ev.stability_repair:
         raise GpquadError("the mirrored flights are flown by the stability repair: set "
                           "stability_repair = true", source=source,

@@ -1,0 +1,74 @@
+"""Equations of a left-right symmetric vehicle (`evolution.symmetric_equations`, opt-in).
+
+Each equation's terms of the wrong left-right parity (gpquad.models.symmetry) are removed,
+constants excepted (a constant in p_dot may be a real offset: a centre of gravity off the
+axis, a trim that is not the vehicle's neutral), and the remaining constants refitted by
+Levenberg-Marquardt through the integrator on the training windows, the equation flown
+alone with the other accelerations from the data, as the search fits them. Runs before the
+stability repair; the report (model.json `symmetrized`) lists what each equation lost.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import sympy as sp
+
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.evolve.windows import tile
+from gpquad.engine.taps import taps_of, with_taps
+from gpquad.engine.tree.export import from_sympy, round_constants
+from gpquad.models.symmetry import ODD_TARGETS, term_parity
+
+#: Levenberg-Marquardt evaluations of the refit (each flies every training window once).
+REFIT_STEPS = 40
+
+
+def without_wrong_parity(equation, flipped) -> tuple[sp.Expr, list[str]] | None:
+    """(the equation without its wrong-parity terms, those terms) or None if it has none."""
+    wanted = -1 if equation.target in ODD_TARGETS else 1
+    keep, dropped = [], []
+    for term in sp.Add.make_args(sp.expand(equation.sympy())):
+        rest = term.as_coeff_Mul()[1]
+        if rest == 1 or term_parity(str(rest), flipped) == wanted:
+            keep.append(term)
+        else:
+            dropped.append(str(round_constants(term, equation.digits)
+                               .xreplace(equation.shown_inputs())))
+    if not dropped:
+        return None
+    return sp.Add(*keep) if keep else sp.Float(0.0), dropped
+
+
+def refit(equation, tree, dataset, evolution):
+    """The tree with its constants fitted through the integrator on the training windows,
+    and its training error (the search's metric)."""
+    taps = taps_of(len(tree.delays), len(equation.input_names))
+    ev = Evaluator(with_taps(dataset, taps), equation.target, evolution.window_steps,
+                   evolution.metric)
+    starts, steps = tile(dataset.train, evolution.window_steps, evolution.max_delay)
+
+    def error_of(t) -> float:
+        return float(ev.window_errors([t], starts, n_steps=steps).mean())
+
+    start_error = error_of(tree)
+    return gauss_newton_constants(ev, tree, start_error, starts, steps, error_of, REFIT_STEPS)
+
+
+def symmetrize(model, dataset, evolution, flipped):
+    """(model, report): every equation without its wrong-parity terms, constants refitted;
+    report {target: {"dropped": [...], "error_before": ..., "error_after": ...}}."""
+    equations, report = dict(model.equations), {}
+    for target, equation in model.equations.items():
+        found = without_wrong_parity(equation, frozenset(flipped))
+        if found is None:
+            continue
+        expr, dropped = found
+        tree = from_sympy(expr, equation.used_delays(), equation.input_names)
+        tree, error = refit(equation, tree, dataset, evolution)
+        equations[target] = dataclasses.replace(equation, tree=tree, error=float(error),
+                                                validation_error=np.nan)
+        report[target] = {"dropped": dropped, "error_after": float(error)}
+    return dataclasses.replace(model, equations=equations), report
