@@ -72,3 +72,12 @@ def symmetrize(model, dataset, evolution, flipped):
                                                 validation_error=np.nan)
         report[target] = {"dropped": dropped, "error_after": float(error)}
     return dataclasses.replace(model, equations=equations), report
+
+
+def symmetrized_summary(report: dict) -> str:
+    """One line for the user: which equations lost which terms."""
+    if not report:
+        return "symmetric equations: no equation had a term of the wrong left-right parity"
+    parts = [f"{target} without {', '.join(entry['dropped'])}"
+             for target, entry in report.items()]
+    return f"symmetric equations (terms of the wrong left-right parity removed): {'; '.join(parts)}"

@@ -21,6 +21,7 @@ from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
 from gpquad.models.joint_fit import joint_fit_summary
 from gpquad.models.stability import stability_summary
+from gpquad.models.symmetrize import symmetrized_summary
 from gpquad.models.symmetry import mirror_odd_terms, parity_summary
 from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
@@ -206,6 +207,8 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     finally:
         history.close()
     model = finish_model(model, dataset, ev)
+    if model.symmetrized is not None:
+        report.say(symmetrized_summary(model.symmetrized))
     if model.stability is not None:
         report.say(stability_summary(model.stability))
     if model.joint_fit is not None:
