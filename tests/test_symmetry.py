@@ -86,6 +86,13 @@ def test_symmetrize_drops_the_wrong_parity_and_refits(dataset):
     for k, v in want.items():
         assert got[k] == pytest.approx(v, rel=1e-3), k
     assert fixed.equations["a_z"].delays["u_T"] == 5
+    from gpquad.models.symmetrize import symmetrized_summary
+
+    assert symmetrized_summary(report) == ("symmetric equations (terms of the wrong left-right "
+                                           "parity removed): a_z without 2.0*r")
+    assert "no equation" in symmetrized_summary({})
+    again = DiscoveredModel.from_dict(dataclasses.replace(fixed, symmetrized=report).to_dict())
+    assert again.symmetrized == report
 
 
 def test_symmetric_equations_need_the_mirrored_inputs():
