@@ -192,7 +192,9 @@ class EvolutionConfig:
     # the mirror image of a flight (the roll and yaw commands, e.g. ["u_R", "u_Y"]). The
     # stability repair then also flies the mirrored validation flights, and an equation set
     # that diverges there is swapped for front alternatives that do not, where the recorded
-    # flights allow (gpquad.data.mirror, gpquad.models.stability). [] = off.
+    # flights allow (gpquad.data.mirror, gpquad.models.stability); `gpquad run` reports
+    # each equation's part of the wrong left-right parity (gpquad.models.symmetry) and
+    # `gpquad score` the mirrored windows that diverge. [] = off.
     mirror_inputs: tuple[str, ...] = ()
     # Not in the paper: the equations of a left-right symmetric vehicle. After the searches,
     # each equation loses its terms of the wrong left-right parity (constants excepted) and

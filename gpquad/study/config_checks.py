@@ -80,10 +80,6 @@ def validate(cfg: Config, source: str = "config") -> Config:
         raise GpquadError("the symmetric equations keep the parity of the mirror that flips "
                           'mirror_inputs: name them (e.g. ["u_R", "u_Y"])', source=source,
                           field="evolution.symmetric_equations")
-    if ev.mirror_inputs and not ev.stability_repair:
-        raise GpquadError("the mirrored flights are flown by the stability repair: set "
-                          "stability_repair = true", source=source,
-                          field="evolution.mirror_inputs")
     if not 0.0 <= ev.attitude_weight <= 100.0:
         raise GpquadError("must be in [0, 100] (1 counts the angle like the rate; 0 = off)",
                           source=source, field="evolution.attitude_weight")
