@@ -126,18 +126,18 @@ def test_finish_model_flies_the_mirror_only_when_asked_and_the_inputs_exist(turn
 def test_score_counts_the_mirrored_windows_that_diverge(turning_dataset):
     """gpquad score's mirrored count (gpquad.data.score): the one-sided a_z flies the
     recorded windows and diverges on mirrored ones; the truth's a_z on neither."""
-    from gpquad.data.score import DIVERGENCE_FACTOR, diverged_beyond, mirrored_diverged
-    from gpquad.models.scoring import SCORED_INDEX
+    from gpquad.data.score import mirrored_diverged
+    from gpquad.models.scoring import SCORED_INDEX, diverged, divergence_bound
 
     ds = turning_dataset
     steps = 250
     starts = np.arange(10, len(ds.arrays.states) - steps - 1, steps)
-    limit = DIVERGENCE_FACTOR * np.abs(ds.arrays.states[:, list(SCORED_INDEX)]).max()
+    bound = divergence_bound(ds.arrays.states[:, list(SCORED_INDEX)])
     one_sided = turning_model(ds)
     truth = model_of(TRUTH, ds)
-    assert not diverged_beyond(one_sided.simulate(ds, starts, steps), limit).any()
-    assert mirrored_diverged(one_sided, ds, starts, steps, limit, FLIP) > 0
-    assert mirrored_diverged(truth, ds, starts, steps, limit, FLIP) == 0
+    assert not diverged(one_sided.simulate(ds, starts, steps), bound).any()
+    assert mirrored_diverged(one_sided, ds, starts, steps, bound, FLIP) > 0
+    assert mirrored_diverged(truth, ds, starts, steps, bound, FLIP) == 0
 
 
 def test_config_checks_the_mirrored_inputs():

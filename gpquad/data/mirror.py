@@ -26,10 +26,15 @@ import dataclasses
 import numpy as np
 
 from gpquad.engine.kernels.flight_arrays import FlightArrays
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 
+#: States and accelerations that change sign in the mirror (gpquad.models.symmetry's
+#: parities come from these too).
+ODD_STATES = frozenset({"phi", "psi", "v", "p", "r"})
+ODD_TARGETS = frozenset({"a_y", "p_dot", "r_dot"})
 QUAT_SIGNS = np.array([1.0, -1.0, 1.0, -1.0])
-STATE_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
-ACC_SIGNS = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+STATE_SIGNS = np.array([-1.0 if n in ODD_STATES else 1.0 for n in STATE_NAMES])
+ACC_SIGNS = np.array([-1.0 if n in ODD_TARGETS else 1.0 for n in TARGET_NAMES])
 #: M R M for a row-major 3x3 rotation: the entries with exactly one y index change sign.
 ROT_SIGNS = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
 

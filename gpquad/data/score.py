@@ -20,8 +20,6 @@ import numpy as np
 
 from gpquad.errors import GpquadError
 
-#: A prediction beyond this multiple of the data's largest |state| counts as diverged.
-DIVERGENCE_FACTOR = 10.0
 PARTS = ("auto", "all", "validation")
 
 
@@ -49,8 +47,10 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     from gpquad.data.integration_check import screen_segments
     from gpquad.data.io import READERS, guess_format
     from gpquad.models.scoring import (
+        DIVERGENCE_FACTOR,
         SCORED_INDEX,
         SCORED_STATES,
+        diverged,
         load_run,
         model_view,
         rse,
@@ -89,14 +89,15 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     view = model_view(dataset, run.trim)
     pred = run.model.simulate(view, starts, steps)
     truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
-    limit = DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max()
-    diverged = diverged_beyond(pred, limit)
+    # one bound for every state: DIVERGENCE_FACTOR x the scored windows' largest |state|
+    bound = np.full(len(SCORED_INDEX), DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
+    n_diverged = int(diverged(pred, bound).sum())
     values = rse(pred, truth)
     flipped = tuple(cfg.evolution.mirror_inputs)
     mirrored = None
     if flipped and all(n in dataset.input_names for n in flipped):
         mirrored = {"inputs": list(flipped),
-                    "diverged": mirrored_diverged(run.model, view, starts, steps, limit, flipped)}
+                    "diverged": mirrored_diverged(run.model, view, starts, steps, bound, flipped)}
     outside = []
     if run.model.envelope:
         from gpquad.models.envelope import outside_envelope
@@ -108,28 +109,20 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
     return {"run": str(run_dir), "data": str(log), "format": fmt, "part": which,
             "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
-            "diverged": int(diverged.sum()), "rse": scores,
+            "diverged": n_diverged, "rse": scores,
             "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
             "dropped": dropped, "outside_training": outside, "mirrored": mirrored}
 
 
-def diverged_beyond(pred: np.ndarray, limit: float) -> np.ndarray:
-    """Windows (n,) whose scored states are non-finite or beyond `limit` somewhere."""
-    from gpquad.models.scoring import SCORED_INDEX
-
-    with np.errstate(invalid="ignore"):
-        block = pred[:, :, SCORED_INDEX]
-        return ~np.isfinite(block).all(axis=(1, 2)) | (np.abs(block) > limit).any(axis=(1, 2))
-
-
-def mirrored_diverged(model, dataset, starts, steps: int, limit: float, flipped) -> int:
+def mirrored_diverged(model, dataset, starts, steps: int, bound, flipped) -> int:
     """Windows of `dataset` (the model's input view) that diverge flown mirrored left-right
-    with the inputs `flipped` changing sign (same limit as the recorded windows: a mirror
-    changes signs, not magnitudes)."""
+    with the inputs `flipped` changing sign (gpquad.models.scoring.diverged with the recorded
+    windows' `bound`: a mirror changes signs, not magnitudes)."""
     from gpquad.data.mirror import mirror_dataset
+    from gpquad.models.scoring import diverged
 
     pred = model.simulate(mirror_dataset(dataset, flipped), starts, steps)
-    return int(diverged_beyond(pred, limit).sum())
+    return int(diverged(pred, bound).sum())
 
 
 def format_score(result: dict) -> str:

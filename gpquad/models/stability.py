@@ -167,21 +167,17 @@ def stability_summary(report: dict) -> str:
     mirror = ""
     if "mirrored" in report:
         m_before, m_after = report["mirrored_diverged_before"], report["mirrored_diverged_after"]
-        mirror = (f"; mirrored ({', '.join(report['mirrored'])} flipped): "
-                  f"{m_before} diverged" + (f", {m_after} after" if m_before else ""))
+        mirror = f"; mirrored ({', '.join(report['mirrored'])} flipped): {m_before} diverged"
+        if m_before:
+            swapped = [s["target"] for s in report["swaps"] if s.get("why") == "mirror diverged"]
+            mirror += f", {m_after} after swapping {', '.join(swapped) or 'none'}"
     if not before:
         line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
         if report.get("select"):
             line += (f"; front alternatives that fly significantly better: "
                      f"{', '.join(chosen) or 'none'} (error {report['error_before']:.4g} -> "
                      f"{report['error_after']:.4g})")
-        if report.get("mirrored_diverged_before"):
-            swapped = ", ".join(s["target"] for s in report["swaps"]
-                                if s.get("why") == "mirror diverged") or "none"
-            line += f"{mirror}; swapped for front alternatives: {swapped}"
-        elif mirror:
-            line += mirror
-        return line
+        return line + mirror
     swapped = ", ".join(s["target"] for s in report["swaps"]) or "none"
     return (f"full model diverged in {before} of {n} {report['horizon_s']:g} s "
             f"{report['judged_on']} flights; equations swapped for front alternatives: "

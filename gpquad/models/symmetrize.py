@@ -1,4 +1,4 @@
-"""Equations of a left-right symmetric vehicle (`evolution.symmetric_equations`, opt-in).
+"""Equations of a left-right symmetric vehicle (`evolution.symmetric_equations`).
 
 Each equation's terms of the wrong left-right parity (gpquad.models.symmetry) are removed,
 constants excepted (a constant in p_dot may be a real offset: a centre of gravity off the
@@ -20,7 +20,7 @@ from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.taps import taps_of, with_taps
 from gpquad.engine.tree.export import from_sympy, round_constants
-from gpquad.models.symmetry import ODD_TARGETS, term_parity
+from gpquad.models.symmetry import wrong_parity
 
 #: Levenberg-Marquardt evaluations of the refit (each flies every training window once).
 REFIT_STEPS = 40
@@ -28,11 +28,10 @@ REFIT_STEPS = 40
 
 def without_wrong_parity(equation, flipped) -> tuple[sp.Expr, list[str]] | None:
     """(the equation without its wrong-parity terms, those terms) or None if it has none."""
-    wanted = -1 if equation.target in ODD_TARGETS else 1
     keep, dropped = [], []
     for term in sp.Add.make_args(sp.expand(equation.sympy())):
         rest = term.as_coeff_Mul()[1]
-        if rest == 1 or term_parity(str(rest), flipped) == wanted:
+        if rest == 1 or not wrong_parity(equation.target, str(rest), flipped):
             keep.append(term)
         else:
             dropped.append(str(round_constants(term, equation.digits)
@@ -46,8 +45,9 @@ def refit(equation, tree, dataset, evolution):
     """The tree with its constants fitted through the integrator on the training windows,
     and its training error (the search's metric)."""
     taps = taps_of(len(tree.delays), len(equation.input_names))
-    ev = Evaluator(with_taps(dataset, taps), equation.target, evolution.window_steps,
-                   evolution.metric)
+    cfg = evolution.for_target(equation.target)  # the search's evaluator for this target
+    ev = Evaluator(with_taps(dataset, taps), equation.target, cfg.window_steps, cfg.metric,
+                   cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
     starts, steps = tile(dataset.train, evolution.window_steps, evolution.max_delay)
 
     def error_of(t) -> float:
@@ -59,7 +59,8 @@ def refit(equation, tree, dataset, evolution):
 
 def symmetrize(model, dataset, evolution, flipped):
     """(model, report): every equation without its wrong-parity terms, constants refitted;
-    report {target: {"dropped": [...], "error_before": ..., "error_after": ...}}."""
+    report {target: {"dropped": [term texts], "error_after": training error after the
+    refit}} for the equations that lost a term."""
     equations, report = dict(model.equations), {}
     for target, equation in model.equations.items():
         found = without_wrong_parity(equation, frozenset(flipped))

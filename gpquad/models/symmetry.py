@@ -18,14 +18,11 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
+from gpquad.data.mirror import ODD_STATES, ODD_TARGETS
 from gpquad.engine.taps import base_input
 from gpquad.engine.tree.export import round_constants
 from gpquad.models.analysis import term_series
 
-#: States that change sign in the mirror.
-ODD_STATES = frozenset({"phi", "psi", "v", "p", "r"})
-#: Targets that change sign in the mirror.
-ODD_TARGETS = frozenset({"a_y", "p_dot", "r_dot"})
 #: Smallest RMS share (of the target's RMS on the training samples) of a listed term.
 PARITY_SHARE = 0.05
 
@@ -44,6 +41,12 @@ def term_parity(term: str, flipped) -> int:
     return sign
 
 
+def wrong_parity(target: str, term: str, flipped) -> bool:
+    """Whether `term` (a monomial's text) has the parity a symmetric vehicle's `target`
+    cannot have."""
+    return term_parity(term, flipped) != (-1 if target in ODD_TARGETS else 1)
+
+
 def mirror_odd_terms(model, dataset, flipped, share: float = PARITY_SHARE) -> dict:
     """{target: {"share", "terms"}} for each equation whose wrong-parity part (the sum of its
     terms of the wrong parity for a left-right symmetric vehicle, trim-subtracted inputs, as
@@ -54,9 +57,8 @@ def mirror_odd_terms(model, dataset, flipped, share: float = PARITY_SHARE) -> di
     flipped = frozenset(flipped)
     out = {}
     for target, equation in model.equations.items():
-        wanted = -1 if target in ODD_TARGETS else 1
         terms, target_rms = term_series(equation, dataset, raw=False)
-        wrong = [(t, c, v) for t, c, v in terms if term_parity(t, flipped) != wanted]
+        wrong = [(t, c, v) for t, c, v in terms if wrong_parity(target, t, flipped)]
         if not wrong or not target_rms > 0:
             continue
         part = np.sum([v for _, _, v in wrong], axis=0)
