@@ -41,11 +41,16 @@ from gpquad.models.finish import finish_model
 
 HORIZONS_S = (1.0, 7.0, 30.0)
 #: Finishing variants: EvolutionConfig fields set on top of the engine's.
+RATE_REFINE = {"p_dot": 20, "q_dot": 20, "r_dot": 20}
 VARIANTS = {
-    "none": {"stability_repair": False, "front_selection": False, "joint_fit": False},
-    "repair+joint": {"stability_repair": True, "front_selection": False, "joint_fit": True},
+    "none": {"stability_repair": False, "front_selection": False, "joint_fit": False,
+             "refine_terms": 0},
+    "repair+joint": {"stability_repair": True, "front_selection": False, "joint_fit": True,
+                     "refine_terms": 0},
     "repair+front+joint": {"stability_repair": True, "front_selection": True,
-                           "joint_fit": True},
+                           "joint_fit": True, "refine_terms": 0},
+    "refine+repair+joint": {"stability_repair": True, "front_selection": False,
+                            "joint_fit": True, "refine_terms": RATE_REFINE},
 }
 
 

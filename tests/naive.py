@@ -84,9 +84,12 @@ def eval_tree(codes, values, leaves):
     return rec()
 
 
-def window_error(tree, target, arrays, start, n_steps, squared=False, att_weight=0.0):
+def window_error(tree, target, arrays, start, n_steps, squared=False, att_weight=0.0, alpha=1.0):
     """Integrate every state from `start` with the tree's acceleration for `target`; with
-    att_weight, angular targets also count their angle (phi, theta, psi for p, q, r)."""
+    att_weight, angular targets also count their angle (phi, theta, psi for p, q, r); with
+    alpha < 1 the acceleration lags the tree's value (a <- a + alpha (tree - a), from the
+    data's acceleration before `start`)."""
+    lagged = arrays.acc[start - 1, target]
     quat = arrays.quat[start].copy()
     vel = arrays.states[start, 3:6].copy()
     rates = arrays.states[start, 6:9].copy()
@@ -98,6 +101,9 @@ def window_error(tree, target, arrays, start, n_steps, squared=False, att_weight
         leaves += [arrays.inputs[idx - d, j] for j, d in enumerate(tree.delays)]
         acc = arrays.acc[idx].copy()
         acc[target] = eval_tree(tree.codes, tree.values, leaves)
+        if alpha < 1.0:
+            lagged = lagged + alpha * (acc[target] - lagged)
+            acc[target] = lagged
         quat, vel, rates, pos = step(quat, vel, rates, pos, acc, arrays.dt)
         x = np.concatenate([vel, rates])[target]
         if not abs(x) < 1e6:

@@ -145,18 +145,18 @@ def test_tree_evaluation_matches_recursive_reference(nodes, lanes):
 @settings(max_examples=25, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
-       st.booleans(), st.sampled_from([0.0, 0.7]))
+       st.booleans(), st.sampled_from([0.0, 0.7]), st.sampled_from([1.0, 0.35]))
 def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared,
-                                                 att_weight):
+                                                 att_weight, alpha):
     """The kernel's exact shortcuts equal a full-state integration of every window (with the
-    attitude term of angular targets when att_weight > 0)."""
+    attitude term of angular targets when att_weight > 0, and a lag when alpha < 1)."""
     tree = as_tree(nodes, delays)
     arrays = short_dataset.arrays
     starts = np.array([10, 400, 900], dtype=np.int64)
     out = np.empty(3)
     tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                       60, squared, att_weight, np.inf, out)
-    ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared, att_weight)
+                       60, squared, att_weight, alpha, np.inf, out)
+    ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared, att_weight, alpha)
                     for s in starts])
     both_inf = np.isinf(out) & np.isinf(ref)
     # a runaway window (mean error above 1e3, states 1000x the data's) amplifies the two
@@ -223,11 +223,11 @@ def test_rollout_equals_fast_path(short_dataset):
     from gpquad.engine.tree.variation import VariationParams, random_tree
 
     params = VariationParams(n_variables=13, n_inputs=4, max_depth=3)
-    for target in range(6):
+    for target, alpha in zip(range(6), (1.0, 0.4, 1.0, 0.6, 0.3, 1.0), strict=True):
         tree = random_tree(rng, params)
         out = np.empty(2)
         tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                           50, False, 0.0, np.inf, out)
+                           50, False, 0.0, alpha, np.inf, out)
         codes = np.full((6, tree.size), CONST, dtype=np.int64)
         values = np.zeros((6, tree.size))
         codes[target], values[target] = tree.codes, tree.values
@@ -235,7 +235,8 @@ def test_rollout_equals_fast_path(short_dataset):
         delays[target] = tree.delays
         modelled = np.arange(6) == target
         sizes = np.full(6, tree.size, dtype=np.int64)
-        states = rollout(codes, values, sizes, delays, modelled, arrays, starts, 50,
+        alphas = np.where(modelled, alpha, 1.0)
+        states = rollout(codes, values, sizes, delays, modelled, alphas, arrays, starts, 50,
                          np.zeros((0, 0, 0)))
         truth = np.stack([arrays.states[s:s + 51] for s in starts])
         ref = np.abs(states[:, 1:, 3 + target] - truth[:, 1:, 3 + target]).mean(axis=1)

@@ -63,14 +63,17 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
 
 @settings(max_examples=20, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4))
-def test_residuals_match_the_plain_integration(short_dataset, nodes, target, delays):
-    """mean |residual| per window equals the plain-numpy window error (scipy rotations)."""
+@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
+       st.sampled_from([0.0, 0.06]))
+def test_residuals_match_the_plain_integration(short_dataset, nodes, target, delays, lag):
+    """mean |residual| per window equals the plain-numpy window error (scipy rotations),
+    with and without a lag."""
     tree = as_tree(nodes, delays)
-    ev = Evaluator(short_dataset, TARGET_NAMES[target], 60)
+    ev = Evaluator(short_dataset, TARGET_NAMES[target], 60, lag=lag)
+    assert (ev.alpha < 1.0) == (lag > 0)
     res, _, _ = residuals_and_jacobian(ev, tree, STARTS, 60)
     got = np.abs(res.reshape(3, 60)).mean(axis=1)
-    ref = np.array([naive.window_error(tree, target, short_dataset.arrays, s, 60)
+    ref = np.array([naive.window_error(tree, target, short_dataset.arrays, s, 60, alpha=ev.alpha)
                     for s in STARTS])
     fine = np.isfinite(ref) & (got < DIVERGED_RESIDUAL / 2) & (ref < RUNAWAY)
     np.testing.assert_allclose(got[fine], ref[fine], rtol=1e-7, atol=1e-9)
@@ -87,14 +90,14 @@ RATE_LEAVES = [VAR_BASE + k for k in range(6, 13)]
 
 @settings(max_examples=20, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(smooth_trees, st.integers(0, 5))
-def test_jacobian_matches_finite_differences(short_dataset, nodes, target):
+@given(smooth_trees, st.integers(0, 5), st.sampled_from([0.0, 0.06]))
+def test_jacobian_matches_finite_differences(short_dataset, nodes, target, lag):
     if target >= 3:  # keep only leaves that are exact for angular targets
         nodes = [(RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v)
                  for c, v in nodes]
     tree = as_tree(nodes, (1, 0, 2, 3))
     n_c = _n_const(tree)
-    ev = Evaluator(short_dataset, TARGET_NAMES[target], 40)
+    ev = Evaluator(short_dataset, TARGET_NAMES[target], 40, lag=lag)
     res, jac, diverged = residuals_and_jacobian(ev, tree, STARTS, 40)
     if diverged or n_c == 0 or np.abs(res).max() > 1e3:
         return

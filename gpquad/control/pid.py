@@ -62,7 +62,8 @@ def fly(plant: Plant, controller: Controller, waypoints: np.ndarray, noise: np.n
     d = controller.design
     with np.errstate(all="ignore"):
         pos, states, inputs, target, flown = fly_course(
-            plant.codes, plant.values, plant.sizes, plant.delays, plant.trim, plant.dt,
+            plant.codes, plant.values, plant.sizes, plant.delays, plant.alphas, plant.trim,
+            plant.dt,
             controller.gains, controller.ctrl(), d.chan, d.scale, d.hover, controller.lo,
             controller.hi, np.ascontiguousarray(waypoints, float), np.ascontiguousarray(noise), n)
     return Flight(pos, states, inputs, target, int(flown),

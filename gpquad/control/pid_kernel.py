@@ -22,6 +22,8 @@ the heading frame (world rotated by -psi) and [u, v, w] the body velocity:
              With command_limit > 0, the roll, pitch and yaw inputs stay within +-command_limit
              of hover (for rate-level inputs: a rate limit, as PX4's MC_*RATE_MAX).
 ctrl (9,) = [g_x, g_y, max_angle, level, waypoint_radius, integral_limit, command_limit, 0, 0].
+alphas (6,): each equation's lag factor (gpquad.engine.lag; 1 = none), from zero acceleration
+at the start (the craft at rest).
 """
 
 import math
@@ -92,8 +94,8 @@ def pid_command(gains, ctrl, err, vel, angles, rates, integral, cmd):
 
 
 @njit
-def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale, hover, lo, hi,
-               waypoints, noise, n_steps):
+def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan, scale, hover,
+               lo, hi, waypoints, noise, n_steps):
     """Fly the plant through waypoints (n_wp, 3) NED from rest at the origin, level.
 
     noise (n_steps, n_in) is added to the clipped inputs. Returns pos (n_steps + 1, 3),
@@ -118,6 +120,7 @@ def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale,
     pos = np.zeros(3)
     mat = np.empty((3, 3))
     acc = np.empty(6)
+    applied = np.zeros(6)  # the lagged accelerations
     err = np.empty(3)
     angles = np.empty(3)
     cmd = np.empty(4)
@@ -183,5 +186,9 @@ def fly_course(codes, values, sizes, delays, trim, dt, gains, ctrl, chan, scale,
             history[row, j] = u + noise[k, j]
         plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc,
                             features, stack, pred)
+        for t in range(6):
+            if alphas[t] < 1.0:
+                applied[t] += alphas[t] * (acc[t] - applied[t])
+                acc[t] = applied[t]
         integrate_step(quat, vel, rates, pos, acc, dt, mat)
     return pos_out, states, inputs, target, flown

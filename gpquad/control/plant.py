@@ -10,13 +10,14 @@ g_y = d a_y / d phi.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from gpquad.control.pid_kernel import constant_input_accelerations
 from gpquad.data.simulator import TruthModel
 from gpquad.engine.kernels.tree_eval import check_stack
+from gpquad.engine.lag import lag_alpha
 from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import from_sympy
 from gpquad.engine.variables import TARGET_NAMES, target_index
@@ -29,7 +30,8 @@ AXIS_TARGET = {"roll": "p_dot", "pitch": "q_dot", "yaw": "r_dot", "thrust": "a_z
 @dataclass
 class Plant:
     """codes (6, M), values (6, M), sizes (6,), delays (6, K n_in) for K taps per input,
-    trim (n_in,), dt (s)."""
+    trim (n_in,), dt (s); alphas (6,) the equations' lag factors (gpquad.engine.lag; the
+    hover design point does not depend on them: a lag's static gain is 1)."""
 
     name: str
     input_names: tuple[str, ...]
@@ -39,6 +41,7 @@ class Plant:
     delays: np.ndarray
     trim: np.ndarray
     dt: float
+    alphas: np.ndarray = field(default_factory=lambda: np.ones(6))
 
     def arrays(self) -> tuple:
         return self.codes, self.values, self.sizes, self.delays, self.trim, self.dt
@@ -75,7 +78,10 @@ def model_plant(model, form: str = "simplified") -> Plant:
         trees = {t: from_sympy(e.sympy(), e.delays, model.input_names)
                  for t, e in model.equations.items()}
     trim = [model.trim.get(n, 0.0) for n in model.input_names]
-    return plant_from_trees("model", trees, model.input_names, trim, model.dt)
+    plant = plant_from_trees("model", trees, model.input_names, trim, model.dt)
+    for t, e in model.equations.items():
+        plant.alphas[target_index(t)] = lag_alpha(e.lag, model.dt)
+    return plant
 
 
 def truth_plant(equations: dict[str, str], input_names, dt: float) -> Plant:

@@ -7,7 +7,8 @@ model.json contract:
 `expr` is in the model's own variables (trim-subtracted inputs); `expr_raw` writes
 the same equation in the log's raw inputs (u = u' + trim). `digits`: significant digits of
 every printed form (text, LaTeX), enough for it to stay the model (gpquad.models.precision);
-`prefix` holds the full constants.
+`prefix` holds the full constants. `lag` (s, only when > 0): the equation's first-order lag,
+tau d(target)/dt + target = expr (gpquad.engine.lag); `expr` is then the commanded value.
 """
 
 from __future__ import annotations
@@ -57,6 +58,8 @@ class Equation:
     candidates: list[dict] = field(default_factory=list)
     #: Significant digits of the printed forms (gpquad.models.precision.printed_digits).
     digits: int = 3
+    #: Time constant (s) of the equation's first-order lag (gpquad.engine.lag); 0 = none.
+    lag: float = 0.0
 
     def __post_init__(self):
         # taps in a canonical order: the read ones first, by delay (gpquad.engine.taps)
@@ -106,6 +109,8 @@ class Equation:
     def latex(self, digits: int | None = None, raw: bool = False) -> str:
         """LaTeX with constants at `digits` significant digits (default: self.digits)."""
         lhs = TARGET_LATEX[target_index(self.target)]
+        if self.lag > 0:
+            lhs = fr"\left(1 + {self.lag:.3g}\,\frac{{d}}{{dt}}\right) {lhs}"
         expr = self.sympy_raw() if raw else self.sympy()
         return f"{lhs} = {to_latex(expr, self.delays, self.leaf_names, digits or self.digits)}"
 
@@ -123,21 +128,29 @@ class Equation:
         """One line, delayed inputs written u_T(t-5), constants rounded to `digits`
         significant digits (default: self.digits, which keeps the line faithful)."""
         expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits or self.digits)
-        return f"{self.target} = {expr.xreplace(self.shown_inputs())}"
+        lhs = self.target if self.lag <= 0 else \
+            f"{self.target} + {self.lag:.3g} d({self.target})/dt"
+        return f"{lhs} = {expr.xreplace(self.shown_inputs())}"
 
     def summary(self) -> dict:
         """A short JSON record: expression, delays used, training error, size."""
-        return {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
-                "error": _json_number(self.error), "size": self.tree.size}
+        out = {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
+               "error": _json_number(self.error), "size": self.tree.size}
+        if self.lag > 0:
+            out["lag"] = self.lag
+        return out
 
     def alternatives(self) -> list[Equation]:
         """The front's candidates (`candidates`) as equations of the same inputs and trim,
-        in the front's order (smallest first); their validation error is unknown (NaN)."""
+        in the front's order (smallest first), each with its lag (gpquad.models.refine
+        puts the found equation and its refinement path first); their validation error is
+        unknown (NaN)."""
         out = []
         for c in self.candidates:
             tree = from_sympy(sp.sympify(c["expr"]), c.get("delays", {}), self.input_names)
             out.append(Equation(self.target, tree, self.input_names, _number(c.get("error")),
-                                np.nan, dict(self.trim), [], self.digits))
+                                np.nan, dict(self.trim), [], self.digits,
+                                float(c.get("lag", 0.0))))
         return out
 
     def to_dict(self) -> dict:
@@ -151,6 +164,8 @@ class Equation:
             "size": self.tree.size,
             "prefix": {"codes": self.tree.codes.tolist(), "values": self.tree.values.tolist()},
         }
+        if self.lag > 0:
+            out["lag"] = self.lag
         if any(self.trim.values()):
             out["expr_raw"] = expr_string(self.sympy_raw())
         if self.candidates:
@@ -164,7 +179,7 @@ class Equation:
         tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
         return cls(target, tree, tuple(input_names), _number(d["error"]),
                    _number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])),
-                   int(d.get("digits", 3)))
+                   int(d.get("digits", 3)), float(d.get("lag", 0.0)))
 
 
 @dataclass
@@ -188,6 +203,8 @@ class DiscoveredModel:
     mirror_parity: dict | None = None
     #: What gpquad.models.symmetrize removed from each equation, or None (not asked).
     symmetrized: dict | None = None
+    #: What gpquad.models.refine gave each equation (lag, terms), or None (not asked).
+    refined: dict | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -216,6 +233,8 @@ class DiscoveredModel:
             out["mirror_parity"] = self.mirror_parity
         if self.symmetrized is not None:
             out["symmetrized"] = self.symmetrized
+        if self.refined is not None:
+            out["refined"] = self.refined
         return out
 
     @classmethod
@@ -226,7 +245,7 @@ class DiscoveredModel:
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
                    d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
                    d.get("stability"), d.get("envelope"), d.get("mirror_parity"),
-                   d.get("symmetrized"))
+                   d.get("symmetrized"), d.get("refined"))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:
@@ -320,6 +339,7 @@ class DiscoveredModel:
         """The rollout kernel over `arrays`; targets without an equation take the data's
         acceleration (missing_from_data) or zero."""
         from gpquad.engine.kernels.fitness import rollout
+        from gpquad.engine.lag import lag_alpha
 
         codes, values, sizes, delays = stack_rows(
             {target_index(t): e.tree for t, e in self.equations.items()}, 6)
@@ -328,8 +348,11 @@ class DiscoveredModel:
         modelled[[target_index(t) for t in self.equations]] = True
         if not missing_from_data:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
+        alphas = np.ones(6)
+        for t, e in self.equations.items():
+            alphas[target_index(t)] = lag_alpha(e.lag, arrays.dt)
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
-        return rollout(codes, values, sizes, delays, modelled, arrays,
+        return rollout(codes, values, sizes, delays, modelled, alphas, arrays,
                        np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
 
 

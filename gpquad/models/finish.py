@@ -10,6 +10,7 @@ from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import joint_refit
 from gpquad.models.precision import with_printed_digits
+from gpquad.models.refine import refine
 from gpquad.models.stability import repair_stability
 from gpquad.models.symmetrize import symmetrize
 
@@ -24,7 +25,8 @@ def mirror_inputs(evolution, dataset) -> tuple[str, ...]:
 @one_blas_thread
 def finish_model(model, dataset, evolution):
     """The model after the full-model steps the config asks for, when all six equations
-    are there: the stability repair (`evolution.stability_repair`) and full-model front
+    are there: the refined equations (`evolution.refine_terms`, model.refined), the
+    stability repair (`evolution.stability_repair`) and full-model front
     selection (`evolution.front_selection`; with the mirrored flights of
     `evolution.mirror_inputs`), their report in model.stability, then the
     joint refit (`evolution.joint_fit`, model.joint_fit); with
@@ -33,6 +35,9 @@ def finish_model(model, dataset, evolution):
     if evolution.symmetric_equations and flipped:
         model, report = symmetrize(model, dataset, evolution, flipped)
         model = dataclasses.replace(model, symmetrized=report)
+    if any(evolution.refine_for(t) for t in model.equations):
+        model, report = refine(model, dataset, evolution, flipped)
+        model = dataclasses.replace(model, refined=report)
     if all(t in model.equations for t in TARGET_NAMES):
         if evolution.stability_repair or evolution.front_selection:
             repaired, report = repair_stability(model, dataset,

@@ -201,6 +201,15 @@ class EvolutionConfig:
     # its constants are refitted (gpquad.models.symmetrize); needs mirror_inputs. Off by
     # default (fifteenth round, README).
     symmetric_equations: bool = False
+    # Not in the paper: after the searches (and the symmetric-equations step), each
+    # equation may gain up to this many terms: products of two of the states and input taps
+    # at every delay 0..max_delay, screened on the one-step residual and fitted through the
+    # integrator, each kept while it lowers the training error by term_min_gain; the
+    # equation may also get a first-order lag, tau da/dt + a = expr (a motor that lags its
+    # command; tau from gpquad.engine.lag.LAG_GRID). The refined equation replaces the found
+    # one only if it flies the validation windows better (gpquad.models.refine). One
+    # number, or a table per target, e.g. {r_dot = 16}; 0 = off (sixteenth round, README).
+    refine_terms: int | dict[str, int] = 0
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""
@@ -213,6 +222,10 @@ class EvolutionConfig:
     def degree_for(self, target: str) -> int:
         """Largest polynomial degree of `target`'s equation (0: no limit)."""
         return self._per_target("max_degree", target)
+
+    def refine_for(self, target: str) -> int:
+        """Terms the refinement may add to `target`'s equation (0: none)."""
+        return self._per_target("refine_terms", target)
 
     def _per_target(self, name: str, target: str) -> int:
         """Field `name` for `target`: one number for every target, or a {target: number}
@@ -227,7 +240,8 @@ class EvolutionConfig:
         """This config with the per-target tables resolved for `target`."""
         return dataclasses.replace(self, input_taps=self.taps_for(target),
                                    max_depth=self.depth_for(target),
-                                   max_degree=self.degree_for(target))
+                                   max_degree=self.degree_for(target),
+                                   refine_terms=self.refine_for(target))
 
 
 @dataclass(frozen=True)

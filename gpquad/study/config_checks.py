@@ -93,6 +93,12 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if ev.linear_seed and ev.constant_fit != "gauss-newton":
         raise GpquadError('the linear seed is fitted by Levenberg-Marquardt: set constant_fit = '
                           '"gauss-newton"', source=source, field="evolution.linear_seed")
+    _check_table(ev.refine_terms, "refine_terms", 0, 64, "must be between 0 (off) and 64",
+                 source)
+    if any(ev.refine_for(t) for t in TARGET_NAMES) and ev.constant_fit != "gauss-newton":
+        raise GpquadError('the refined equations are fitted by Levenberg-Marquardt: set '
+                          'constant_fit = "gauss-newton"', source=source,
+                          field="evolution.refine_terms")
     if any(not 1 <= h < ev.window_steps for h in ev.fit_horizons) or \
             list(ev.fit_horizons) != sorted(set(ev.fit_horizons)):
         raise GpquadError(f"give ascending step counts between 1 and window_steps - 1 "

@@ -20,6 +20,7 @@ from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
 from gpquad.models.joint_fit import joint_fit_summary
+from gpquad.models.refine import refined_summary
 from gpquad.models.stability import stability_summary
 from gpquad.models.symmetrize import symmetrized_summary
 from gpquad.models.symmetry import mirror_odd_terms, parity_summary
@@ -209,6 +210,8 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None) -> D
     model = finish_model(model, dataset, ev)
     if model.symmetrized is not None:
         report.say(symmetrized_summary(model.symmetrized))
+    if model.refined is not None:
+        report.say(refined_summary(model.refined))
     if model.stability is not None:
         report.say(stability_summary(model.stability))
     if model.joint_fit is not None:

@@ -7,6 +7,7 @@ import numpy as np
 from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, check_stack
+from gpquad.engine.lag import lag_alpha
 from gpquad.engine.tree.encoding import Tree, max_nodes
 from gpquad.engine.variables import STATE_NAMES, target_index
 
@@ -38,11 +39,14 @@ class Evaluator:
     (gpquad.engine.kernels.fitness; scaled by `attitude_weight`); 0 = the paper's fitness.
     angle_tangents: the constants' Jacobian follows them through the Euler angles the tree
     reads (gpquad.engine.kernels.sensitivity; used by the gradient fit only).
+    lag: the equation's time constant, s (gpquad.engine.lag; 0 = none); `set_lag` changes it.
     """
 
     def __init__(self, dataset: Dataset, target: str, n_steps: int, metric: str = "mae",
-                 max_depth: int = 5, attitude: float = 0.0, angle_tangents: bool = False):
+                 max_depth: int = 5, attitude: float = 0.0, angle_tangents: bool = False,
+                 lag: float = 0.0):
         self.arrays = dataset.arrays
+        self.set_lag(lag)
         self.target = target_index(target)
         self.att_weight = attitude_weight(dataset, target, attitude)
         self.angle_tangents = bool(angle_tangents)
@@ -51,6 +55,11 @@ class Evaluator:
         self.capacity = max_nodes(max_depth)
         self.n_inputs = dataset.arrays.inputs.shape[1]
         self.evaluations = 0  # window evaluations, for throughput reports
+
+    def set_lag(self, tau: float) -> None:
+        """Evaluate every tree with time constant tau (s) from now on."""
+        self.lag = float(tau)
+        self.alpha = lag_alpha(self.lag, self.arrays.dt)
 
     def pack(self, trees: list[Tree]):
         """Population arrays (codes, values, sizes, delays) for the kernel."""
@@ -77,7 +86,7 @@ class Evaluator:
         out = np.empty((len(trees), len(starts)))
         codes, values, sizes, delays = self.pack(trees)
         population_window_errors(codes, values, sizes, delays, self.target, self.arrays, starts,
-                                 n_steps, self.squared, self.att_weight,
+                                 n_steps, self.squared, self.att_weight, self.alpha,
                                  np.asarray(bounds, dtype=float), out)
         self.evaluations += len(trees) * len(starts)
         return out

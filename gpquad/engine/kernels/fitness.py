@@ -20,6 +20,11 @@ not an approximation:
 - angular targets: the attitude is integrated only when the tree reads Euler
   angles or att_weight > 0, and the velocity only when it reads u, v or w.
 `rollout` integrates everything and is the reference these paths are tested on.
+
+Not in the paper: an equation may have a first-order lag (gpquad.engine.lag): the
+acceleration it applies follows the tree's value f as a_k = a_{k-1} + alpha (f_k - a_{k-1}),
+from the data's acceleration of the step before the window (a motor that lags its command).
+alpha = 1 is no lag and leaves every result bit-identical to the kernels without it.
 """
 
 import numpy as np
@@ -61,8 +66,10 @@ def _uses(codes, size, first, last):
 
 @njit
 def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
-                       att_weight, bound, out):
+                       att_weight, alpha, bound, out):
     """Mean per-step error of one tree on each window; fills out (n_windows,).
+
+    alpha: the equation's lag factor in (0, 1] (module notes; 1 = no lag).
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
@@ -93,8 +100,11 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     err = np.zeros(n)
     alive = np.ones(n, dtype=np.bool_)
     n_alive = n
+    lagged = alpha < 1.0
+    applied = np.zeros(n)  # the lagged acceleration of each lane
     for lane in range(n):
         s = starts[lane]
+        applied[lane] = acc[s - 1, target] if s > 0 else 0.0
         for i in range(4):
             quat[i, lane] = quat_d[s, i]
         for i in range(3):
@@ -151,6 +161,10 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 j = input_cols[c]
                 features[9 + j, lane] = inputs[idx - delays[j], j]
         eval_lanes(codes, values, size, features, stack, pred, n)
+        if lagged:
+            for lane in range(n):
+                applied[lane] += alpha * (pred[lane] - applied[lane])
+                pred[lane] = applied[lane]
 
         total = 0.0
         for lane in range(n):
@@ -218,20 +232,21 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
 
 @njit
 def population_window_errors(codes, values, sizes, delays, target, flight, starts, n_steps, squared,
-                             att_weight, bounds, out):
+                             att_weight, alpha, bounds, out):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
     for i in range(codes.shape[0]):
         tree_window_errors(codes[i], values[i], sizes[i], delays[i], target, flight, starts,
-                           n_steps, squared, att_weight, bounds[i], out[i])
+                           n_steps, squared, att_weight, alpha, bounds[i], out[i])
 
 
 @njit
-def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, input_noise):
+def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise):
     """Fly a full model: integrate every state from each window start, all six accelerations.
 
     codes (6, M), values (6, M), sizes (6,), delays (6, K n_inputs): one tree per target,
     K taps per input (gpquad.engine.taps; leaf slot j reads input j % n_inputs);
-    modelled (6,) bool: use the tree for this target, else the data's acceleration.
+    modelled (6,) bool: use the tree for this target, else the data's acceleration;
+    alphas (6,): each equation's lag factor (module notes; 1 = no lag).
     input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
     Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
     """
@@ -245,8 +260,11 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
     stack = np.empty((STACK_ROWS, 1))
     pred = np.empty(1)
     a = np.empty(6)
+    applied = np.empty(6)  # the lagged accelerations
     for lane in range(n):
         s = starts[lane]
+        for t in range(6):
+            applied[t] = acc[s - 1, t] if s > 0 else 0.0
         q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
         vel = states[s, 3:6].copy()
         rates = states[s, 6:9].copy()
@@ -272,6 +290,9 @@ def rollout(codes, values, sizes, delays, modelled, flight, starts, n_steps, inp
                         features[9 + j, 0] = u
                     eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
                     a[t] = pred[0]
+                    if alphas[t] < 1.0:
+                        applied[t] += alphas[t] * (pred[0] - applied[t])
+                        a[t] = applied[t]
             d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
             vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + a[0] * dt,
                                                  vel[1] + a[1] * dt, vel[2] + a[2] * dt)

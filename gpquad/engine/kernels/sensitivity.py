@@ -35,6 +35,9 @@ second row, att_weight * (angle - angle(data)) for the angle the target's rate i
 into (wrapped), with Jacobian att_weight * A of that angle: rows 2 (w n_steps + k) and
 2 (w n_steps + k) + 1.
 
+With a lag (alpha < 1, gpquad.engine.kernels.fitness) the applied acceleration and its
+gradient follow the same filter: a <- a + alpha (f - a), da <- da + alpha (df - da).
+
 Flat arrays only: codes, values, size, delays as the fitness kernel; flight is FlightArrays.
 """
 
@@ -125,10 +128,10 @@ def residual_rows(target, att_weight):
 
 @njit
 def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, att_weight,
-                     angle_tangents, res, jac):
+                     angle_tangents, alpha, res, jac):
     """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
     residual_rows(target, att_weight); angle_tangents: the Euler leaves read their
-    sensitivities (module notes).
+    sensitivities (module notes); alpha: the equation's lag factor (1 = no lag).
 
     Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST
     nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
@@ -160,9 +163,13 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     vel = np.empty(3)
     rates = np.empty(3)
     b = np.empty(3)
+    lagged = alpha < 1.0
+    dapplied = np.zeros(n_c)  # gradient of the lagged acceleration
     n_diverged = 0
     for w in range(starts.shape[0]):
         s = starts[w]
+        applied = acc[s - 1, target] if s > 0 else 0.0
+        dapplied[:] = 0.0
         q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
         for i in range(3):
             vel[i] = states[s, 3 + i]
@@ -204,6 +211,12 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                 features[9 + jj] = inputs[idx - delays[jj], jj]
             pred = eval_with_tangent(codes, values, size, slot_of, features, tangents, stack,
                                      dstack, grad)
+            if lagged:
+                applied += alpha * (pred - applied)
+                pred = applied
+                for c in range(n_c):
+                    dapplied[c] += alpha * (grad[c] - dapplied[c])
+                    grad[c] = dapplied[c]
             if linear:
                 for i in range(3):
                     b[i] = vel[i] + acc[idx, i] * dt

@@ -1,0 +1,331 @@
+"""Refined equations: a first-order lag and greedy product terms after the search
+(`evolution.refine_terms`; sixteenth round, not in the paper).
+
+A parsimonious search with depth 7 finds the loop of a closed-loop rate equation but not
+what a controller's attitude error adds to it through a motor's lag: on rotorpy's
+crazyflie (angle mode, 72 ms motors) r_dot needs the yaw part of the SO(3) error, products
+of the roll and pitch set-points at several delays, filtered by the motors (README,
+fifteenth round). This step gives each found equation, flown alone through the integrator
+as in the search:
+
+1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried, the
+   equation's own terms refitted (one-step least squares on the inverse-filtered target,
+   then Levenberg-Marquardt through the integrator with a growing horizon); a lag is kept
+   when it lowers the training error by more than term_min_gain (relative);
+2. up to `refine_terms` new terms, one at a time: every product of two of the states (not
+   psi) and input taps at delays 0..max_delay, and every tap alone, is screened by how much
+   of the one-step residual it explains beyond the equation's terms; the SCREENED best are
+   fitted through the integrator (all constants), and the best is kept while it lowers the
+   training error by more than term_min_gain. With `mirror_inputs`, terms of the wrong
+   left-right parity are not offered (gpquad.models.symmetry);
+3. of the equations on that path (the found one first), the one with the lowest validation
+   error replaces the found one: early stopping on flights the fit did not see;
+4. with all six equations, the six are flown together on the stability repair's windows
+   (and their mirror images), and refinements are undone one at a time while that makes
+   the full model fly better (keep_what_flies): each equation was refined flown alone, and
+   a lagged stiff loop that flies alone can diverge beside the others.
+
+model.json `refined` reports, per equation, the lag, the added terms and the errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import sympy as sp
+
+from gpquad.data.mirror import mirror_dataset
+from gpquad.engine.evolve.coevolution import SEED_HORIZONS, SHORT_WINDOW_STEPS
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.windows import spread, tile
+from gpquad.engine.kernels.tree_eval import eval_on_samples
+from gpquad.engine.lag import LAG_GRID
+from gpquad.engine.taps import base_input, tap_name, with_taps
+from gpquad.engine.tree.encoding import Tree, shallow_sum
+from gpquad.engine.tree.export import from_sympy, round_constants, to_sympy
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
+from gpquad.models.joint_fit import JOINT_HORIZONS_S, judged_windows
+from gpquad.models.stability import FullModelFlights
+from gpquad.models.symmetry import wrong_parity
+
+#: Candidates fitted through the integrator per step (the best by the one-step screen).
+SCREENED = 6
+#: Levenberg-Marquardt evaluations per fit (each flies every training window once).
+FIT_STEPS = 40
+#: Training samples of the one-step screen and the least-squares starts (evenly spread):
+#: the library's columns then take at most 560 x 20000 numbers whatever the log's length.
+SCREEN_SAMPLES = 20000
+#: Errors below this fraction of the zero equation's count as flown exactly: a gain is
+#: term_min_gain of max(error, NEGLIGIBLE * zero error), so that round-off is not fitted.
+NEGLIGIBLE = 1e-6
+
+
+class RefineProblem:
+    """One equation's data for the refinement: the dataset with one tap per delay
+    0..max_delay, the search's evaluator on it, the training windows and samples."""
+
+    def __init__(self, equation, dataset, evolution):
+        cfg = evolution.for_target(equation.target)
+        self.target = equation.target
+        self.input_names = equation.input_names
+        self.n_taps = cfg.max_delay + 1
+        self.delays = {tap_name(n, d): d for d in range(self.n_taps) for n in self.input_names}
+        tapped = with_taps(dataset, self.n_taps)
+        self.arrays = tapped.arrays
+        self.dataset = dataset
+        self.ev = Evaluator(tapped, equation.target, cfg.window_steps, cfg.metric,
+                            cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
+        self.starts, self.steps = tile(dataset.train, cfg.window_steps, cfg.max_delay)
+        self.short = [(spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h),
+                       h) for h in SEED_HORIZONS]
+        samples = np.unique((self.starts[:, None] + np.arange(self.steps)[None, :]).ravel())
+        self.samples = spread(samples[samples >= 1], SCREEN_SAMPLES)
+        self.acc = self.arrays.acc[:, target_index(equation.target)]
+        self.window_steps, self.max_delay = cfg.window_steps, cfg.max_delay
+
+    def canonical(self, equation) -> sp.Expr:
+        """The equation's expression with each delayed input written as the tap at its
+        delay (u_R at delay 3 -> u_R__tap3)."""
+        reps = {sp.Symbol(n, real=True): sp.Symbol(tap_name(base_input(n), d), real=True)
+                for n, d in equation.delays.items()}
+        return sp.expand(equation.sympy().xreplace(reps))
+
+    def tree(self, expr: sp.Expr) -> Tree:
+        """The tree of an expanded expression: its terms as a shallow sum."""
+        prefixes = []
+        for term in sp.Add.make_args(expr):
+            t = from_sympy(term, self.delays, self.input_names)
+            prefixes.append(list(zip(t.codes.tolist(), t.values.tolist(), strict=True)))
+        prefix = shallow_sum(prefixes)
+        return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
+                               from_sympy(sp.Float(0.0), self.delays, self.input_names).delays)
+
+    def expr(self, tree: Tree) -> sp.Expr:
+        """The expanded expression of a tree of this problem."""
+        return sp.expand(to_sympy(tree, tuple(self.delays)))
+
+    def values(self, expr: sp.Expr) -> np.ndarray:
+        """One-step values of an expression on the training samples."""
+        t = self.tree(expr)
+        return eval_on_samples(t.codes, t.values, t.size, t.delays, self.arrays.states,
+                               self.arrays.inputs, self.samples)
+
+    def commanded(self) -> np.ndarray:
+        """The one-step target of the expression under the evaluator's lag: the data's
+        acceleration inverse-filtered, (a_k - (1 - alpha) a_{k-1}) / alpha."""
+        alpha = self.ev.alpha
+        return (self.acc[self.samples] - (1.0 - alpha) * self.acc[self.samples - 1]) / alpha
+
+    def error(self, tree: Tree, ranges=None) -> float:
+        """Mean window error flown alone (the search's metric) over the training windows, or
+        over `ranges` tiled."""
+        if ranges is None:
+            starts, steps = self.starts, self.steps
+        else:
+            starts, steps = tile(ranges, self.window_steps, self.max_delay)
+            if len(starts) == 0:
+                return float("nan")
+        with np.errstate(all="ignore"):
+            return float(self.ev.window_errors([tree], starts, n_steps=steps).mean())
+
+    def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
+        """(expr with its constants fitted through the integrator, training error)."""
+        tree = self.tree(expr)
+        start = self.error(tree)
+        fitted, error = continued_constants(self.ev, tree, start if np.isfinite(start)
+                                            else np.inf, self.starts, self.steps, self.error,
+                                            FIT_STEPS, self.short)
+        return self.expr(fitted), float(error)
+
+    def least_squares(self, monomials: list[sp.Expr]) -> sp.Expr:
+        """The monomials' one-step least-squares combination for the evaluator's lag."""
+        columns = np.column_stack([self.values(m) for m in monomials])
+        coef, *_ = np.linalg.lstsq(columns, self.commanded(), rcond=None)
+        return sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, monomials, strict=True)])
+
+
+def monomials(expr: sp.Expr) -> list[sp.Expr]:
+    """The expanded expression's monomials without their coefficients (1 for a constant)."""
+    return [term.as_coeff_Mul()[1] for term in sp.Add.make_args(sp.expand(expr))]
+
+
+def library(problem: RefineProblem, flipped) -> list[sp.Expr]:
+    """Every input tap, and every product of two of the states (not psi) and taps; without
+    the wrong left-right parity when `flipped` names the mirrored inputs."""
+    states = [sp.Symbol(n, real=True) for n in STATE_NAMES if n != "psi"]
+    taps = [sp.Symbol(n, real=True) for n in problem.delays]
+    terms = taps + [a * b for a, b in itertools.combinations_with_replacement(states + taps, 2)]
+    if flipped:
+        terms = [t for t in terms if not wrong_parity(problem.target, str(t), flipped)]
+    return terms
+
+
+def screen(problem: RefineProblem, expr: sp.Expr, candidates: list[sp.Expr],
+           columns: np.ndarray) -> list[int]:
+    """Indices of the SCREENED candidates that explain most of the one-step residual of
+    `expr` beyond the span of its own monomials."""
+    own = np.column_stack([problem.values(m) for m in monomials(expr)])
+    q, _ = np.linalg.qr(own)
+    residual = problem.commanded() - problem.values(expr)
+    residual -= q @ (q.T @ residual)
+    projected = columns - q @ (q.T @ columns)
+    norms = (projected ** 2).sum(axis=0)
+    score = np.where(norms > 1e-12 * max(norms.max(), 1e-300),
+                     (projected.T @ residual) ** 2 / np.maximum(norms, 1e-300), 0.0)
+    return [int(k) for k in np.argsort(-score, kind="stable")[:SCREENED] if score[k] > 0]
+
+
+def choose_lag(problem: RefineProblem, expr: sp.Expr, error: float,
+               gain: float) -> tuple[float, sp.Expr, float]:
+    """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
+    the equation's own terms flies best, if it beats the found equation by `gain`."""
+    best = (0.0, expr, error)
+    for tau in LAG_GRID[1:]:
+        problem.ev.set_lag(tau)
+        fitted, fitted_error = problem.fit(problem.least_squares(monomials(expr)))
+        if fitted_error < best[2] - gain:
+            best = (tau, fitted, fitted_error)
+    problem.ev.set_lag(best[0])
+    return best
+
+
+def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, dict]:
+    """(equation, report): the found equation's lag and added terms (module notes), or the
+    found equation itself when no refinement flies the validation windows better."""
+    n_terms = evolution.refine_for(equation.target)
+    min_gain = evolution.term_min_gain
+    problem = RefineProblem(equation, dataset, evolution)
+    found = problem.canonical(equation)
+    found_error = problem.error(problem.tree(found))
+    path = [(0.0, found, found_error, problem.error(problem.tree(found), dataset.validation),
+             [])]
+    zero_error = problem.error(problem.tree(sp.Float(0.0)))
+
+    def gain(err: float) -> float:  # the least improvement that counts
+        return min_gain * max(err, NEGLIGIBLE * zero_error)
+
+    tau, expr, error = choose_lag(problem, found, found_error, gain(found_error))
+    if tau > 0:
+        path.append((tau, expr, error, problem.error(problem.tree(expr), dataset.validation),
+                     []))
+    added: list[sp.Expr] = []
+    candidates = library(problem, frozenset(flipped))
+    columns = np.column_stack([problem.values(c) for c in candidates])
+    for _ in range(n_terms):
+        own = set(monomials(expr))
+        fresh = [k for k, c in enumerate(candidates) if c not in own]
+        best = None
+        for k in screen(problem, expr, [candidates[k] for k in fresh], columns[:, fresh]):
+            term = candidates[fresh[k]]
+            fitted, fitted_error = problem.fit(problem.least_squares(monomials(expr) + [term]))
+            if best is None or fitted_error < best[1]:
+                best = (fitted, fitted_error, term)
+        if best is None or not best[1] < error - gain(error):
+            break
+        expr, error = best[0], best[1]
+        added.append(best[2])
+        path.append((tau, expr, error, problem.error(problem.tree(expr), dataset.validation),
+                     list(added)))
+    scored = [p for p in path if np.isfinite(p[3])]
+    chosen = min(scored, key=lambda p: p[3]) if scored else path[0]
+    report = {"lag": chosen[0], "added": [text(equation, t) for t in chosen[4]],
+              "error_before": found_error, "error_after": chosen[2],
+              "validation_before": path[0][3], "validation_after": chosen[3],
+              "tried": len(path) - 1}
+    if chosen is path[0]:
+        return equation, report
+    def as_equation(step) -> object:
+        return dataclasses.replace(equation, tree=problem.tree(step[1]), lag=float(step[0]),
+                                   error=float(step[2]), validation_error=float(step[3]),
+                                   candidates=[])
+
+    # the found equation and the rest of the path become the first alternatives of the
+    # stability repair: a refined equation that flies alone may diverge with the others
+    others = [equation.summary()] + [as_equation(p).summary() for p in path[1:]
+                                     if p is not chosen]
+    refined = dataclasses.replace(as_equation(chosen), candidates=others + equation.candidates)
+    return refined, report
+
+
+def text(equation, term: sp.Expr) -> str:
+    """A term as the equations print it: u_R__tap3 -> u_R(t-3)."""
+    reps = {s: sp.Symbol(f"{base_input(str(s))}(t-{d})" if d else base_input(str(s)),
+                         real=True)
+            for s in term.free_symbols
+            for d in [int(str(s).rsplit("__tap", 1)[1]) if "__tap" in str(s) else 0]}
+    return str(round_constants(term, equation.digits).xreplace(reps))
+
+
+def refine(model, dataset, evolution, flipped=()) -> tuple[object, dict]:
+    """(model, report): every equation with `refine_terms` > 0 refined (module notes),
+    then refinements the full model flies worse with reverted (keep_what_flies);
+    report {target: refine_equation's report, with "reverted": true for those}."""
+    equations, report = dict(model.equations), {}
+    for target, equation in model.equations.items():
+        if evolution.refine_for(target) <= 0:
+            continue
+        equations[target], report[target] = refine_equation(equation, dataset, evolution,
+                                                            flipped)
+    refined, reverted = keep_what_flies(dataclasses.replace(model, equations=equations), model,
+                                        dataset, flipped)
+    for target in reverted:
+        report[target]["reverted"] = True
+    return refined, report
+
+
+def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[str]]:
+    """(model, reverted targets): each equation is refined flown alone, with the other
+    accelerations from the data; flown together a lagged stiff loop can diverge. While
+    putting one refined equation's found form back makes the six fly the stability repair's
+    windows better (fewer diverged windows, then fewer diverged mirrored ones, then a lower
+    full-model error), the best such reversion is made."""
+    changed = [t for t in TARGET_NAMES
+               if t in refined.equations and refined.equations[t] is not found.equations[t]]
+    if not changed or not all(t in refined.equations for t in TARGET_NAMES):
+        return refined, []
+    starts, steps, _ = judged_windows(dataset, refined, JOINT_HORIZONS_S[-1])
+    if len(starts) == 0:
+        return refined, []
+    flights = FullModelFlights(dataset, starts, steps)
+    mirrored = (FullModelFlights(mirror_dataset(dataset, mirror), starts, steps)
+                if mirror else None)
+
+    def score(model) -> tuple[int, int, float]:
+        n_div, windows = flights.windows(model)
+        n_mirror = mirrored.windows(model)[0] if mirrored is not None else 0
+        error = float(windows.sum())
+        return n_div, n_mirror, error if np.isfinite(error) else np.inf
+
+    def reverted(model, target):
+        return dataclasses.replace(model, equations={**model.equations,
+                                                     target: found.equations[target]})
+
+    current, out = score(refined), []
+    while changed:
+        best_score, target = min((score(reverted(refined, t)), t) for t in changed)
+        if not best_score < current:
+            break
+        refined, current = reverted(refined, target), best_score
+        changed.remove(target)
+        out.append(target)
+    return refined, out
+
+
+def refined_summary(report: dict) -> str:
+    """One line for the user: what each refined equation gained."""
+    if not report:
+        return "refined equations: none asked for"
+    parts = []
+    for target, entry in report.items():
+        if entry.get("reverted"):
+            parts.append(f"{target}: kept as found (refined, it made the full model fly worse)")
+        elif entry["validation_after"] < entry["validation_before"]:
+            lag = f"lag {1000 * entry['lag']:.0f} ms, " if entry["lag"] > 0 else ""
+            parts.append(f"{target}: {lag}+{len(entry['added'])} terms, validation error "
+                         f"{entry['validation_before']:.4g} -> {entry['validation_after']:.4g}")
+        else:
+            parts.append(f"{target}: kept as found")
+    return "refined equations: " + "; ".join(parts)

@@ -1,0 +1,139 @@
+"""Refined equations (gpquad.models.refine): a product of input taps the search missed is
+found with its coefficient; an exact equation is left as it is; config and model.json."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import truth_dataset
+from test_stability import model_of
+
+from gpquad.errors import GpquadError
+from gpquad.models.equations import DiscoveredModel
+from gpquad.models.refine import RefineProblem, library, refine, refine_equation, refined_summary
+from gpquad.study.config import EvolutionConfig, SimulatorConfig, config_from_dict
+
+TRUTH = dict(SimulatorConfig().equations)
+#: r_dot of the truth plus a product of the pitch and roll commands at two delays (the yaw
+#: part of an attitude error through a lag, in miniature)
+R_DOT = TRUTH["r_dot"] + " + 6.0*u_P(t-2)*u_R(t-1)"
+FLIP = ("u_R", "u_Y")
+
+
+@pytest.fixture(scope="module")
+def dataset():
+    return truth_dataset({"r_dot": R_DOT}, duration_s=120.0, seed=11)
+
+
+def evolution(n_terms=3):
+    return dataclasses.replace(EvolutionConfig(), window_steps=250, max_delay=5,
+                               constant_fit="gauss-newton", term_min_gain=0.01,
+                               refine_terms={"r_dot": n_terms})
+
+
+def coefficients(equation) -> dict:
+    return {str(k): float(v) for k, v in
+            equation.sympy().xreplace(equation.shown_inputs()).as_coefficients_dict().items()}
+
+
+def test_the_missing_product_of_taps_is_found_with_its_coefficient(dataset):
+    found = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    refined, report = refine_equation(found, dataset, evolution(), FLIP)
+    assert report["added"] == ["u_P(t-2)*u_R(t-1)"]
+    assert report["lag"] == 0.0  # the data have none
+    assert report["validation_after"] < 1e-3 * report["validation_before"]
+    got = coefficients(refined)
+    want = {"u_P(t-2)*u_R(t-1)": 6.0, "u_Y(t-2)": -7.8, "r": -1.9}
+    assert set(got) == set(want)
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, rel=1e-3), k
+    assert refined.lag == 0.0 and refined.error == pytest.approx(report["error_after"])
+
+
+def test_an_exact_equation_is_kept_as_found(dataset):
+    """The bad case for the step: nothing to gain, nothing may be added (no lag either)."""
+    exact = model_of({"r_dot": R_DOT}, dataset).equations["r_dot"]
+    refined, report = refine_equation(exact, dataset, evolution(), FLIP)
+    assert refined is exact
+    assert report["added"] == [] and report["lag"] == 0.0 and report["tried"] == 0
+    assert "kept as found" in refined_summary({"r_dot": report})
+
+
+def test_the_library_leaves_out_the_wrong_parity_and_the_heading(dataset):
+    eq = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    problem = RefineProblem(eq, dataset, evolution())
+    names = {str(t) for t in library(problem, frozenset(FLIP))}
+    assert "u_P__tap2*u_R__tap1" in names and "u_Y__tap5" in names and "p*q" in names
+    assert not any("psi" in n for n in names)
+    assert "u_P__tap2" not in names and "p*r" not in names  # even: r_dot is odd
+    every = {str(t) for t in library(problem, frozenset())}
+    assert "u_P__tap2" in every and len(every) == 24 + (8 + 24) * (8 + 25) // 2
+
+
+def test_refine_only_the_asked_equations_and_model_json_keeps_the_report(dataset):
+    model = model_of({"r_dot": TRUTH["r_dot"], "q_dot": TRUTH["q_dot"]}, dataset)
+    refined, report = refine(model, dataset, evolution(2), FLIP)
+    assert list(report) == ["r_dot"]
+    assert refined.equations["q_dot"] is model.equations["q_dot"]
+    again = DiscoveredModel.from_dict(dataclasses.replace(refined, refined=report).to_dict())
+    assert again.refined == report
+    assert again.equations["r_dot"].text() == refined.equations["r_dot"].text()
+    assert "r_dot: +1 terms" in refined_summary(report)
+
+
+def test_a_lagged_equation_round_trips_and_says_so(dataset):
+    eq = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    lagged = dataclasses.replace(eq, lag=0.05)
+    model = DiscoveredModel({"r_dot": lagged}, dataset.input_names, {}, dataset.dt, 1, {})
+    again = DiscoveredModel.from_dict(model.to_dict()).equations["r_dot"]
+    assert again.lag == 0.05 and again.text().startswith("r_dot + 0.05 d(r_dot)/dt = ")
+    # flown, the lag delays the response: the lagged model differs from the plain one
+    starts = np.array([100, 400])
+    plain = DiscoveredModel({"r_dot": eq}, dataset.input_names, {}, dataset.dt, 1, {})
+    diff = np.abs(model.simulate(dataset, starts, 50)[..., 8]
+                  - plain.simulate(dataset, starts, 50)[..., 8]).max()
+    assert diff > 1e-3
+
+
+@pytest.mark.parametrize("value, message", [
+    (-1, "between 0"), ({"x_dot": 3}, "unknown target"), (True, "expected int"), (65, "and 64")])
+def test_refine_terms_is_checked(value, message):
+    with pytest.raises(GpquadError, match=message):
+        config_from_dict({"evolution": {"refine_terms": value}})
+
+
+def test_refine_terms_needs_the_gradient_fit():
+    with pytest.raises(GpquadError, match="Levenberg"):
+        config_from_dict({"evolution": {"refine_terms": 4, "constant_fit": "nelder-mead"}})
+
+
+def test_the_found_equation_and_the_path_are_the_first_alternatives(dataset):
+    """A refined equation that flies alone may diverge with the other five: the stability
+    repair can then swap the found equation back (or a shorter step of the path)."""
+    found = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    refined, _ = refine_equation(found, dataset, evolution(), FLIP)
+    alternatives = refined.alternatives()
+    assert alternatives[0].text() == found.text() and alternatives[0].lag == 0.0
+    lagged = dataclasses.replace(found, lag=0.07)
+    assert lagged.summary()["lag"] == 0.07
+    again = dataclasses.replace(found, candidates=[lagged.summary()]).alternatives()[0]
+    assert again.lag == 0.07 and again.text() == lagged.text()
+
+
+def test_a_refinement_the_full_model_flies_worse_is_undone(dataset):
+    """Refined alone, flown together: a q_dot that diverges beside the other five goes back
+    to its found form (the bad case), a refinement that makes the six fly better stays."""
+    from gpquad.models.refine import keep_what_flies
+
+    found = model_of({**TRUTH, "r_dot": TRUTH["r_dot"]}, dataset)
+    refined = model_of({**TRUTH, "r_dot": R_DOT, "q_dot": "-9.8*u_P + 3.3*q"}, dataset)
+    kept, reverted = keep_what_flies(refined, found, dataset, FLIP)
+    assert reverted == ["q_dot"]
+    assert kept.equations["q_dot"] is found.equations["q_dot"]
+    assert kept.equations["r_dot"] is refined.equations["r_dot"]
+    # nothing to undo when every refinement flies better
+    good = dataclasses.replace(found, equations={**found.equations,
+                                                 "r_dot": refined.equations["r_dot"]})
+    assert keep_what_flies(good, found, dataset, FLIP)[1] == []
+    assert "made the full model fly worse" in refined_summary(
+        {"q_dot": {"reverted": True, "lag": 0.0, "added": []}})
