@@ -52,7 +52,8 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
             runner.identify(None, "p_dot", type("C", (), {"evolution": None})())
         model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
         evolution = type("E", (), {"stability_repair": True, "front_selection": False,
-                                    "mirror_inputs": (), "symmetric_equations": False})()
+                                    "mirror_inputs": (), "symmetric_equations": False,
+                                    "refine_for": staticmethod(lambda target: 0)})()
         with pytest.raises(Stop):
             finish.finish_model(model, None, evolution)
     assert seen == [{1}, {1}]
