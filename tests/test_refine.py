@@ -137,3 +137,22 @@ def test_a_refinement_the_full_model_flies_worse_is_undone(dataset):
     assert keep_what_flies(good, found, dataset, FLIP)[1] == []
     assert "made the full model fly worse" in refined_summary(
         {"q_dot": {"reverted": True, "lag": 0.0, "added": []}})
+
+
+def test_a_candidate_starts_from_the_fitted_constants_and_its_residual_coefficient(dataset):
+    """The fit of a new term starts where the equation was fitted through the integrator:
+    its own constants unchanged, the term's coefficient its one-step least-squares value on
+    the residual (here the missing product's 6.0, since the rest is the truth)."""
+    import sympy as sp
+
+    from gpquad.models.refine import warm_start
+
+    found = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    problem = RefineProblem(found, dataset, evolution())
+    expr = problem.canonical(found)
+    term = sp.Symbol("u_P__tap2", real=True) * sp.Symbol("u_R__tap1", real=True)
+    start = warm_start(problem, expr, term, problem.values(term))
+    coefficients = sp.expand(start).as_coefficients_dict()
+    assert float(coefficients[term]) == pytest.approx(6.0, rel=1e-6)
+    for monomial, value in sp.expand(expr).as_coefficients_dict().items():
+        assert float(coefficients[monomial]) == float(value)
