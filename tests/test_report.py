@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -46,6 +47,12 @@ def test_median_table_marks_shared_terms_only():
     assert r"\boldsymbol{4.15 p}" in tex and r"\boldsymbol{10.3 u_{R-1}}" in tex
     assert r"\boldsymbol{2.0 q}" not in tex and "2.0 q" in tex
     assert "| p_dot |" in md and "`p` 100%" in md and "3 runs" in md
+    assert r"\frac{d}{dt}" not in tex
+    # an equation with a lag shows it: the right-hand side alone would be another model
+    lagged = dataclasses.replace(median, lag=0.05)
+    tex, md = median_tables(dataclasses.replace(model, equations={"p_dot": lagged}), runs, 0.5)
+    assert r"\left(1 + 0.05\,\frac{d}{dt}\right) \dot{p}" in tex
+    assert r"\left(1 + 0.05\,\frac{d}{dt}\right)" in md
 
 
 def test_rse_and_divergence():

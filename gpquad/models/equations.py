@@ -106,11 +106,16 @@ class Equation:
                 for n in self.leaf_names if self.trim.get(base_input(n), 0.0)}
         return simplify(expr.xreplace(reps)) if reps else expr
 
-    def latex(self, digits: int | None = None, raw: bool = False) -> str:
-        """LaTeX with constants at `digits` significant digits (default: self.digits)."""
+    def latex_lhs(self) -> str:
+        """The left-hand side in LaTeX: the target, with its lag operator when lag > 0."""
         lhs = TARGET_LATEX[target_index(self.target)]
         if self.lag > 0:
             lhs = fr"\left(1 + {self.lag:.3g}\,\frac{{d}}{{dt}}\right) {lhs}"
+        return lhs
+
+    def latex(self, digits: int | None = None, raw: bool = False) -> str:
+        """LaTeX with constants at `digits` significant digits (default: self.digits)."""
+        lhs = self.latex_lhs()
         expr = self.sympy_raw() if raw else self.sympy()
         return f"{lhs} = {to_latex(expr, self.delays, self.leaf_names, digits or self.digits)}"
 
@@ -260,6 +265,8 @@ class DiscoveredModel:
                               "model.json a `gpquad run` wrote", source=str(path)) from None
 
     def to_sympy(self) -> dict[str, sp.Expr]:
+        """Each equation's right-hand side; where an equation has a lag (Equation.lag > 0)
+        it is the commanded value the target follows, tau d(target)/dt + target = expr."""
         return {t: e.sympy() for t, e in self.equations.items()}
 
     def latex(self, raw: bool = False) -> str:

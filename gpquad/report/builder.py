@@ -21,7 +21,7 @@ import numpy as np
 import sympy as sp
 
 from gpquad.engine.tree.export import to_latex
-from gpquad.engine.variables import TARGET_LATEX, TARGET_NAMES, TARGET_STATE, target_index
+from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.study.assemble import load_sweep_config
@@ -91,7 +91,7 @@ def median_tables(model: DiscoveredModel, runs: dict[str, list[Equation]], fract
         shares = structure_shares(runs[t])
         shared = {k for k, s in shares.items() if s > fraction}
         body = _equation_latex(eq, shared)
-        lhs = TARGET_LATEX[target_index(t)]
+        lhs = eq.latex_lhs()
         tex_rows.append(f"${lhs} = {body}$ & {eq.validation_error:.4g} \\\\")
         top = ", ".join(f"`{_short(k)}` {100 * s:.0f}%" for k, s in list(shares.items())[:4])
         md_rows.append(f"| {t} | ${lhs} = {body}$ | {eq.validation_error:.4g} | {top} |")
