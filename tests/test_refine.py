@@ -156,3 +156,14 @@ def test_a_candidate_starts_from_the_fitted_constants_and_its_residual_coefficie
     assert float(coefficients[term]) == pytest.approx(6.0, rel=1e-6)
     for monomial, value in sp.expand(expr).as_coefficients_dict().items():
         assert float(coefficients[monomial]) == float(value)
+
+
+def test_without_validation_windows_nothing_is_refined_and_the_run_says_why(dataset):
+    """A refinement is chosen on validation windows; with none, fitting it would be wasted
+    and choosing it by training error alone would keep every term: the found equation stays."""
+    found = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    refined, report = refine_equation(found, dataclasses.replace(dataset, validation=[]),
+                                      evolution(), FLIP)
+    assert refined is found and report["no_validation"] and report["tried"] == 0
+    assert report["validation_before"] is None  # model.json stays valid JSON
+    assert "data.validation_fraction" in refined_summary({"r_dot": report})

@@ -215,6 +215,10 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     found_error = problem.error(problem.tree(found))
     path = [(0.0, found, found_error, problem.error(problem.tree(found), dataset.validation),
              [])]
+    if not np.isfinite(path[0][3]):  # nothing to judge a refinement on: not worth fitting
+        return equation, {"lag": 0.0, "added": [], "error_before": found_error,
+                          "error_after": found_error, "validation_before": None,
+                          "validation_after": None, "tried": 0, "no_validation": True}
     zero_error = problem.error(problem.tree(sp.Float(0.0)))
 
     def gain(err: float) -> float:  # the least improvement that counts
@@ -336,6 +340,10 @@ def refined_summary(report: dict) -> str:
     for target, entry in report.items():
         if entry.get("reverted"):
             parts.append(f"{target}: kept as found (refined, it made the full model fly worse)")
+        elif entry.get("no_validation"):
+            parts.append(f"{target}: kept as found (no validation window of window_steps "
+                         "to judge a refinement on: raise data.validation_fraction or name "
+                         "validation files in data.validation)")
         elif entry["validation_after"] < entry["validation_before"]:
             lag = f"lag {1000 * entry['lag']:.0f} ms, " if entry["lag"] > 0 else ""
             parts.append(f"{target}: {lag}+{len(entry['added'])} terms, validation error "
