@@ -151,7 +151,7 @@ def test_a_candidate_starts_from_the_fitted_constants_and_its_residual_coefficie
     problem = RefineProblem(found, dataset, evolution())
     expr = problem.canonical(found)
     term = sp.Symbol("u_P__tap2", real=True) * sp.Symbol("u_R__tap1", real=True)
-    start = warm_start(problem, expr, term, problem.values(term))
+    start = warm_start(expr, term, problem.values(term), problem.residual(expr))
     coefficients = sp.expand(start).as_coefficients_dict()
     assert float(coefficients[term]) == pytest.approx(6.0, rel=1e-6)
     for monomial, value in sp.expand(expr).as_coefficients_dict().items():

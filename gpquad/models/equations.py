@@ -187,6 +187,10 @@ class Equation:
                    int(d.get("digits", 3)), float(d.get("lag", 0.0)))
 
 
+#: DiscoveredModel's optional reports: each a model.json entry of the same name when not None.
+REPORTS = ("joint_fit", "stability", "envelope", "mirror_parity", "symmetrized", "refined")
+
+
 @dataclass
 class DiscoveredModel:
     """The equations of a run, with what is needed to reproduce and fly them."""
@@ -228,18 +232,8 @@ class DiscoveredModel:
         }
         if self.interrupted:
             out["interrupted"] = True
-        if self.joint_fit is not None:
-            out["joint_fit"] = self.joint_fit
-        if self.stability is not None:
-            out["stability"] = self.stability
-        if self.envelope is not None:
-            out["envelope"] = self.envelope
-        if self.mirror_parity is not None:
-            out["mirror_parity"] = self.mirror_parity
-        if self.symmetrized is not None:
-            out["symmetrized"] = self.symmetrized
-        if self.refined is not None:
-            out["refined"] = self.refined
+        out.update({name: getattr(self, name) for name in REPORTS
+                    if getattr(self, name) is not None})
         return out
 
     @classmethod
@@ -248,9 +242,8 @@ class DiscoveredModel:
         eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
-                   d.get("config", {}), bool(d.get("interrupted", False)), d.get("joint_fit"),
-                   d.get("stability"), d.get("envelope"), d.get("mirror_parity"),
-                   d.get("symmetrized"), d.get("refined"))
+                   d.get("config", {}), bool(d.get("interrupted", False)),
+                   **{name: d.get(name) for name in REPORTS})
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from typing import NamedTuple
 
 import numpy as np
 import sympy as sp
@@ -72,11 +73,10 @@ class RefineProblem:
         cfg = evolution.for_target(equation.target)
         self.target = equation.target
         self.input_names = equation.input_names
-        self.n_taps = cfg.max_delay + 1
-        self.delays = {tap_name(n, d): d for d in range(self.n_taps) for n in self.input_names}
-        tapped = with_taps(dataset, self.n_taps)
+        n_taps = cfg.max_delay + 1
+        self.delays = {tap_name(n, d): d for d in range(n_taps) for n in self.input_names}
+        tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
-        self.dataset = dataset
         self.ev = Evaluator(tapped, equation.target, cfg.window_steps, cfg.metric,
                             cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
         self.starts, self.steps = tile(dataset.train, cfg.window_steps, cfg.max_delay)
@@ -120,6 +120,10 @@ class RefineProblem:
         alpha = self.ev.alpha
         return (self.acc[self.samples] - (1.0 - alpha) * self.acc[self.samples - 1]) / alpha
 
+    def residual(self, expr: sp.Expr) -> np.ndarray:
+        """What the expression leaves of the one-step target on the training samples."""
+        return self.commanded() - self.values(expr)
+
     def error(self, tree: Tree, ranges=None) -> float:
         """Mean window error flown alone (the search's metric) over the training windows, or
         over `ranges` tiled."""
@@ -141,11 +145,16 @@ class RefineProblem:
                                             FIT_STEPS, self.short)
         return self.expr(fitted), float(error)
 
-    def least_squares(self, monomials: list[sp.Expr]) -> sp.Expr:
-        """The monomials' one-step least-squares combination for the evaluator's lag."""
-        columns = np.column_stack([self.values(m) for m in monomials])
-        coef, *_ = np.linalg.lstsq(columns, self.commanded(), rcond=None)
-        return sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, monomials, strict=True)])
+
+
+class Step(NamedTuple):
+    """One equation on the refinement's path."""
+
+    lag: float  # s
+    expr: sp.Expr
+    error: float  # training windows
+    validation: float  # validation windows
+    added: list  # the terms added so far
 
 
 def monomials(expr: sp.Expr) -> list[sp.Expr]:
@@ -164,29 +173,27 @@ def library(problem: RefineProblem, flipped) -> list[sp.Expr]:
     return terms
 
 
-def screen(problem: RefineProblem, expr: sp.Expr, candidates: list[sp.Expr],
-           columns: np.ndarray) -> list[int]:
-    """Indices of the SCREENED candidates that explain most of the one-step residual of
-    `expr` beyond the span of its own monomials."""
+def screen(problem: RefineProblem, expr: sp.Expr, residual: np.ndarray, columns: np.ndarray,
+           offered: np.ndarray) -> list[int]:
+    """Indices of the SCREENED columns among `offered` (bool, one per column) that explain
+    most of `expr`'s one-step residual beyond the span of its own monomials."""
     own = np.column_stack([problem.values(m) for m in monomials(expr)])
     q, _ = np.linalg.qr(own)
-    residual = problem.commanded() - problem.values(expr)
-    residual -= q @ (q.T @ residual)
+    residual = residual - q @ (q.T @ residual)
     projected = columns - q @ (q.T @ columns)
     norms = (projected ** 2).sum(axis=0)
-    score = np.where(norms > 1e-12 * max(norms.max(), 1e-300),
+    score = np.where(offered & (norms > 1e-12 * max(norms.max(), 1e-300)),
                      (projected.T @ residual) ** 2 / np.maximum(norms, 1e-300), 0.0)
     return [int(k) for k in np.argsort(-score, kind="stable")[:SCREENED] if score[k] > 0]
 
 
-def warm_start(problem: RefineProblem, expr: sp.Expr, term: sp.Expr,
-               column: np.ndarray) -> sp.Expr:
+def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray,
+               residual: np.ndarray) -> sp.Expr:
     """expr + c term, c the term's one-step least-squares coefficient on expr's residual:
     the equation keeps the constants it was fitted with through the integrator. (Refitting
     every constant by one-step least squares instead, the one-step fit a stiff closed loop
     does not have, stopped rotorpy-angle crazyflie seed 1's r_dot after 4 terms at
     validation error 0.022; from here it went on to 0.0092.)"""
-    residual = problem.commanded() - problem.values(expr)
     c = float(column @ residual / max(float(column @ column), 1e-300))
     return expr + sp.Float(c) * term
 
@@ -196,9 +203,13 @@ def choose_lag(problem: RefineProblem, expr: sp.Expr, error: float,
     """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
     the equation's own terms flies best, if it beats the found equation by `gain`."""
     best = (0.0, expr, error)
+    terms = monomials(expr)
+    columns = np.column_stack([problem.values(m) for m in terms])  # the same for every lag
     for tau in LAG_GRID[1:]:
-        problem.ev.set_lag(tau)
-        fitted, fitted_error = problem.fit(problem.least_squares(monomials(expr)))
+        problem.ev.set_lag(tau)  # the one-step target is the data inverse-filtered by it
+        coef, *_ = np.linalg.lstsq(columns, problem.commanded(), rcond=None)
+        start = sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, terms, strict=True)])
+        fitted, fitted_error = problem.fit(start)
         if fitted_error < best[2] - gain:
             best = (tau, fitted, fitted_error)
     problem.ev.set_lag(best[0])
@@ -213,9 +224,9 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     problem = RefineProblem(equation, dataset, evolution)
     found = problem.canonical(equation)
     found_error = problem.error(problem.tree(found))
-    path = [(0.0, found, found_error, problem.error(problem.tree(found), dataset.validation),
-             [])]
-    if not np.isfinite(path[0][3]):  # nothing to judge a refinement on: not worth fitting
+    path = [Step(0.0, found, found_error,
+                 problem.error(problem.tree(found), dataset.validation), [])]
+    if not np.isfinite(path[0].validation):  # nothing to judge a refinement on: not worth fitting
         return equation, {"lag": 0.0, "added": [], "error_before": found_error,
                           "error_after": found_error, "validation_before": None,
                           "validation_after": None, "tried": 0, "no_validation": True}
@@ -226,39 +237,40 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
 
     tau, expr, error = choose_lag(problem, found, found_error, gain(found_error))
     if tau > 0:
-        path.append((tau, expr, error, problem.error(problem.tree(expr), dataset.validation),
-                     []))
+        path.append(Step(tau, expr, error,
+                         problem.error(problem.tree(expr), dataset.validation), []))
     added: list[sp.Expr] = []
     candidates = library(problem, frozenset(flipped))
     columns = np.column_stack([problem.values(c) for c in candidates])
     for _ in range(n_terms):
         own = set(monomials(expr))
-        fresh = [k for k, c in enumerate(candidates) if c not in own]
+        offered = np.array([c not in own for c in candidates])
+        residual = problem.residual(expr)
         best = None
-        for k in screen(problem, expr, [candidates[k] for k in fresh], columns[:, fresh]):
-            term = candidates[fresh[k]]
-            fitted, fitted_error = problem.fit(warm_start(problem, expr, term,
-                                                          columns[:, fresh[k]]))
+        for k in screen(problem, expr, residual, columns, offered):
+            fitted, fitted_error = problem.fit(warm_start(expr, candidates[k], columns[:, k],
+                                                          residual))
             if best is None or fitted_error < best[1]:
-                best = (fitted, fitted_error, term)
+                best = (fitted, fitted_error, candidates[k])
         if best is None or not best[1] < error - gain(error):
             break
         expr, error = best[0], best[1]
         added.append(best[2])
-        path.append((tau, expr, error, problem.error(problem.tree(expr), dataset.validation),
-                     list(added)))
-    scored = [p for p in path if np.isfinite(p[3])]
-    chosen = min(scored, key=lambda p: p[3]) if scored else path[0]
-    report = {"lag": chosen[0], "added": [text(equation, t) for t in chosen[4]],
-              "error_before": found_error, "error_after": chosen[2],
-              "validation_before": path[0][3], "validation_after": chosen[3],
+        path.append(Step(tau, expr, error,
+                         problem.error(problem.tree(expr), dataset.validation), list(added)))
+    # path[0] has a finite validation error (checked above); a later step may have diverged
+    chosen = min((p for p in path if np.isfinite(p.validation)), key=lambda p: p.validation)
+    report = {"lag": chosen.lag, "added": [text(equation, t) for t in chosen.added],
+              "error_before": found_error, "error_after": chosen.error,
+              "validation_before": path[0].validation, "validation_after": chosen.validation,
               "tried": len(path) - 1}
     if chosen is path[0]:
         return equation, report
-    def as_equation(step) -> object:
-        return dataclasses.replace(equation, tree=problem.tree(step[1]), lag=float(step[0]),
-                                   error=float(step[2]), validation_error=float(step[3]),
-                                   candidates=[])
+
+    def as_equation(step: Step) -> object:
+        return dataclasses.replace(equation, tree=problem.tree(step.expr), lag=float(step.lag),
+                                   error=float(step.error),
+                                   validation_error=float(step.validation), candidates=[])
 
     # the found equation and the rest of the path become the first alternatives of the
     # stability repair: a refined equation that flies alone may diverge with the others
