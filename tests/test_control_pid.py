@@ -261,3 +261,28 @@ def test_model_forms_differ_where_protected_division_fires():
     off = np.array([0.54, 0.0, 0.0, 0.0])  # u_P - trim = 0.34: both -1
     assert model_plant(model, "tree").accelerations(np.zeros(9), off)[4] == pytest.approx(-1.0)
     assert model_plant(model).accelerations(np.zeros(9), off)[4] == pytest.approx(-1.0)
+
+
+def test_a_lagged_equation_reaches_the_plant_by_hand():
+    """An identified equation's lag (gpquad.engine.lag) is flown: from rest, the applied
+    roll acceleration is alpha times the equation's value at the first step, and the lag
+    leaves the other equations alone."""
+    plant = truth_plant(LINEAR, NAMES, DT)
+    plant.alphas[3] = 0.25  # p_dot
+    f = fly(plant, _controller(plant), np.array([[3.0, 4.0, 2.0]]), np.zeros((2, 4)))
+    u = f.inputs[0]
+    assert f.states[1, 6] == pytest.approx(0.25 * 2.0 * u[1] * DT)
+    assert f.states[1, 5] == pytest.approx((-20.0 * u[3] + 10.0) * DT)
+
+
+def test_model_plant_takes_each_equations_lag():
+    from gpquad.control.plant import model_plant
+    from gpquad.engine.lag import lag_alpha
+    from gpquad.engine.tree.export import from_sympy, parse_equation
+    from gpquad.models.equations import DiscoveredModel, Equation
+
+    expr, delays = parse_equation("-3.3*q - 9.8*u_P", NAMES)
+    eq = Equation("q_dot", from_sympy(expr, delays, NAMES), NAMES, 0.0, 0.0, {}, lag=0.05)
+    plant = model_plant(DiscoveredModel({"q_dot": eq}, NAMES, {}, 0.04, 1, {}))
+    assert plant.alphas[4] == pytest.approx(lag_alpha(0.05, 0.04)) and plant.alphas[4] < 1.0
+    assert np.all(np.delete(plant.alphas, 4) == 1.0)
