@@ -1,7 +1,7 @@
 """A/B comparison of engine settings on known-truth and real-log scenarios (not a test).
 
     nice -n 5 python benchmarks/ab_engine.py --scenario rigid-body --seeds 1 2 3 \\
-        --variant base: --variant gn:constant_fit=gauss-newton [--json out.json]
+        --variant base: --variant nm:constant_fit=nelder-mead [--json out.json]
 
 A variant is NAME:FIELD=VALUE,FIELD=VALUE (EvolutionConfig fields; values parsed as TOML).
 For every scenario, seed and variant all six equations are identified (same seeds for
@@ -34,7 +34,7 @@ from gpquad.models.analysis import compare_to_truth
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.scoring import SCORED_STATES, score_model
 from gpquad.study.config import Config, load_config, validate
-from gpquad.study.runner import identify
+from gpquad.study.search import identify
 
 NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
 SCENARIOS = {

@@ -35,7 +35,7 @@ from gpquad.benchmark import evaluate
 from gpquad.benchmark.cells import cell_path, load_cell, recovery_gpquad
 from gpquad.benchmark.engine import engine_config, fit_gpquad
 from gpquad.benchmark.paired import paired
-from gpquad.benchmark.scenarios import build_scenario, repo_root
+from gpquad.benchmark.scenarios import build_scenario
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.finish import finish_model
 
@@ -43,14 +43,10 @@ HORIZONS_S = (1.0, 7.0, 30.0)
 #: Finishing variants: EvolutionConfig fields set on top of the engine's.
 RATE_REFINE = {"p_dot": 20, "q_dot": 20, "r_dot": 20}
 VARIANTS = {
-    "none": {"stability_repair": False, "front_selection": False, "joint_fit": False,
-             "refine_terms": 0},
-    "repair+joint": {"stability_repair": True, "front_selection": False, "joint_fit": True,
-                     "refine_terms": 0},
-    "repair+front+joint": {"stability_repair": True, "front_selection": True,
-                           "joint_fit": True, "refine_terms": 0},
-    "refine+repair+joint": {"stability_repair": True, "front_selection": False,
-                            "joint_fit": True, "refine_terms": RATE_REFINE},
+    "none": {"finish": ()},
+    "repair+joint": {"finish": ("symmetrize", "repair", "joint_fit")},
+    "refine+repair+joint": {"finish": ("symmetrize", "refine", "repair", "joint_fit"),
+                            "refine_terms": RATE_REFINE},
 }
 
 
@@ -67,7 +63,7 @@ def raw_model(sub, name: str, group: str, seed: int, engine: dict, out: Path):
     path = out / "raw" / name / group / f"seed{seed}.json"
     if path.exists():
         return DiscoveredModel.from_dict(json.loads(path.read_text()))
-    cfg, _ = engine_config(repo_root() / "experiments", seed)
+    cfg = engine_config(seed)
     ev = dataclasses.replace(cfg.evolution, **engine, **VARIANTS["none"])  # no full-model step
     t0 = time.perf_counter()
     model = fit_gpquad(sub.fit, dataclasses.replace(cfg, evolution=ev))
@@ -83,12 +79,12 @@ def run_seed(name: str, seed: int, engine: dict, out: Path, variants) -> list[di
     groups = scenario.groups or {"all": scenario}
     offsets = scenario.group_offsets() if scenario.groups else {"all": (0, scenario.test.n_samples)}
     raws = {g: raw_model(sub, name, g, seed, engine, out) for g, sub in groups.items()}
-    cfg, _ = engine_config(repo_root() / "experiments", seed)
+    cfg = engine_config(seed)
     rows = []
     for variant in variants:
         ev = dataclasses.replace(cfg.evolution, **engine, **VARIANTS[variant])
         t0 = time.perf_counter()
-        models = {g: finish_model(raws[g], groups[g].fit, ev) for g in groups}
+        models = {g: finish_model(raws[g], groups[g].fit, ev, cfg.vehicle) for g in groups}
         finish_s = time.perf_counter() - t0
 
         def simulate(starts, steps, models=models):

@@ -31,9 +31,9 @@ from scipy.optimize import least_squares
 
 import gpquad.engine.evolve.gradient_fit as gradient_fit
 from gpquad.benchmark.engine import engine_config
-from gpquad.benchmark.scenarios import build_scenario, repo_root
+from gpquad.benchmark.scenarios import build_scenario
 from gpquad.engine.tree.operators import CONST
-from gpquad.study.runner import identify
+from gpquad.study.search import identify
 
 
 class Replayed(Exception):
@@ -68,7 +68,7 @@ def main() -> None:
     args = parser.parse_args()
     scenario = build_scenario("rotorpy-heldout-angle", args.flights)
     sub = next(iter(scenario.groups.values()))
-    cfg, _ = engine_config(repo_root() / "experiments", 1)
+    cfg = engine_config(1)
     cfg = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
                                                                  targets=["p_dot"]))
     original = gradient_fit.residuals_and_jacobian

@@ -13,7 +13,7 @@ import time
 from gpquad.data.io import load_dataset
 from gpquad.models.analysis import compare_to_truth
 from gpquad.study.config import load_config, override
-from gpquad.study.runner import identify
+from gpquad.study.search import identify
 
 
 def main() -> None:

@@ -1,5 +1,6 @@
 """`gpquad benchmark`: bad input is one line and exit 2; a rerun resumes; --jobs 2 gives the
-same table as --jobs 1; the engine settings come from recommended.toml when it exists."""
+same table as --jobs 1; the engine settings are gpquad's defaults unless --engine names a
+config."""
 
 import json
 import shutil
@@ -8,12 +9,13 @@ from pathlib import Path
 import pytest
 
 from gpquad.benchmark import table
-from gpquad.benchmark.engine import engine_source
+from gpquad.benchmark.engine import ENGINE_SOURCE, engine_config, load_engine
 from gpquad.benchmark.runner import collect, run_benchmark
 from gpquad.cli.benchmark import write_report
 from gpquad.cli.commands import main
 
 TINY_ENGINE = """
+preset = "paper"
 [evolution]
 iterations = 1
 model_generations = 4
@@ -21,8 +23,7 @@ test_generations = 2
 n_models = 3
 n_tests = 2
 suite_size = 2
-window_steps = 50
-test_offset_max = 10
+window_s = 2.0
 simplify_generations = 2
 """
 
@@ -63,25 +64,31 @@ def test_bad_user_config_is_one_line(tmp_path, capsys):
     assert "bad.toml" in err and "data.trim" in err and "\n" not in err
 
 
-def test_engine_settings_prefer_recommended(tmp_path):
-    (tmp_path / "quickstart.toml").write_text(TINY_ENGINE)
-    assert engine_source(tmp_path).name == "quickstart.toml"
-    (tmp_path / "recommended.toml").write_text(TINY_ENGINE)
-    assert engine_source(tmp_path).name == "recommended.toml"
+def test_engine_settings_are_the_package_defaults_unless_named(tmp_path):
+    """An installed gpquad knows its engine: no file of the checkout is read."""
+    cfg, source = load_engine()
+    assert source == ENGINE_SOURCE and cfg.evolution == engine_config(1).evolution
+    assert engine_config(1).evolution.constant_fit == "lm"
+    (tmp_path / "engine.toml").write_text(TINY_ENGINE)
+    cfg, source = load_engine(tmp_path / "engine.toml")
+    assert source.endswith("engine.toml") and cfg.evolution.iterations == 1
+    # every target is identified whatever the engine config's targets say
+    assert engine_config(1, cfg).evolution.targets == engine_config(1).evolution.targets
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     base = tmp_path_factory.mktemp("bench")
     (base / "engine").mkdir()
-    (base / "engine" / "quickstart.toml").write_text(TINY_ENGINE)
+    (base / "engine" / "engine.toml").write_text(TINY_ENGINE)
     (base / "tiny.toml").write_text(USER_CONFIG)
     return base
 
 
 def _run(tiny, out, jobs=1):
     return run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, jobs=jobs,
-                         horizons_s=(1.0, 2.0), engine_dir=tiny / "engine", log=lambda s: None)
+                         horizons_s=(1.0, 2.0), engine=tiny / "engine" / "engine.toml",
+                         log=lambda s: None)
 
 
 def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
@@ -126,7 +133,7 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     assert table.parameters({"n_parameters": {"a": 3, "b": None}}) is None
     assert table.parameters({}) is None
     saved = json.loads((out2 / "results.json").read_text())
-    assert saved["benchmark"]["engine_config"].endswith("quickstart.toml")
+    assert saved["benchmark"]["engine_config"].endswith("engine.toml")
 
 
 def test_folder_scored_at_other_horizons_is_refused(tiny, capsys):
@@ -134,7 +141,7 @@ def test_folder_scored_at_other_horizons_is_refused(tiny, capsys):
     shutil.copytree(tiny / "run1", out)
     with pytest.raises(Exception, match="other horizons"):
         run_benchmark([str(tiny / "tiny.toml")], ["zero"], 1, out, horizons_s=(1.0,),
-                      engine_dir=tiny / "engine", log=lambda s: None)
+                      engine=tiny / "engine" / "engine.toml", log=lambda s: None)
     assert Path(out / "benchmark.json").is_file()
 
 
@@ -143,15 +150,15 @@ def test_changed_engine_config_recomputes_only_gpquad_cells(tiny):
     shutil.copytree(tiny / "run1", out)
     engine = tiny / "engine2"
     engine.mkdir()
-    (engine / "quickstart.toml").write_text(TINY_ENGINE.replace("iterations = 1",
-                                                                "iterations = 2"))
+    (engine / "engine.toml").write_text(TINY_ENGINE.replace("iterations = 1",
+                                                            "iterations = 2"))
     before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
     # peers only: gpquad's cells (made with the old engine) are not touched
     run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
-                  engine_dir=engine, log=lambda s: None, with_gpquad=False)
+                  engine=engine / "engine.toml", log=lambda s: None, with_gpquad=False)
     assert {c: c.read_bytes() for c in before} == before
     info = run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out,
-                         horizons_s=(1.0, 2.0), engine_dir=engine, log=lambda s: None)
+                         horizons_s=(1.0, 2.0), engine=engine / "engine.toml", log=lambda s: None)
     changed = sorted(c.relative_to(out / "cells").as_posix() for c in before
                      if c.read_bytes() != before[c])
     assert changed == ["tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json"]
@@ -166,8 +173,8 @@ def test_a_comment_in_the_engine_config_recomputes_nothing(tiny):
     shutil.copytree(tiny / "run1", out)
     engine = tiny / "engine3"
     engine.mkdir()
-    (engine / "quickstart.toml").write_text("# a note on the settings\n" + TINY_ENGINE)
+    (engine / "engine.toml").write_text("# a note on the settings\n" + TINY_ENGINE)
     before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
     run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
-                  engine_dir=engine, log=lambda s: None)
+                  engine=engine / "engine.toml", log=lambda s: None)
     assert {c: c.read_bytes() for c in before} == before

@@ -213,11 +213,11 @@ def test_export_then_run_gives_the_same_model(tmp_path):
     out = tmp_path / "e.parquet"
     assert main(["data", "export", str(reset_log()), "--out", str(out)]) == 0
     evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_steps": 100, "test_offset_max": 20,
-           "stability_repair": True, "mirror_inputs": ["u_R", "u_Y"]}
+           "test_generations": 2, "window_s": 4.0, "finish": ["repair"]}
     runs = []
     for files, fmt in (([str(reset_log())], "px4-csv"), ([str(out)], "generic")):
-        cfg = config_from_dict({"seed": 3, "data": {"files": files, "format": fmt},
+        cfg = config_from_dict({"seed": 3, "preset": "paper",
+                                "data": {"files": files, "format": fmt},
                                 "evolution": evo, "output": {"progress": False}})
         run_experiment(cfg, tmp_path / fmt, progress=False)
         d = json.loads((tmp_path / fmt / "model.json").read_text())
@@ -242,9 +242,9 @@ def test_score_command(tmp_path, capsys):
     from gpquad.study.runner import run_experiment
 
     evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_steps": 100, "test_offset_max": 20,
-           "stability_repair": True, "mirror_inputs": ["u_R", "u_Y"]}
-    cfg = config_from_dict({"seed": 1, "data": {"files": [str(reset_log())], "format": "px4-csv"},
+           "test_generations": 2, "window_s": 4.0, "finish": ["repair"]}
+    cfg = config_from_dict({"seed": 1, "preset": "paper", "vehicle": {"symmetric": True},
+                            "data": {"files": [str(reset_log())], "format": "px4-csv"},
                             "evolution": evo, "output": {"progress": False}})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

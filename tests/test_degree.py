@@ -16,7 +16,7 @@ from gpquad.engine.tree.operators import DIV
 from gpquad.engine.tree.variation import VariationParams, mutate, random_tree
 from gpquad.engine.variables import terminal_names
 from gpquad.errors import GpquadError
-from gpquad.study.config import Config, EvolutionConfig, validate
+from gpquad.study.config import Config, preset_evolution, validate
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 PARAMS = VariationParams(n_variables=13, n_inputs=4, max_depth=6)
@@ -27,9 +27,18 @@ def _tree(text):
     return from_sympy(expr, delays, INPUTS)
 
 
-@pytest.mark.parametrize("text, degree", [
-    ("1.5", 0), ("p", 1), ("0.9*q*r", 2), ("9*u_R(t-2) - 4*p - 0.9*q*r", 2),
-    ("phi*theta*u_R*u_T", 4), ("p/(q + r)", 2), ("2*(p + q)*(r - u)", 2)])
+@pytest.mark.parametrize(
+    "text, degree",
+    [
+        ("1.5", 0),
+        ("p", 1),
+        ("0.9*q*r", 2),
+        ("9*u_R(t-2) - 4*p - 0.9*q*r", 2),
+        ("phi*theta*u_R*u_T", 4),
+        ("p/(q + r)", 2),
+        ("2*(p + q)*(r - u)", 2),
+    ],
+)
 def test_degree_of_written_equations(text, degree):
     assert tree_degree(_tree(text).codes) == degree
 
@@ -83,7 +92,7 @@ def test_term_insertion_offers_products_only_within_the_limit():
 
 @pytest.mark.parametrize("value", [-1, 17])
 def test_config_refuses_a_degree_out_of_range(value):
-    cfg = Config(evolution=dataclasses.replace(EvolutionConfig(), max_degree=value))
+    cfg = Config(evolution=dataclasses.replace(preset_evolution(), max_degree=value))
     with pytest.raises(GpquadError, match="evolution.max_degree"):
         validate(cfg, "x.toml")
 
@@ -91,19 +100,24 @@ def test_config_refuses_a_degree_out_of_range(value):
 def test_depth_and_degree_tables_per_target():
     from gpquad.study.config import config_from_dict
 
-    ev = config_from_dict({"evolution": {"max_depth": {"p_dot": 7}, "max_degree": {"p_dot": 2}}},
-                          "x.toml").evolution
+    ev = config_from_dict(
+        {"evolution": {"max_depth": {"p_dot": 7}, "max_degree": {"p_dot": 2}}}, "x.toml"
+    ).evolution
     assert (ev.depth_for("p_dot"), ev.depth_for("a_x")) == (7, 5)  # left out: the paper's 5
     assert (ev.degree_for("p_dot"), ev.degree_for("a_x")) == (2, 0)  # left out: no limit
     resolved = ev.for_target("p_dot")
-    assert (resolved.max_depth, resolved.max_degree, resolved.input_taps) == (7, 2, 1)
+    assert (resolved.max_depth, resolved.max_degree, resolved.input_taps) == (7, 2, 6)
 
 
-@pytest.mark.parametrize("table, field", [
-    ({"max_depth": {"p_dt": 7}}, "evolution.max_depth.p_dt"),
-    ({"max_depth": {"a_x": 9}}, "evolution.max_depth.a_x"),
-    ({"max_degree": {"r_dot": -1}}, "evolution.max_degree.r_dot"),
-    ({"max_depth": True}, "evolution.max_depth")])
+@pytest.mark.parametrize(
+    "table, field",
+    [
+        ({"max_depth": {"p_dt": 7}}, "evolution.max_depth.p_dt"),
+        ({"max_depth": {"a_x": 9}}, "evolution.max_depth.a_x"),
+        ({"max_degree": {"r_dot": -1}}, "evolution.max_degree.r_dot"),
+        ({"max_depth": True}, "evolution.max_depth"),
+    ],
+)
 def test_tables_name_the_bad_key(table, field):
     from gpquad.study.config import config_from_dict
 

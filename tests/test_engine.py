@@ -12,18 +12,27 @@ from gpquad.engine.evolve.windows import WindowSpace, tile
 from gpquad.engine.tree.operators import VAR_BASE
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.models.equations import DiscoveredModel
-from gpquad.study.config import Config, DataConfig, EvolutionConfig, SimulatorConfig
+from gpquad.study.config import Config, DataConfig, SimulatorConfig, preset_evolution
 from gpquad.study.runner import run_experiment
 
-TINY = EvolutionConfig(targets=("p_dot",), iterations=2, model_generations=15,
-                       test_generations=5, window_steps=60, test_offset_max=30,
-                       simplify_generations=5)
+TINY = preset_evolution(
+    targets=("p_dot",),
+    iterations=2,
+    model_generations=15,
+    test_generations=5,
+    window_s=2.4,
+    simplify_generations=5,
+)
 
 
 def tiny_config(**evolution) -> Config:
     sim = dataclasses.replace(SimulatorConfig(), duration_s=40.0)
-    return Config(seed=3, simulator=sim, data=DataConfig(trim="mean"),
-                  evolution=dataclasses.replace(TINY, **evolution))
+    return Config(
+        seed=3,
+        simulator=sim,
+        data=DataConfig(trim="mean"),
+        evolution=dataclasses.replace(TINY, **evolution),
+    )
 
 
 def test_windows_never_span_flights_or_the_split():
@@ -40,14 +49,15 @@ def test_windows_never_span_flights_or_the_split():
     mutated = space.mutate(rng, space.random(rng, 50), 1000)
     assert ((mutated >= 0) & (mutated < space.size)).all()
     tiles, steps = tile(ranges, 70, 5)
-    assert steps == 70 and all(any(a + 5 <= s and s + 70 <= b - 1 for a, b in ranges)
-                               for s in tiles)
+    assert steps == 70 and all(
+        any(a + 5 <= s and s + 70 <= b - 1 for a, b in ranges) for s in tiles
+    )
 
 
 def test_window_space_refuses_short_data():
     from gpquad.errors import GpquadError
 
-    with pytest.raises(GpquadError, match="window_steps"):
+    with pytest.raises(GpquadError, match="window_s"):
         WindowSpace([(0, 50)], n_steps=750, max_delay=5)
 
 
@@ -95,8 +105,14 @@ def test_same_seed_same_model_json(tmp_path):
 def test_run_folder_contents(tmp_path):
     model = run_experiment(tiny_config(), tmp_path / "run", progress=False)
     run = tmp_path / "run"
-    for name in ("model.json", "equations.tex", "equations.md", "history.csv", "run.json",
-                 "config.json"):
+    for name in (
+        "model.json",
+        "equations.tex",
+        "equations.md",
+        "history.csv",
+        "run.json",
+        "config.json",
+    ):
         assert (run / name).is_file(), name
     info = json.loads((run / "run.json").read_text())
     assert info["seed"] == 3 and "numba" in info["versions"] and info["git_revision"]
@@ -108,14 +124,17 @@ def test_run_folder_contents(tmp_path):
 
     sp.sympify(p_dot["expr"])  # parsable
     front = p_dot["candidates"]  # size/error Pareto front: bigger only if more accurate
-    assert front and all(a["size"] < b["size"] and a["error"] > b["error"]
-                         for a, b in zip(front, front[1:]))
+    assert front and all(
+        a["size"] < b["size"] and a["error"] > b["error"] for a, b in zip(front, front[1:])
+    )
     assert front[-1]["error"] == pytest.approx(p_dot["error"])  # no pruning: the best climber
     history = (run / "history.csv").read_text().splitlines()
     assert len(history) == 1 + TINY.iterations * TINY.model_generations
     loaded = DiscoveredModel.load(run)
-    assert loaded.equations["p_dot"].tree.codes.tolist() == \
-        model.equations["p_dot"].tree.codes.tolist()
+    assert (
+        loaded.equations["p_dot"].tree.codes.tolist()
+        == model.equations["p_dot"].tree.codes.tolist()
+    )
 
 
 def test_model_simulate_reproduces_the_data_with_the_true_equations(short_dataset):
@@ -129,21 +148,29 @@ def test_model_simulate_reproduces_the_data_with_the_true_equations(short_datase
     for target, text in MEDIAN_MODEL.items():
         expr, delays = parse_equation(text, short_dataset.input_names)
         expr = expr.subs({s: s + trim[str(s)] for s in expr.free_symbols if str(s) in trim})
-        eqs[target] = Equation(target, from_sympy(expr, delays, short_dataset.input_names),
-                               short_dataset.input_names, 0.0, 0.0, trim)
+        eqs[target] = Equation(
+            target,
+            from_sympy(expr, delays, short_dataset.input_names),
+            short_dataset.input_names,
+            0.0,
+            0.0,
+            trim,
+        )
     model = DiscoveredModel(eqs, short_dataset.input_names, trim, short_dataset.dt, 0, {})
     starts = np.array([20, 500], dtype=np.int64)
     states = model.simulate(short_dataset, starts, 300)
-    truth = np.stack([short_dataset.arrays.states[s:s + 301] for s in starts])
+    truth = np.stack([short_dataset.arrays.states[s : s + 301] for s in starts])
     assert np.abs(states - truth).max() < 1e-8
 
 
 def test_cli_run_and_errors(tmp_path, capsys):
     cfg = tmp_path / "exp.toml"
-    cfg.write_text('seed = 2\n[simulator]\nduration_s = 40.0\n[evolution]\n'
-                   'targets = ["r_dot"]\niterations = 1\nmodel_generations = 5\n'
-                   'test_generations = 2\nwindow_steps = 60\ntest_offset_max = 30\n'
-                   'simplify_generations = 2\n')
+    cfg.write_text(
+        "seed = 2\npreset = \"paper\"\n[simulator]\nduration_s = 40.0\n[evolution]\n"
+        'targets = ["r_dot"]\niterations = 1\nmodel_generations = 5\n'
+        "test_generations = 2\nwindow_s = 2.4\n"
+        "simplify_generations = 2\n"
+    )
     out = tmp_path / "run"
     assert main(["run", str(cfg), "--out", str(out), "--quiet"]) == 0
     assert "r_dot =" in capsys.readouterr().out
@@ -184,8 +211,9 @@ def test_interrupt_writes_partial_results_and_the_same_command_resumes(tmp_path,
     calls["n"] = 0
     resumed = run_experiment(cfg, tmp_path / "run", progress=False)
     for name in ("model.json", "history.csv", "equations.tex"):
-        assert (tmp_path / "run" / name).read_bytes() == \
-            (tmp_path / "straight" / name).read_bytes(), name
+        assert (tmp_path / "run" / name).read_bytes() == (
+            tmp_path / "straight" / name
+        ).read_bytes(), name
     assert resumed.to_dict() == reference.to_dict()
     # a different config in the same folder is refused, not mixed
     from gpquad.errors import GpquadError
@@ -196,15 +224,19 @@ def test_interrupt_writes_partial_results_and_the_same_command_resumes(tmp_path,
 
 def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
     cfg = tmp_path / "exp.toml"
-    cfg.write_text('seed = 5\n[simulator]\nduration_s = 40.0\n[evolution]\n'
-                   'targets = ["q_dot"]\niterations = 1\nmodel_generations = 5\n'
-                   'test_generations = 2\nwindow_steps = 60\ntest_offset_max = 30\n'
-                   'simplify_generations = 2\n')
+    cfg.write_text(
+        "seed = 5\npreset = \"paper\"\n[simulator]\nduration_s = 40.0\n[evolution]\n"
+        'targets = ["q_dot"]\niterations = 1\nmodel_generations = 5\n'
+        "test_generations = 2\nwindow_s = 2.4\n"
+        "simplify_generations = 2\n"
+    )
     flight = tmp_path / "flight.parquet"
     assert main(["simulate", str(cfg), "--out", str(flight)]) == 0
     assert "1000 samples at 25 Hz" in capsys.readouterr().out
-    assert main(["run", str(cfg), "--data", str(flight), "--out", str(tmp_path / "run"),
-                 "--quiet"]) == 0
+    assert (
+        main(["run", str(cfg), "--data", str(flight), "--out", str(tmp_path / "run"), "--quiet"])
+        == 0
+    )
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["dataset"]["flights"] == ["flight.parquet"]
     assert info["dataset"]["train_samples"] + info["dataset"]["validation_samples"] == 1000
@@ -232,14 +264,36 @@ def test_fly_reproduces_the_simulator_with_the_true_equations(short_flight, tmp_
     write_json(tmp_path / "run" / "model.json", model.to_dict())
     write_flight_file(short_flight, tmp_path / "inputs.csv")
     out = tmp_path / "flown.csv"
-    assert main(["fly", str(tmp_path / "run"), "--inputs", str(tmp_path / "inputs.csv"),
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "fly",
+                str(tmp_path / "run"),
+                "--inputs",
+                str(tmp_path / "inputs.csv"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     from gpquad.data.flight import read_flight_file
 
     again = read_flight_file(out, names)
     assert np.abs(again.vel - short_flight.vel).max() < 1e-9
-    assert main(["fly", str(tmp_path / "run"), "--inputs", str(tmp_path / "none.csv"),
-                 "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "fly",
+                str(tmp_path / "run"),
+                "--inputs",
+                str(tmp_path / "none.csv"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
 
 
 def test_report_of_a_run_folder(tmp_path):
@@ -285,8 +339,9 @@ def test_damaged_checkpoint_restarts_that_target(tmp_path, monkeypatch, capsys):
     run_experiment(cfg, tmp_path / "run", progress=False)
     assert "restarting a_y" in capsys.readouterr().err
     for name in ("model.json", "history.csv"):
-        assert (tmp_path / "run" / name).read_bytes() == \
-            (tmp_path / "straight" / name).read_bytes(), name
+        assert (tmp_path / "run" / name).read_bytes() == (
+            tmp_path / "straight" / name
+        ).read_bytes(), name
 
 
 @pytest.mark.parametrize("prune_tolerance", [0.0, 0.5])
@@ -297,8 +352,9 @@ def test_reported_equation_is_not_beaten_by_a_candidate_of_the_run(tmp_path, pru
     model = run_experiment(cfg, tmp_path / "run", progress=False)
     for eq in model.equations.values():
         size = eq.tree.size
-        beaten = [c for c in eq.candidates
-                  if c["size"] <= size and c["error"] < eq.error * (1 - 1e-12)]
+        beaten = [
+            c for c in eq.candidates if c["size"] <= size and c["error"] < eq.error * (1 - 1e-12)
+        ]
         assert beaten == [], (eq.text(), beaten)
 
 
@@ -308,8 +364,10 @@ def test_unmeasured_states_are_never_leaves(short_flight):
     from gpquad.engine.evolve.coevolution import Coevolution
     from gpquad.engine.variables import terminal_names
 
-    flight = dataclasses.replace(short_flight, meta={
-        **short_flight.meta, "measured": {"u": "not measured (test)", "v": "not measured"}})
+    flight = dataclasses.replace(
+        short_flight,
+        meta={**short_flight.meta, "measured": {"u": "not measured (test)", "v": "not measured"}},
+    )
     dataset = build_dataset([flight], validation_fraction=0.2, trim="mean")
     assert dataset.unmeasured("u") and not dataset.unmeasured("w")
     co = Coevolution(dataset, "p_dot", TINY)
@@ -321,9 +379,12 @@ def test_unmeasured_states_are_never_leaves(short_flight):
     read = {names[c - VAR_BASE] for t in state.models for c in t.codes[: t.size] if c >= VAR_BASE}
     assert read and not read & {"u", "v"}
     # the same data with every state measured offers all of them
-    assert Coevolution(build_dataset([short_flight], validation_fraction=0.2, trim="mean"),
-                       "p_dot",
-                       TINY).params.variables is None
+    assert (
+        Coevolution(
+            build_dataset([short_flight], validation_fraction=0.2, trim="mean"), "p_dot", TINY
+        ).params.variables
+        is None
+    )
 
 
 def test_excluded_leaves_are_never_read_and_unknown_names_are_refused(short_dataset):

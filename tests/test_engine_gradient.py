@@ -26,8 +26,7 @@ from gpquad.study.config import load_config, override
 from gpquad.study.runner import run_experiment
 
 EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
-NEW = {"constant_fit": "gauss-newton", "final_selection": "bic", "term_search": True,
-       "linear_seed": True}
+NEW = {"constant_fit": "lm", "selection": "bic", "term_search": True, "linear_seed": True}
 
 
 @pytest.fixture(scope="module")
@@ -212,16 +211,15 @@ def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
     assert np.array_equal(state.model_errors, loaded.model_errors)
 
 
-def test_paper_defaults_leave_the_new_features_off():
+def test_paper_config_leaves_the_new_features_off():
     ev = load_config(EXPERIMENTS / "paper.toml").evolution
-    assert (ev.constant_fit, ev.final_selection, ev.term_search) == ("nelder-mead", "prune",
-                                                                      False)
-    assert ev.attitude_weight == 0.0
+    assert (ev.constant_fit, ev.selection, ev.term_search, ev.finish) == ("none", "prune",
+                                                                          False, ())
 
 
 @pytest.mark.parametrize("field, value", [
-    ("constant_fit", "newton"), ("final_selection", "aic"), ("term_min_gain", 1.5),
-    ("gradient_steps", -1), ("attitude_weight", -0.5)])
+    ("constant_fit", "newton"), ("selection", "aic"), ("term_min_gain", 1.5),
+    ("gradient_steps", -1), ("finish", ("repair", "repair"))])
 def test_bad_engine_settings_name_their_field(field, value):
     cfg = tiny_config()
     bad = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,

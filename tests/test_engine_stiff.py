@@ -26,7 +26,7 @@ from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import random_tree
 from gpquad.errors import GpquadError
-from gpquad.study.config import Config, EvolutionConfig, validate
+from gpquad.study.config import Config, preset_evolution, validate
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 STIFF = "544.0*(u_R - phi) - 46.6*p"
@@ -76,8 +76,9 @@ def test_growing_horizon_finds_the_stiff_loop_where_a_direct_fit_does_not(stiff_
 
 
 def test_linear_seed_starts_a_climber_in_the_loops_basin(stiff_dataset):
-    ev_cfg = EvolutionConfig(constant_fit="gauss-newton", linear_seed=True, window_steps=250,
-                             n_models=4, exclude_leaves=("psi",))
+    ev_cfg = preset_evolution(
+        constant_fit="lm", linear_seed=True, window_s=10.0, n_models=4, exclude_leaves=("psi",)
+    )
     co = Coevolution(stiff_dataset, "p_dot", ev_cfg)
     seeded = co.linear_seed()
     assert seeded is not None and seeded.depth <= ev_cfg.max_depth
@@ -94,8 +95,9 @@ def test_linear_seed_starts_a_climber_in_the_loops_basin(stiff_dataset):
     # no random draw: the other climbers are those of a run without the seed
     plain = Coevolution(stiff_dataset, "p_dot", dataclasses.replace(ev_cfg, linear_seed=False))
     other = plain.init_state(1)
-    assert [m.codes.tolist() for m in state.models[1:]] == \
-        [m.codes.tolist() for m in other.models[1:]]
+    assert [m.codes.tolist() for m in state.models[1:]] == [
+        m.codes.tolist() for m in other.models[1:]
+    ]
 
 
 def test_linear_tree_round_trips_its_coefficients():
@@ -104,8 +106,9 @@ def test_linear_tree_round_trips_its_coefficients():
     assert coefs.tolist() == [1.5, -2.0, 3.25] and constant == 0.5
     assert coefficients_of(tree, [10, 0])[0].tolist() == [3.25, 1.5]
     # the shallow sum reorders its terms: the constant and the first term come last
-    four = linear_tree([0, 6, 10, 12], np.array([1.5, -2.0, 3.25, 7.0]), 0.5,
-                       np.zeros(4, dtype=int))
+    four = linear_tree(
+        [0, 6, 10, 12], np.array([1.5, -2.0, 3.25, 7.0]), 0.5, np.zeros(4, dtype=int)
+    )
     assert [int(c) - 5 for c in four.codes if c >= 5] == [6, 10, 12, 0]
     coefs, constant = coefficients_of(four, [0, 6, 10, 12])
     assert coefs.tolist() == [1.5, -2.0, 3.25, 7.0] and constant == 0.5
@@ -114,9 +117,15 @@ def test_linear_tree_round_trips_its_coefficients():
 
 def _evaluate(tree: Tree, table: np.ndarray) -> np.ndarray:
     samples = np.arange(5, len(table), dtype=np.int64)
-    return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
-                           np.ascontiguousarray(table[:, :9]),
-                           np.ascontiguousarray(table[:, 9:]), samples)
+    return eval_on_samples(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        np.ascontiguousarray(table[:, :9]),
+        np.ascontiguousarray(table[:, 9:]),
+        samples,
+    )
 
 
 @settings(max_examples=60, deadline=None)
@@ -124,7 +133,7 @@ def _evaluate(tree: Tree, table: np.ndarray) -> np.ndarray:
 def test_one_gain_per_term_is_the_same_function(seed):
     """with_term_coefficients only regroups and adds unit gains: same values everywhere."""
     rng = np.random.default_rng(seed)
-    co_cfg = EvolutionConfig()
+    co_cfg = preset_evolution()
     from gpquad.engine.evolve.coevolution import variation_params
 
     tree = random_tree(RandomStream(rng), variation_params(co_cfg, 4))
@@ -144,13 +153,14 @@ def test_term_candidates_give_every_term_a_gain():
     assert all(c.depth <= 5 for c in candidates) and len(candidates) > 100
 
 
-@pytest.mark.parametrize("fields, field", [
-    ({"linear_seed": True}, "evolution.linear_seed"),  # needs gauss-newton
-    ({"constant_fit": "gauss-newton", "fit_horizons": (10, 2)}, "evolution.fit_horizons"),
-    ({"constant_fit": "gauss-newton", "fit_horizons": (0,)}, "evolution.fit_horizons"),
-    ({"constant_fit": "gauss-newton", "fit_horizons": (750,)}, "evolution.fit_horizons"),
-])
+@pytest.mark.parametrize(
+    "fields, field",
+    [
+        ({"linear_seed": True}, "evolution.linear_seed"),  # needs the LM constant fit
+        ({"linear_seed": True, "constant_fit": "nelder-mead"}, "evolution.linear_seed"),
+    ],
+)
 def test_bad_stiff_loop_settings_are_refused(fields, field):
-    cfg = Config(evolution=dataclasses.replace(EvolutionConfig(), **fields))
+    cfg = Config(evolution=dataclasses.replace(preset_evolution(), **fields))
     with pytest.raises(GpquadError, match=field.replace(".", r"\.")):
         validate(cfg, "x.toml")

@@ -21,8 +21,9 @@ from gpquad.study.config import MEDIAN_MODEL
 from gpquad.study.store import write_json
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
-QUICK = ('[evolution]\ntargets = ["p_dot"]\niterations = 1\nmodel_generations = 2\n'
-         'test_generations = 2\nwindow_steps = 60\ntest_offset_max = 30\n'
+QUICK = ('preset = "paper"\n[evolution]\ntargets = ["p_dot"]\niterations = 1\n'
+         'model_generations = 2\n'
+         'test_generations = 2\nwindow_s = 2.4\n'
          'simplify_generations = 2\n[simulator]\nduration_s = 40.0\n')
 
 

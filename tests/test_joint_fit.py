@@ -12,7 +12,7 @@ from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models import finish, joint_fit
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.study.config import EvolutionConfig, SimulatorConfig
+from gpquad.study.config import SimulatorConfig, preset_evolution
 
 TRUTH = dict(SimulatorConfig().equations)
 
@@ -27,8 +27,14 @@ def model_of(equations: dict[str, str], dataset) -> DiscoveredModel:
     eqs = {}
     for target, text in equations.items():
         expr, delays = parse_equation(text, dataset.input_names)
-        eqs[target] = Equation(target, from_sympy(expr, delays, dataset.input_names),
-                               dataset.input_names, np.nan, np.nan, dict(dataset.trim))
+        eqs[target] = Equation(
+            target,
+            from_sympy(expr, delays, dataset.input_names),
+            dataset.input_names,
+            np.nan,
+            np.nan,
+            dict(dataset.trim),
+        )
     return DiscoveredModel(eqs, dataset.input_names, dict(dataset.trim), dataset.dt, 1, {})
 
 
@@ -41,15 +47,20 @@ def _consts(tree):
 def test_perturbed_constants_come_back_to_the_truth(raw_dataset):
     """Per-equation errors that the full model integrates (a pitch gain 8 % low, a drag
     30 % high, a thrust gain 3 % high) are undone by the joint refit, to 0.5 %."""
-    wrong = dict(TRUTH, q_dot="-9.0*u_P - 3.3*q", a_x="10.0*theta - 0.78*u",
-                 a_z="29.0*u_T(t-5) - w - 9.81")
+    wrong = dict(
+        TRUTH, q_dot="-9.0*u_P - 3.3*q", a_x="10.0*theta - 0.78*u", a_z="29.0*u_T(t-5) - w - 9.81"
+    )
     refitted, report = joint_fit.joint_refit(model_of(wrong, raw_dataset), raw_dataset)
     assert report["accepted"] and report["judged_on"] == "validation"
     assert report["error_after"] < 1e-4 * report["error_before"]
     truth = model_of(TRUTH, raw_dataset)
     for target in TARGET_NAMES:
-        np.testing.assert_allclose(_consts(refitted.equations[target].tree),
-                                   _consts(truth.equations[target].tree), rtol=5e-3, atol=1e-3)
+        np.testing.assert_allclose(
+            _consts(refitted.equations[target].tree),
+            _consts(truth.equations[target].tree),
+            rtol=5e-3,
+            atol=1e-3,
+        )
 
 
 def test_a_refit_that_does_not_help_is_not_kept(raw_dataset, monkeypatch):
@@ -68,30 +79,38 @@ def test_a_refit_that_does_not_help_is_not_kept(raw_dataset, monkeypatch):
 def test_unmeasured_states_keep_their_equations(raw_dataset):
     """With u and v unmeasured (a log without horizontal velocity), a_x and a_y are not
     refitted and u, v are not in the objective."""
-    info = [dict(f, measured={**f.get("measured", {}), "u": "not logged", "v": "not logged"})
-            for f in raw_dataset.flight_info]
+    info = [
+        dict(f, measured={**f.get("measured", {}), "u": "not logged", "v": "not logged"})
+        for f in raw_dataset.flight_info
+    ]
     dataset = dataclasses.replace(raw_dataset, flight_info=info)
     wrong = dict(TRUTH, a_x="10.0*theta - 0.9*u", q_dot="-9.0*u_P - 3.3*q")
     refitted, report = joint_fit.joint_refit(model_of(wrong, dataset), dataset)
     assert report["states"] == ["w", "p", "q", "r"]
     assert _consts(refitted.equations["a_x"].tree) == [-0.9, 10.0]
     assert report["accepted"]
-    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3],
-                               rtol=5e-3)
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=5e-3)
 
 
 def test_finish_model_only_with_the_option_and_six_equations(raw_dataset, tmp_path):
     model = model_of(TRUTH, raw_dataset)
-    off = EvolutionConfig()
+    off = preset_evolution()
+
     def unchanged(done, before):  # no refit: the same trees, only the printing digits set
-        return done.joint_fit is None and all(
-            np.array_equal(done.equations[t].tree.values, e.tree.values)
-            for t, e in before.equations.items()) and set(done.equations) == set(before.equations)
+        return (
+            done.joint_fit is None
+            and all(
+                np.array_equal(done.equations[t].tree.values, e.tree.values)
+                for t, e in before.equations.items()
+            )
+            and set(done.equations) == set(before.equations)
+        )
 
     assert unchanged(finish.finish_model(model, raw_dataset, off), model)
-    on = dataclasses.replace(off, joint_fit=True)
-    five = dataclasses.replace(model, equations={t: e for t, e in model.equations.items()
-                                                 if t != "r_dot"})
+    on = dataclasses.replace(off, finish=("joint_fit",))
+    five = dataclasses.replace(
+        model, equations={t: e for t, e in model.equations.items() if t != "r_dot"}
+    )
     assert unchanged(finish.finish_model(five, raw_dataset, on), five)
     done = finish.finish_model(model, raw_dataset, on)
     assert done.joint_fit["constants"] == 13 and done.joint_fit["judged_on"] == "validation"
@@ -135,15 +154,14 @@ def test_sweep_full_models_are_refitted_when_configured(raw_dataset):
     eqs = model_of(dict(TRUTH, q_dot="-9.0*u_P - 3.3*q"), raw_dataset).equations
     runs = {t: [SimpleNamespace(equation=e)] for t, e in eqs.items()}
     choice = {t: 0 for t in runs}
-    cfg = Config()
+    cfg = Config(evolution=preset_evolution())
     plain = assembled(choice, runs, raw_dataset, cfg)
     assert plain.joint_fit is None and plain.equations == eqs
-    on = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution, joint_fit=True))
+    on = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
+                                                                finish=("joint_fit",)))
     refitted = assembled(choice, runs, raw_dataset, on)
     assert refitted.joint_fit["accepted"]
-    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3],
-                               rtol=5e-3)
-
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=5e-3)
 
 
 def test_significant_drop_needs_more_than_the_windows_spread():
@@ -154,8 +172,7 @@ def test_significant_drop_needs_more_than_the_windows_spread():
     mixed -= (mixed.sum() - before.sum() + 0.05) / 12  # total 0.05 lower
     assert mixed.sum() < before.sum()
     assert not joint_fit.significant_drop(before, mixed)
-    assert joint_fit.significant_drop([1.0], [0.9]) and not joint_fit.significant_drop([1.0],
-                                                                                        [1.1])
+    assert joint_fit.significant_drop([1.0], [0.9]) and not joint_fit.significant_drop([1.0], [1.1])
 
 
 def test_a_large_skewed_drop_in_every_window_is_kept_and_a_small_one_is_not():
@@ -163,10 +180,12 @@ def test_a_large_skewed_drop_in_every_window_is_kept_and_a_small_one_is_not():
     every window lower, one holding most of the drop; the t statistic is below 2, the sum
     falls to a quarter. Kept; the same windows with the sum falling only to 60 %, or one
     window worse, are not."""
-    before = np.array([0.0050, 0.0068, 0.0131, 0.0160, 0.0020, 0.0778, 0.0040, 0.0068,
-                       0.0032, 0.0020, 0.0072])
-    after = np.array([0.0042, 0.0030, 0.0028, 0.0042, 0.0015, 0.0032, 0.0025, 0.0059,
-                      0.0024, 0.0012, 0.0053])
+    before = np.array(
+        [0.0050, 0.0068, 0.0131, 0.0160, 0.0020, 0.0778, 0.0040, 0.0068, 0.0032, 0.0020, 0.0072]
+    )
+    after = np.array(
+        [0.0042, 0.0030, 0.0028, 0.0042, 0.0015, 0.0032, 0.0025, 0.0059, 0.0024, 0.0012, 0.0053]
+    )
     drop = before - after
     assert drop.mean() < joint_fit.SIGNIFICANCE * drop.std(ddof=1) / np.sqrt(drop.size)
     assert joint_fit.significant_drop(before, after)
@@ -176,4 +195,3 @@ def test_a_large_skewed_drop_in_every_window_is_kept_and_a_small_one_is_not():
     one_worse = after.copy()
     one_worse[0] = before[0] + 1e-4
     assert not joint_fit.significant_drop(before, one_worse)
-

@@ -16,7 +16,13 @@ from gpquad.data.simulator import simulate
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.errors import GpquadError
 from gpquad.models import finish, stability
-from gpquad.study.config import Config, EvolutionConfig, SimulatorConfig, config_from_dict
+from gpquad.study.config import (
+    Config,
+    SimulatorConfig,
+    VehicleConfig,
+    config_from_dict,
+    preset_evolution,
+)
 
 TRUTH = dict(SimulatorConfig().equations)
 FLIP = ("u_R", "u_Y")
@@ -46,10 +52,12 @@ def test_mirrored_arrays_are_the_pipelines_arrays_of_the_mirrored_flight(short_f
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("flip, symmetric", [(FLIP, True), (("u_R",), False),
-                                             (("u_R", "u_P", "u_Y"), False)])
+@pytest.mark.parametrize(
+    "flip, symmetric", [(FLIP, True), (("u_R",), False), (("u_R", "u_P", "u_Y"), False)]
+)
 def test_the_median_model_flies_its_mirrored_flight_only_with_the_right_flips(
-        short_flight, flip, symmetric):
+    short_flight, flip, symmetric
+):
     """The truth is symmetric: with u_R and u_Y flipped it flies the mirrored flight with
     zero error; with the wrong inputs flipped (the bad case) it does not."""
     from gpquad.engine.tree.export import from_sympy, parse_equation
@@ -75,9 +83,13 @@ def turning_dataset():
     """A flight that keeps turning right (r from 0 to 1.1 rad/s, median 0.66): the yaw
     stick trimmed at -0.15 and no heading hold; the truth (the median model) is symmetric."""
     base = SimulatorConfig()
-    sim = dataclasses.replace(base, duration_s=60.0, seed=2, trim={**base.trim, "u_Y": -0.15},
-                              pilot_gains={k: v for k, v in base.pilot_gains.items()
-                                           if k != "u_Y"})
+    sim = dataclasses.replace(
+        base,
+        duration_s=60.0,
+        seed=2,
+        trim={**base.trim, "u_Y": -0.15},
+        pilot_gains={k: v for k, v in base.pilot_gains.items() if k != "u_Y"},
+    )
     return build_dataset([simulate(sim, INPUTS)], validation_fraction=0.2, trim="none")
 
 
@@ -85,8 +97,7 @@ def turning_model(ds, front=(TRUTH["a_z"], ONE_SIDED_Z)):
     return model_of(dict(TRUTH, a_z=ONE_SIDED_Z), ds, {"a_z": list(front)})
 
 
-def test_the_mirrored_flights_expose_a_one_sided_equation_and_the_repair_swaps_it(
-        turning_dataset):
+def test_the_mirrored_flights_expose_a_one_sided_equation_and_the_repair_swaps_it(turning_dataset):
     ds = turning_dataset
     assert ds.arrays.states[:, 8].min() > -0.1  # the flight never turns left
     model = turning_model(ds)
@@ -114,13 +125,16 @@ def test_the_mirror_never_trades_a_recorded_flight(turning_dataset):
 def test_finish_model_flies_the_mirror_only_when_asked_and_the_inputs_exist(turning_dataset):
     ds = turning_dataset
     model = turning_model(ds)
-    repair = dataclasses.replace(EvolutionConfig(), stability_repair=True)
+    repair = preset_evolution(finish=["repair"])
     plain = finish.finish_model(model, ds, repair)
     assert "mirrored" not in plain.stability
-    mirrored = finish.finish_model(model, ds, dataclasses.replace(repair, mirror_inputs=FLIP))
+    mirrored = finish.finish_model(model, ds, repair, VehicleConfig(mirror_inputs=FLIP))
     assert mirrored.stability["mirrored_diverged_after"] == 0
-    unknown = dataclasses.replace(repair, mirror_inputs=("u_X",))
-    assert finish.mirror_inputs(unknown, ds) == ()
+    asymmetric = finish.finish_model(model, ds, repair,
+                                     VehicleConfig(symmetric=False, mirror_inputs=FLIP))
+    assert "mirrored" not in asymmetric.stability
+    assert VehicleConfig(mirror_inputs=("u_X",)).flipped(ds.input_names) == ()
+    assert VehicleConfig(mirror_inputs=FLIP).flipped(ds.input_names) == FLIP
 
 
 def test_score_counts_the_mirrored_windows_that_diverge(turning_dataset):
@@ -141,11 +155,12 @@ def test_score_counts_the_mirrored_windows_that_diverge(turning_dataset):
 
 
 def test_config_checks_the_mirrored_inputs():
-    ok = config_from_dict({"evolution": {"stability_repair": True, "mirror_inputs": list(FLIP)}})
-    assert ok.evolution.mirror_inputs == FLIP
-    with pytest.raises(GpquadError, match=r"mirror_inputs\[1\]"):
-        config_from_dict({"evolution": {"stability_repair": True,
-                                        "mirror_inputs": ["u_R", "u_Q"]}})
-    # the parity report and the symmetric equations use it without the repair
-    assert config_from_dict({"evolution": {"mirror_inputs": list(FLIP)}}).evolution.mirror_inputs
-    assert Config().evolution.mirror_inputs == ()
+    ok = config_from_dict({"vehicle": {"mirror_inputs": list(FLIP)}})
+    assert ok.vehicle.mirror_inputs == FLIP
+    with pytest.raises(GpquadError, match=r"vehicle.mirror_inputs\[1\]"):
+        config_from_dict({"vehicle": {"mirror_inputs": ["u_R", "u_Q"]}})
+    # an old config's key moves to [vehicle] with a note
+    notes = []
+    old = config_from_dict({"evolution": {"mirror_inputs": list(FLIP)}}, notes=notes)
+    assert old.vehicle.mirror_inputs == FLIP and "vehicle.mirror_inputs" in notes[0]
+    assert Config().vehicle.mirror_inputs == FLIP and Config().vehicle.symmetric

@@ -16,7 +16,7 @@ from gpquad.engine.tree.polynomial import MAX_MONOMIALS, expand, monomial_terms
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import random_tree
 from gpquad.engine.variables import terminal_names
-from gpquad.study.config import EvolutionConfig
+from gpquad.study.config import preset_evolution
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
@@ -33,9 +33,15 @@ def _as_tree(poly, delays):
 
 def _evaluate(tree, table):
     samples = np.arange(5, len(table), dtype=np.int64)
-    return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
-                           np.ascontiguousarray(table[:, :9]),
-                           np.ascontiguousarray(table[:, 9:]), samples)
+    return eval_on_samples(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        np.ascontiguousarray(table[:, :9]),
+        np.ascontiguousarray(table[:, 9:]),
+        samples,
+    )
 
 
 def test_a_product_of_sums_becomes_its_monomials():
@@ -69,17 +75,25 @@ def test_division_by_a_constant_scales_and_by_a_variable_is_not_expanded():
 
 
 def test_too_many_monomials_are_not_expanded():
-    text = "*".join(f"({a} + {b})" for a, b in [("p", "q"), ("r", "u"), ("v", "w"),
-                                                    ("phi", "theta"), ("u_R", "u_P"),
-                                                    ("u_T", "u_Y")])
-    assert 2 ** 6 > MAX_MONOMIALS and expand(*_tree_arrays(text)) is None
+    text = "*".join(
+        f"({a} + {b})"
+        for a, b in [
+            ("p", "q"),
+            ("r", "u"),
+            ("v", "w"),
+            ("phi", "theta"),
+            ("u_R", "u_P"),
+            ("u_T", "u_Y"),
+        ]
+    )
+    assert 2**6 > MAX_MONOMIALS and expand(*_tree_arrays(text)) is None
 
 
 @settings(max_examples=80, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_the_expansion_is_the_same_function(seed):
     rng = np.random.default_rng(seed)
-    tree = random_tree(RandomStream(rng), variation_params(EvolutionConfig(), 4))
+    tree = random_tree(RandomStream(rng), variation_params(preset_evolution(), 4))
     poly = expand(tree.codes, tree.values)
     if poly is None:  # only a division by a variable, or too many monomials
         expr = sp.expand(to_sympy(tree, INPUTS))

@@ -10,7 +10,7 @@ import pytest
 
 from gpquad.models.analysis import compare_to_truth
 from gpquad.study.config import MEDIAN_MODEL, load_config, override
-from gpquad.study.runner import identify
+from gpquad.study.search import identify
 
 QUICKSTART = Path(__file__).resolve().parents[1] / "experiments" / "quickstart.toml"
 

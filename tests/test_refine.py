@@ -11,7 +11,7 @@ from test_stability import model_of
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.refine import RefineProblem, library, refine, refine_equation, refined_summary
-from gpquad.study.config import EvolutionConfig, SimulatorConfig, config_from_dict
+from gpquad.study.config import SimulatorConfig, config_from_dict, preset_evolution
 
 TRUTH = dict(SimulatorConfig().equations)
 #: r_dot of the truth plus a product of the pitch and roll commands at two delays (the yaw
@@ -26,14 +26,24 @@ def dataset():
 
 
 def evolution(n_terms=3):
-    return dataclasses.replace(EvolutionConfig(), window_steps=250, max_delay=5,
-                               constant_fit="gauss-newton", term_min_gain=0.01,
-                               refine_terms={"r_dot": n_terms})
+    return preset_evolution(
+        window_s=10.0,
+        max_delay=5,
+        constant_fit="lm",
+        term_min_gain=0.01,
+        finish=["refine"],
+        refine_terms={"r_dot": n_terms},
+    )
 
 
 def coefficients(equation) -> dict:
-    return {str(k): float(v) for k, v in
-            equation.sympy().xreplace(equation.shown_inputs()).as_coefficients_dict().items()}
+    return {
+        str(k): float(v)
+        for k, v in equation.sympy()
+        .xreplace(equation.shown_inputs())
+        .as_coefficients_dict()
+        .items()
+    }
 
 
 def test_the_missing_product_of_taps_is_found_with_its_coefficient(dataset):
@@ -90,13 +100,16 @@ def test_a_lagged_equation_round_trips_and_says_so(dataset):
     # flown, the lag delays the response: the lagged model differs from the plain one
     starts = np.array([100, 400])
     plain = DiscoveredModel({"r_dot": eq}, dataset.input_names, {}, dataset.dt, 1, {})
-    diff = np.abs(model.simulate(dataset, starts, 50)[..., 8]
-                  - plain.simulate(dataset, starts, 50)[..., 8]).max()
+    diff = np.abs(
+        model.simulate(dataset, starts, 50)[..., 8] - plain.simulate(dataset, starts, 50)[..., 8]
+    ).max()
     assert diff > 1e-3
 
 
-@pytest.mark.parametrize("value, message", [
-    (-1, "between 0"), ({"x_dot": 3}, "unknown target"), (True, "expected int"), (65, "and 64")])
+@pytest.mark.parametrize(
+    "value, message",
+    [(-1, "between 0"), ({"x_dot": 3}, "unknown target"), (True, "expected int"), (65, "and 64")],
+)
 def test_refine_terms_is_checked(value, message):
     with pytest.raises(GpquadError, match=message):
         config_from_dict({"evolution": {"refine_terms": value}})
@@ -132,11 +145,13 @@ def test_a_refinement_the_full_model_flies_worse_is_undone(dataset):
     assert kept.equations["q_dot"] is found.equations["q_dot"]
     assert kept.equations["r_dot"] is refined.equations["r_dot"]
     # nothing to undo when every refinement flies better
-    good = dataclasses.replace(found, equations={**found.equations,
-                                                 "r_dot": refined.equations["r_dot"]})
+    good = dataclasses.replace(
+        found, equations={**found.equations, "r_dot": refined.equations["r_dot"]}
+    )
     assert keep_what_flies(good, found, dataset, FLIP)[1] == []
     assert "made the full model fly worse" in refined_summary(
-        {"q_dot": {"reverted": True, "lag": 0.0, "added": []}})
+        {"q_dot": {"reverted": True, "lag": 0.0, "added": []}}
+    )
 
 
 def test_a_candidate_starts_from_the_fitted_constants_and_its_residual_coefficient(dataset):
@@ -162,8 +177,9 @@ def test_without_validation_windows_nothing_is_refined_and_the_run_says_why(data
     """A refinement is chosen on validation windows; with none, fitting it would be wasted
     and choosing it by training error alone would keep every term: the found equation stays."""
     found = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
-    refined, report = refine_equation(found, dataclasses.replace(dataset, validation=[]),
-                                      evolution(), FLIP)
+    refined, report = refine_equation(
+        found, dataclasses.replace(dataset, validation=[]), evolution(), FLIP
+    )
     assert refined is found and report["no_validation"] and report["tried"] == 0
     assert report["validation_before"] is None  # model.json stays valid JSON
     assert "data.validation_fraction" in refined_summary({"r_dot": report})

@@ -2,7 +2,6 @@
 whose truth is known: an equation that makes the full model diverge is swapped for the
 front alternative that flies."""
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ from gpquad.data.dataset import build_dataset
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.models import finish, stability
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.study.config import EvolutionConfig, SimulatorConfig
+from gpquad.study.config import SimulatorConfig, preset_evolution
 
 TRUTH = dict(SimulatorConfig().equations)
 #: Pitch damping with the wrong sign: q grows as exp(3.3 t), the full model diverges.
@@ -25,23 +24,31 @@ def raw_dataset(short_flight):
 
 def equation(target, text, dataset, front=()):
     expr, delays = parse_equation(text, dataset.input_names)
-    eq = Equation(target, from_sympy(expr, delays, dataset.input_names), dataset.input_names,
-                  0.5, np.nan, dict(dataset.trim))
+    eq = Equation(
+        target,
+        from_sympy(expr, delays, dataset.input_names),
+        dataset.input_names,
+        0.5,
+        np.nan,
+        dict(dataset.trim),
+    )
     eq.candidates = [equation(target, t, dataset).summary() for t in front]
     return eq
 
 
 def model_of(equations, dataset, fronts=None):
-    eqs = {t: equation(t, text, dataset, (fronts or {}).get(t, ()))
-           for t, text in equations.items()}
+    eqs = {
+        t: equation(t, text, dataset, (fronts or {}).get(t, ())) for t, text in equations.items()
+    }
     return DiscoveredModel(eqs, dataset.input_names, dict(dataset.trim), dataset.dt, 1, {})
 
 
 def test_alternatives_rebuild_the_front(raw_dataset):
     eq = equation("a_z", "1.0", raw_dataset, ["28.2*u_T(t-5) - w - 9.81", "-w"])
     alts = eq.alternatives()
-    assert [a.text() for a in alts] == [equation("a_z", t, raw_dataset).text()
-                                        for t in ("28.2*u_T(t-5) - w - 9.81", "-w")]
+    assert [a.text() for a in alts] == [
+        equation("a_z", t, raw_dataset).text() for t in ("28.2*u_T(t-5) - w - 9.81", "-w")
+    ]
     assert alts[0].used_delays() == {"u_T": 5}
 
 
@@ -52,8 +59,9 @@ def test_a_diverging_equation_is_swapped_for_the_front_alternative_that_flies(ra
     assert report["judged_on"] == "validation" and report["diverged_before"] > 0
     assert report["diverged_after"] == 0 and report["error_after"] < report["error_before"]
     assert [s["target"] for s in report["swaps"]] == ["q_dot"]
-    assert repaired.equations["q_dot"].text() == equation("q_dot", TRUTH["q_dot"],
-                                                          raw_dataset).text()
+    assert (
+        repaired.equations["q_dot"].text() == equation("q_dot", TRUTH["q_dot"], raw_dataset).text()
+    )
     assert repaired.equations["q_dot"].candidates == model.equations["q_dot"].candidates
     for t in ("a_x", "a_y", "a_z", "p_dot", "r_dot"):
         assert repaired.equations[t] is model.equations[t]
@@ -63,8 +71,7 @@ def test_a_diverging_equation_is_swapped_for_the_front_alternative_that_flies(ra
 def test_no_swap_when_no_alternative_helps(raw_dataset):
     """The check can fail: with only diverging alternatives the model stays as it was and
     the report says it still diverges."""
-    model = model_of(dict(TRUTH, q_dot=UNSTABLE_Q), raw_dataset,
-                     {"q_dot": ["-9.8*u_P + 5.0*q"]})
+    model = model_of(dict(TRUTH, q_dot=UNSTABLE_Q), raw_dataset, {"q_dot": ["-9.8*u_P + 5.0*q"]})
     repaired, report = stability.repair_stability(model, raw_dataset)
     assert report["swaps"] == [] and report["diverged_after"] == report["diverged_before"] > 0
     assert repaired.equations["q_dot"].text() == model.equations["q_dot"].text()
@@ -81,60 +88,16 @@ def test_a_model_that_flies_is_left_alone(raw_dataset):
 
 def test_finish_model_repairs_only_with_the_option(raw_dataset):
     model = model_of(dict(TRUTH, q_dot=UNSTABLE_Q), raw_dataset, {"q_dot": [TRUTH["q_dot"]]})
-    off = finish.finish_model(model, raw_dataset, EvolutionConfig())
-    assert off.stability is None and off.equations["q_dot"].text() == model.equations[
-        "q_dot"].text()
-    on = finish.finish_model(model, raw_dataset,
-                             dataclasses.replace(EvolutionConfig(), stability_repair=True))
+    off = finish.finish_model(model, raw_dataset, preset_evolution())
+    assert (
+        off.stability is None and off.equations["q_dot"].text() == model.equations["q_dot"].text()
+    )
+    on = finish.finish_model(
+        model, raw_dataset, preset_evolution(finish=["repair"])
+    )
     assert on.stability["diverged_after"] == 0
     assert on.equations["q_dot"].text() == equation("q_dot", TRUTH["q_dot"], raw_dataset).text()
     again = DiscoveredModel.from_dict(on.to_dict())  # the report is kept in model.json
     assert again.stability == on.stability
 
 
-def test_front_selection_swaps_an_equation_that_flies_significantly_worse(raw_dataset):
-    """With select, a model that flies but carries a wrong a_x (no drag term) takes the
-    front's truth, which flies better on every validation window; without, it stays."""
-    wrong = "9.0*theta"
-    model = model_of(dict(TRUTH, a_x=wrong), raw_dataset,
-                     {"a_x": ["10.0*theta", TRUTH["a_x"]]})
-    kept, plain = stability.repair_stability(model, raw_dataset)
-    assert plain["swaps"] == [] and kept is model
-    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
-    assert report["diverged_before"] == 0 and report["select"] is True
-    assert [(s["target"], s["why"]) for s in report["swaps"]] == [("a_x", "error")]
-    assert chosen.equations["a_x"].text() == equation("a_x", TRUTH["a_x"], raw_dataset).text()
-    assert report["error_after"] < 0.5 * report["error_before"]
-    assert "a_x" in stability.stability_summary(report)
-
-
-def test_front_selection_keeps_the_truth_against_worse_alternatives(raw_dataset):
-    """The check can fail the other way: the truth's fronts hold only worse equations and
-    slightly perturbed copies, and nothing is swapped."""
-    fronts = {"a_x": ["10.0*theta", TRUTH["a_x"].replace("0.6", "0.61")],
-              "q_dot": ["-9.8*u_P"]}
-    model = model_of(TRUTH, raw_dataset, fronts)
-    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
-    assert report["swaps"] == [] and report["error_after"] == report["error_before"]
-    assert all(chosen.equations[t].text() == model.equations[t].text() for t in TRUTH)
-    assert "fly significantly better: none" in stability.stability_summary(report)
-
-
-def test_front_selection_alone_turns_the_swaps_on(raw_dataset):
-    model = model_of(dict(TRUTH, a_x="9.0*theta"), raw_dataset, {"a_x": [TRUTH["a_x"]]})
-    on = finish.finish_model(model, raw_dataset,
-                             dataclasses.replace(EvolutionConfig(), front_selection=True))
-    assert on.stability["select"] and on.stability["swaps"][0]["why"] == "error"
-
-
-def test_front_selection_drops_a_term_that_spoils_the_full_model(raw_dataset):
-    """No front at all: a_y with a spurious roll-rate term flies worse than without it, and
-    selection drops that term (constants as they were); the option off keeps it."""
-    spoiled = TRUTH["a_y"] + " + 2.0*p"
-    model = model_of(dict(TRUTH, a_y=spoiled), raw_dataset)
-    chosen, report = stability.repair_stability(model, raw_dataset, select=True)
-    assert [(s["target"], s["why"]) for s in report["swaps"]] == [("a_y", "error")]
-    assert chosen.equations["a_y"].text() == equation("a_y", TRUTH["a_y"], raw_dataset).text()
-    assert stability.term_drops(chosen.equations["r_dot"])[0].tree.size < \
-        chosen.equations["r_dot"].tree.size
-    assert stability.term_drops(equation("a_x", "10.0*theta", raw_dataset)) == []

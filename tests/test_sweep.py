@@ -23,7 +23,8 @@ TINY = {
     "data": {"trim": "mean", "validation_fraction": 0.3},
     "simulator": {"duration_s": 60.0},
     "evolution": {"targets": ["a_z", "p_dot"], "iterations": 2, "model_generations": 8,
-                  "test_generations": 3, "simplify_generations": 3, "window_steps": 50},
+                  "test_generations": 3, "simplify_generations": 3, "window_s": 2.0},
+    "preset": "paper",
     "sweep": {"runs": 2, "full_models": 3, "horizons_s": [1.0, 3.0]},
 }
 
@@ -137,7 +138,7 @@ def test_bad_arguments_fail_before_work(tmp_path):
     with pytest.raises(GpquadError, match="--backend"):
         run_sweep(tiny_config(), tmp_path, backend="mpi")
     with pytest.raises(GpquadError, match="window"):
-        run_sweep(tiny_config(evolution={"window_steps": 5000}), tmp_path)
+        run_sweep(tiny_config(evolution={"window_s": 200.0}), tmp_path)
     assert not (tmp_path / "sweep.json").exists()
 
 
@@ -189,8 +190,8 @@ def test_paper_config_has_the_papers_numbers_each_line_documented():
     ev, sw = cfg.evolution, cfg.sweep
     assert (sw.runs, sw.full_models, ev.iterations) == (30, 30, 30)
     assert (ev.model_generations, ev.test_generations) == (600, 80)
-    assert (ev.n_models, ev.n_tests, ev.suite_size, ev.window_steps) == (14, 5, 6, 750)
-    assert (ev.max_depth, ev.max_delay, ev.p_leaf, ev.p_delay) == (5, 5, 0.7, 0.1)
+    assert (ev.n_models, ev.n_tests, ev.suite_size, ev.window_steps(0.04)) == (14, 5, 6, 750)
+    assert (ev.max_depth, ev.max_delay, ev.gp.p_leaf, ev.gp.p_delay) == (5, 5, 0.7, 0.1)
     assert (sw.input_noise, sw.window_s, sw.horizons_s) == (0.1, 7.0, (1.0, 7.0, 30.0))
     assert round(cfg.data.validation_fraction * 13800) == 2000
     assert cfg.simulator.duration_s * cfg.simulator.rate_hz == 13800

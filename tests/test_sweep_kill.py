@@ -20,6 +20,7 @@ from gpquad.study.sweep_folders import grid, run_dir
 KILL_TOML = """
 name = "kill"
 seed = 9
+preset = "paper"
 [data]
 trim = "mean"
 validation_fraction = 0.3
@@ -31,7 +32,7 @@ iterations = 6
 model_generations = 60
 test_generations = 5
 simplify_generations = 5
-window_steps = 60
+window_s = 2.4
 [sweep]
 runs = 2
 full_models = 3

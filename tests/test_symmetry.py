@@ -9,7 +9,7 @@ from gpquad.data.dataset import build_dataset
 from gpquad.models.analysis import term_contributions
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.symmetry import mirror_odd_terms, parity_summary, term_parity
-from gpquad.study.config import SimulatorConfig
+from gpquad.study.config import SimulatorConfig, preset_evolution
 
 TRUTH = dict(SimulatorConfig().equations)
 FLIP = ("u_R", "u_Y")
@@ -20,9 +20,22 @@ def dataset(short_flight):
     return build_dataset([short_flight], validation_fraction=0.25, trim="none")
 
 
-@pytest.mark.parametrize("term, parity", [
-    ("r", -1), ("q", 1), ("1", 1), ("r**2", 1), ("phi*u_R", 1), ("u_R*u_Y", 1),
-    ("u_Y__tap2", -1), ("p*q*r", 1), ("v*w", -1), ("theta*u_P", 1), ("psi*u_T", -1)])
+@pytest.mark.parametrize(
+    "term, parity",
+    [
+        ("r", -1),
+        ("q", 1),
+        ("1", 1),
+        ("r**2", 1),
+        ("phi*u_R", 1),
+        ("u_R*u_Y", 1),
+        ("u_Y__tap2", -1),
+        ("p*q*r", 1),
+        ("v*w", -1),
+        ("theta*u_P", 1),
+        ("psi*u_T", -1),
+    ],
+)
 def test_term_parity(term, parity):
     assert term_parity(term, FLIP) == parity
 
@@ -37,12 +50,15 @@ def test_the_truth_has_a_symmetric_vehicles_parity(dataset):
 
 
 def test_terms_of_the_wrong_parity_are_found_with_their_share(dataset):
-    model = model_of(dict(TRUTH, a_z=TRUTH["a_z"] + " + 2.0*r",
-                          p_dot=TRUTH["p_dot"] + " + 3.0*q"), dataset)
+    model = model_of(
+        dict(TRUTH, a_z=TRUTH["a_z"] + " + 2.0*r", p_dot=TRUTH["p_dot"] + " + 3.0*q"), dataset
+    )
     found = mirror_odd_terms(model, dataset, FLIP)
     assert set(found) == {"a_z", "p_dot"}
-    rows = {r["term"]: r["share"] for r in term_contributions(model.equations["a_z"], dataset,
-                                                              raw=False)}
+    rows = {
+        r["term"]: r["share"]
+        for r in term_contributions(model.equations["a_z"], dataset, raw=False)
+    }
     assert found["a_z"]["share"] == pytest.approx(rows["r"], rel=1e-12)
     assert found["a_z"]["text"] == "2.0*r"
     assert [t["term"] for t in found["p_dot"]["terms"]] == ["q"]
@@ -69,18 +85,20 @@ def test_symmetrize_drops_the_wrong_parity_and_refits(dataset):
     import dataclasses
 
     from gpquad.models.symmetrize import symmetrize, without_wrong_parity
-    from gpquad.study.config import EvolutionConfig
 
-    model = model_of(dict(TRUTH, a_z="25.0*u_T(t-5) - 0.8*w - 9.0 + 2.0*r",
-                          p_dot=TRUTH["p_dot"] + " + 0.3"), dataset)
+    model = model_of(
+        dict(TRUTH, a_z="25.0*u_T(t-5) - 0.8*w - 9.0 + 2.0*r", p_dot=TRUTH["p_dot"] + " + 0.3"),
+        dataset,
+    )
     assert without_wrong_parity(model.equations["p_dot"], FLIP) is None
     assert without_wrong_parity(model.equations["q_dot"], FLIP) is None
-    evolution = dataclasses.replace(EvolutionConfig(), window_steps=250, max_delay=5)
+    evolution = preset_evolution(window_s=10.0, max_delay=5)
     fixed, report = symmetrize(model, dataset, evolution, FLIP)
     assert list(report) == ["a_z"] and report["a_z"]["dropped"] == ["2.0*r"]
     assert fixed.equations["p_dot"] is model.equations["p_dot"]
-    got = {str(k): float(v) for k, v in
-           fixed.equations["a_z"].sympy().as_coefficients_dict().items()}
+    got = {
+        str(k): float(v) for k, v in fixed.equations["a_z"].sympy().as_coefficients_dict().items()
+    }
     want = {"u_T": 28.2, "w": -1.0, "1": -9.81}
     assert set(got) == set(want)
     for k, v in want.items():
@@ -88,8 +106,9 @@ def test_symmetrize_drops_the_wrong_parity_and_refits(dataset):
     assert fixed.equations["a_z"].delays["u_T"] == 5
     from gpquad.models.symmetrize import symmetrized_summary
 
-    assert symmetrized_summary(report) == ("symmetric equations (terms of the wrong left-right "
-                                           "parity removed): a_z without 2.0*r")
+    assert symmetrized_summary(report) == (
+        "symmetric equations (terms of the wrong left-right parity removed): a_z without 2.0*r"
+    )
     assert "no equation" in symmetrized_summary({})
     again = DiscoveredModel.from_dict(dataclasses.replace(fixed, symmetrized=report).to_dict())
     assert again.symmetrized == report
@@ -99,8 +118,19 @@ def test_symmetric_equations_need_the_mirrored_inputs():
     from gpquad.errors import GpquadError
     from gpquad.study.config import config_from_dict
 
-    with pytest.raises(GpquadError, match="symmetric_equations"):
-        config_from_dict({"evolution": {"symmetric_equations": True}})
-    ok = config_from_dict({"evolution": {"symmetric_equations": True, "stability_repair": True,
-                                         "mirror_inputs": list(FLIP)}})
-    assert ok.evolution.symmetric_equations
+    with pytest.raises(GpquadError, match="vehicle.mirror_inputs"):
+        config_from_dict({"vehicle": {"mirror_inputs": []}})
+    # an asymmetric vehicle needs none; an old config's switches become the finish list
+    assert config_from_dict({"vehicle": {"symmetric": False, "mirror_inputs": []}})
+    notes = []
+    ok = config_from_dict(
+        {
+            "evolution": {
+                "symmetric_equations": True,
+                "stability_repair": True,
+                "mirror_inputs": list(FLIP),
+            }
+        },
+        notes=notes,
+    )
+    assert ok.evolution.finish == ("symmetrize", "repair") and len(notes) == 2

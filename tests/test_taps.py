@@ -29,8 +29,13 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.study.config import Config, EvolutionConfig, config_from_dict, validate
-from gpquad.study.runner import identify
+from gpquad.study.config import (
+    Config,
+    config_from_dict,
+    preset_evolution,
+    validate,
+)
+from gpquad.study.search import identify
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 LAGGING = "-3.0*p + 20.0*u_R(t-1) - 12.0*u_R(t-3)"
@@ -50,7 +55,7 @@ def test_tap_names_and_tiling():
     x = np.arange(6.0).reshape(3, 2)
     tiled = tile_inputs(x, 3)
     assert tiled.shape == (3, 6)
-    assert all(np.array_equal(tiled[:, 2 * k:2 * k + 2], x) for k in range(3))
+    assert all(np.array_equal(tiled[:, 2 * k : 2 * k + 2], x) for k in range(3))
     assert tile_inputs(x, 1) is x
     assert initial_delays(2, 3, 5).tolist() == [0, 0, 1, 1, 2, 2]
     assert initial_delays(1, 3, 1).tolist() == [0, 1, 1]  # clipped at max_delay
@@ -106,18 +111,18 @@ def test_untapped_models_keep_the_paper_layout():
 
 def test_config_bounds_on_input_taps():
     with pytest.raises(GpquadError, match="input_taps"):
-        validate(Config(evolution=EvolutionConfig(input_taps=0)))
+        validate(Config(evolution=preset_evolution(input_taps=0)))
     with pytest.raises(GpquadError, match=r"max_delay \+ 1 \(2\)"):
-        validate(Config(evolution=EvolutionConfig(input_taps=3, max_delay=1)))
-    validate(Config(evolution=EvolutionConfig(input_taps=6)))  # every delay 0..max_delay
+        validate(Config(evolution=preset_evolution(input_taps=3, max_delay=1)))
+    validate(Config(evolution=preset_evolution(input_taps=6)))  # every delay 0..max_delay
     with pytest.raises(GpquadError, match="input_taps"):
-        validate(Config(evolution=EvolutionConfig(input_taps=7, max_delay=6)))
+        validate(Config(evolution=preset_evolution(input_taps=7, max_delay=6)))
 
 
 def test_input_taps_per_target_table():
     cfg = config_from_dict({"evolution": {"input_taps": {"p_dot": 6, "a_x": 2}}})
     assert [cfg.evolution.taps_for(t) for t in ("p_dot", "a_x", "r_dot")] == [6, 2, 1]
-    assert EvolutionConfig(input_taps=4).taps_for("r_dot") == 4
+    assert preset_evolution(input_taps=4).taps_for("r_dot") == 4
     with pytest.raises(GpquadError, match=r"input_taps\.x_dot.*unknown target"):
         config_from_dict({"evolution": {"input_taps": {"x_dot": 2}}}, "exp.toml")
     with pytest.raises(GpquadError, match=r"input_taps\.q_dot.*between 1 and 6"):
@@ -127,13 +132,13 @@ def test_input_taps_per_target_table():
 
 
 def test_each_target_searches_with_its_own_taps(lagging_dataset):
-    ev = EvolutionConfig(input_taps={"p_dot": 3}, window_steps=100)
+    ev = preset_evolution(input_taps={"p_dot": 3}, window_s=4.0)
     assert len(Coevolution(lagging_dataset, "p_dot", ev).dataset.input_names) == 3 * 4
     assert Coevolution(lagging_dataset, "a_x", ev).dataset.input_names == INPUTS
 
 
 def test_a_model_mixing_tap_counts_flies_each_equation_as_alone():
-    lag = _equation(LAGGING)                         # 2 taps (8 delay slots)
+    lag = _equation(LAGGING)  # 2 taps (8 delay slots)
     yaw = _equation("2.0*u_Y(t-2) - 0.5*r", "r_dot")  # 1 tap (4 slots)
     assert (len(lag.tree.delays), len(yaw.tree.delays)) == (8, 4)
     u = np.random.default_rng(3).normal(size=(60, 4))
@@ -159,8 +164,16 @@ def test_control_plant_reads_every_tap():
         history = np.zeros((6, 4))
         history[:, 1] = [0.1, 0.7, -0.4, 0.9, 0.3, -0.2]
         out = np.empty(6)
-        plant_accelerations(*plant.arrays()[:5], state, history, 5, out, np.empty((17, 1)),
-                            np.empty((STACK_ROWS, 1)), np.empty(1))
+        plant_accelerations(
+            *plant.arrays()[:5],
+            state,
+            history,
+            5,
+            out,
+            np.empty((17, 1)),
+            np.empty((STACK_ROWS, 1)),
+            np.empty(1),
+        )
         assert out[3] == pytest.approx(-0.6 + 20.0 * (0.3 - 0.5) - 12.0 * (-0.4 - 0.5))
 
 
@@ -178,11 +191,19 @@ def test_excluded_inputs_stay_out_with_every_tap(lagging_dataset):
 
 
 def _identify(dataset, taps: int) -> Equation:
-    ev = EvolutionConfig(targets=("p_dot",), iterations=2, n_models=4, n_tests=4,
-                         suite_size=4, window_steps=100, test_offset_max=50,
-                         local_search="delays+constants", constant_fit="gauss-newton",
-                         linear_seed=True, final_selection="bic", input_taps=taps,
-                         exclude_leaves=("psi",))
+    ev = preset_evolution(
+        targets=("p_dot",),
+        iterations=2,
+        n_models=4,
+        n_tests=4,
+        suite_size=4,
+        window_s=4.0,
+        constant_fit="lm",
+        linear_seed=True,
+        selection="bic",
+        input_taps=taps,
+        exclude_leaves=("psi",),
+    )
     return identify(dataset, "p_dot", Config(seed=2, evolution=ev))[0]
 
 
@@ -222,9 +243,9 @@ def test_an_equation_reading_one_tap_takes_the_papers_layout():
     u = rng.normal(size=(40, 4))
     raw = DiscoveredModel({"r_dot": eq}, INPUTS, {}, 0.04, 1, {})
     ref = _equation("2.0*u_Y(t-2)", "r_dot")
-    np.testing.assert_array_equal(raw.fly(u).rates,
-                                  DiscoveredModel({"r_dot": ref}, INPUTS, {}, 0.04, 1, {})
-                                  .fly(u).rates)
+    np.testing.assert_array_equal(
+        raw.fly(u).rates, DiscoveredModel({"r_dot": ref}, INPUTS, {}, 0.04, 1, {}).fly(u).rates
+    )
 
 
 def test_taps_enter_term_insertion_alone_or_beside_their_own_input():

@@ -32,7 +32,7 @@ def test_wrapped_function_runs_on_one_thread_and_the_limit_is_lifted_after():
 @needs_blas
 def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
     from gpquad.models import finish
-    from gpquad.study import runner
+    from gpquad.study import search
 
     seen = []
 
@@ -43,16 +43,15 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
         seen.append(blas_threads())
         raise Stop
 
-    monkeypatch.setattr(runner, "Coevolution", record)
+    monkeypatch.setattr(search, "Coevolution", record)
     monkeypatch.setattr(finish, "repair_stability", record)
     with threadpool_limits(limits=2, user_api="blas"):
         if 2 not in blas_threads():
             pytest.skip("no BLAS here runs on two threads")
         with pytest.raises(Stop):
-            runner.identify(None, "p_dot", type("C", (), {"evolution": None})())
+            search.identify(None, "p_dot", type("C", (), {"evolution": None})())
         model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
-        evolution = type("E", (), {"stability_repair": True, "front_selection": False,
-                                    "mirror_inputs": (), "symmetric_equations": False,
+        evolution = type("E", (), {"finish": ("repair",),
                                     "refine_for": staticmethod(lambda target: 0)})()
         with pytest.raises(Stop):
             finish.finish_model(model, None, evolution)

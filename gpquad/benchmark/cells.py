@@ -54,12 +54,12 @@ def recovery_gpquad(model, scenario) -> dict | None:
     return out
 
 
-def _fit(method: str, scenario, seed: int, engine_dir: Path):
+def _fit(method: str, scenario, seed: int, engine):
     """(simulate(starts, steps) on the test data, fit time, record) of a fitted method;
     a scenario with groups is fitted per group, and each window flies its group's model."""
     if not scenario.groups:
-        return _fit_one(method, scenario, seed, engine_dir)
-    fitted = {g: _fit_one(method, sub, seed, engine_dir) for g, sub in scenario.groups.items()}
+        return _fit_one(method, scenario, seed, engine)
+    fitted = {g: _fit_one(method, sub, seed, engine) for g, sub in scenario.groups.items()}
     offsets = scenario.group_offsets()
 
     def simulate(starts, steps):
@@ -80,19 +80,20 @@ def _fit(method: str, scenario, seed: int, engine_dir: Path):
     return simulate, sum(f[1] for f in fitted.values()), record
 
 
-def _fit_one(method: str, scenario, seed: int, engine_dir: Path):
+def _fit_one(method: str, scenario, seed: int, engine):
     test = scenario.test
     if method == "gpquad":
         from gpquad.benchmark.engine import engine_config, fit_gpquad
 
-        cfg, source = engine_config(engine_dir, seed)
+        cfg = engine_config(seed, engine)
         t0 = time.perf_counter()
         model = fit_gpquad(scenario.fit, cfg)
         fit_time = time.perf_counter() - t0
         record = {"equations": {t: e.text() for t, e in model.equations.items()},
                   "equations_raw_inputs": {t: e.text(raw=True)
                                            for t, e in model.equations.items()},
-                  "settings": {"engine_config": source, "evolution": cfg.to_dict()["evolution"]},
+                  "settings": {"evolution": cfg.to_dict()["evolution"],
+                               "vehicle": cfg.to_dict()["vehicle"]},
                   "recovery": recovery_gpquad(model, scenario), "joint_fit": model.joint_fit,
                   "n_parameters": model.n_parameters}
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
@@ -103,12 +104,12 @@ def _fit_one(method: str, scenario, seed: int, engine_dir: Path):
     return (lambda starts, steps: fly(peer.predict, test.arrays, starts, steps)), fit_time, record
 
 
-def run_cell(scenario, method: str, seed: int, out: Path, engine_dir: Path,
+def run_cell(scenario, method: str, seed: int, out: Path, engine,
              horizons_s, fingerprint: str | None = None) -> dict:
     """Fit, fly and score one cell and save it atomically; returns the cell record."""
     cpu0 = time.process_time()
     with PeakRss() as memory:
-        simulate, fit_time, record = _fit(method, scenario, seed, engine_dir)
+        simulate, fit_time, record = _fit(method, scenario, seed, engine)
         t0 = time.perf_counter()
         metrics = evaluate.score(simulate, scenario.test, scenario.measured, horizons_s)
         trace = evaluate.figure_trace(simulate, scenario.test)

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from gpquad.benchmark import cells, peers, scenarios
-from gpquad.benchmark.engine import engine_source
+from gpquad.benchmark.engine import load_engine
 from gpquad.benchmark.rollout import MAX_LAG
 from gpquad.errors import GpquadError
 from gpquad.study.store import provenance, write_json
@@ -57,16 +57,17 @@ def source_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-def method_settings(method: str, engine_file: Path) -> dict:
-    """What a method's cells depend on besides the scenario and seed."""
+def method_settings(method: str, engine) -> dict:
+    """What a method's cells depend on besides the scenario and seed (`engine`: gpquad's
+    Config)."""
     if method == "gpquad":
         from gpquad import __version__
         from gpquad.benchmark.engine import engine_config
 
-        # the parsed settings, not the file's text: a comment does not recompute the cells
-        evolution = engine_config(engine_file.parent, 0)[0].to_dict()["evolution"]
-        return {"engine": evolution, "engine_file": engine_file.name, "gpquad": __version__,
-                "sources": source_hash()}
+        # the parsed settings, not a file's text: a comment does not recompute the cells
+        used = engine_config(0, engine).to_dict()
+        return {"engine": used["evolution"], "vehicle": used["vehicle"],
+                "gpquad": __version__, "sources": source_hash()}
     return {"settings": peers.PEER_SETTINGS.get(method), "version": peers.package_version(method),
             "max_lag": MAX_LAG}
 
@@ -86,16 +87,15 @@ def check_folder(out: Path, settings: dict) -> None:
 
 
 def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_s=(1, 7, 30),
-                  log=print, engine_dir=None, with_gpquad: bool = True) -> dict:
+                  log=print, engine=None, with_gpquad: bool = True) -> dict:
     """Run every missing cell; returns the summary (also written to benchmark.json).
 
-    engine_dir: folder holding recommended.toml or quickstart.toml (default the
-    repository's experiments/). with_gpquad=False runs the peers only (gpquad's cells
-    already in the folder are still reported).
+    engine: a TOML config whose [evolution] and [vehicle] gpquad uses (default: the
+    package's defaults, the recommended engine). with_gpquad=False runs the peers only
+    (gpquad's cells already in the folder are still reported).
     """
     out = Path(out)
-    engine_dir = Path(engine_dir) if engine_dir else scenarios.repo_root() / "experiments"
-    engine_file = engine_source(engine_dir)
+    engine_cfg, engine_source = load_engine(engine)
     settings = {"horizons_s": list(horizons_s)}
     check_folder(out, settings)
     use_peers, skipped_peers = available_peers(peer_names)
@@ -122,7 +122,7 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
             f"and {sc.test.summary()['validation_samples']} test samples "
             f"({time.perf_counter() - t0:.1f} s to build)")
     # a cell is reused only if made with the same method settings on the same flights
-    fingerprints = {n: {m: settings_fingerprint({"method": method_settings(m, engine_file),
+    fingerprints = {n: {m: settings_fingerprint({"method": method_settings(m, engine_cfg),
                                                  "scenario": sc.source}) for m in methods}
                     for n, sc in built.items()}
     todo = [(sc, m, s) for sc in built.values() for m in run_methods
@@ -136,10 +136,10 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
             "scenarios": {n: sc.source for n, sc in built.items()},
             "skipped_scenarios": skipped, "skipped_peers": skipped_peers, "methods": methods,
             "seeds": {m: seeds_of(m, n_seeds) for m in methods},
-            "method_settings": {m: method_settings(m, engine_file) for m in methods},
+            "method_settings": {m: method_settings(m, engine_cfg) for m in methods},
             "fingerprints": fingerprints,
             "peer_versions": {p: peers.package_version(p) for p in use_peers},
-            "engine_config": str(engine_file),
+            "engine_config": engine_source,
             "figures": {n: figure_data(sc.test) for n, sc in built.items()}, **provenance()}
     write_json(out / "benchmark.json", info)
     log(f"gpquad benchmark: {len(todo) - len(missing)} of {len(todo)} cells done earlier; "
@@ -152,7 +152,7 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         order = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
         missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_dir, horizons_s,
+        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_cfg, horizons_s,
                                                      fingerprints[sc.name][m])
                              for sc, m, s in missing):
             h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")

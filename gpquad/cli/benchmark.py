@@ -100,7 +100,7 @@ def _cmd_benchmark(args) -> int:
     names, peer_names, horizons = check_arguments(args)
     out = Path(args.out)
     info = run_benchmark(names, peer_names, args.seeds, out, jobs=args.jobs, horizons_s=horizons,
-                         with_gpquad=not args.skip_gpquad)
+                         with_gpquad=not args.skip_gpquad, engine=args.engine)
     write_report(out, info)
     print((out / "benchmark.md").read_text())
     print(f"tables: {out / 'benchmark.md'}; JSON: {out / 'results.json'}; figures: "
@@ -119,6 +119,9 @@ def register(subparsers) -> None:
     b.add_argument("--out", default="results/benchmark",
                    help="benchmark folder (default results/benchmark); the same command resumes")
     b.add_argument("--jobs", type=int, default=1, help="parallel cells (default 1)")
+    b.add_argument("--engine", default=None, metavar="CONFIG",
+                   help="a TOML config whose [evolution] and [vehicle] gpquad uses (default: "
+                        "gpquad's defaults, the recommended engine)")
     b.add_argument("--horizons", default="1,7,30", help="prediction horizons in s (default 1,7,30)")
     b.add_argument("--skip-gpquad", action="store_true",
                    help="run the peers only (gpquad's finished cells in --out are still reported)")

@@ -167,9 +167,15 @@ def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | 
                      ) -> Flight:
     """Read and validate one generic flight file (CSV or Parquet)."""
     path = Path(path)
-    source = str(path)
+    return flight_from_frame(_read_table(path), input_names, frame, columns, str(path),
+                             path.name)
+
+
+def flight_from_frame(df: pd.DataFrame, input_names, frame: str = "NED/FRD",
+                      columns: dict | None = None, source: str = "DataFrame",
+                      name: str = "flight") -> Flight:
+    """Validate a table of the generic columns (module notes) and make it a Flight."""
     columns = columns or {}
-    df = _read_table(path)
     t = _column(df, "t", columns, source)
     dt = check_time(t, source, columns.get("t", "t"))
     check_sample_rate(dt, source, columns.get("t", "t"))
@@ -201,7 +207,7 @@ def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | 
                                                                    RATE_COLUMNS),
                                   columns.get("qw", "qw"))
     check_excitation(rates, vel, inputs, [columns.get(c, c) for c in input_names], source)
-    return Flight(name=path.name, t=t - t[0], quat=quat, vel=vel, rates=rates, inputs=inputs,
+    return Flight(name=name, t=t - t[0], quat=quat, vel=vel, rates=rates, inputs=inputs,
                   input_names=tuple(input_names), pos=pos, meta={"source": source, "dt": dt})
 
 

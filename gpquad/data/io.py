@@ -131,19 +131,26 @@ def load_dataset(cfg: Config) -> Dataset:
     refused only when no segment passes.
     """
     flights = load_flights(cfg)
+    source = str(cfg.data.files[0]) if cfg.data.files else None
+    return dataset_of(flights, cfg, source)
+
+
+def dataset_of(flights: list[Flight], cfg: Config, source: str | None) -> Dataset:
+    """`flights` screened by the integration check (unless they are the simulator's:
+    source None), concatenated and split as the config says."""
     check = None
-    if cfg.data.files and cfg.data.check_before_run:
+    if source is not None and cfg.data.check_before_run:
         from gpquad.data.integration_check import screen_segments
 
         flights, dropped, check = screen_segments(
             flights, cfg.data.check_steps, cfg.data.check_max_rse,
-            source=str(cfg.data.files[0]), field="data.check_before_run")
+            source=source, field="data.check_before_run")
         for note in dropped:
             warnings.warn(note, stacklevel=2)
     held = {str(p) for p in held_out_paths(cfg)}
     if held and not any(f.meta.get("file") in held for f in flights):
         raise GpquadError("no usable segment of the held-out files is left for validation",
-                          source=str(cfg.data.files[0]), field="data.validation")
+                          source=source, field="data.validation")
     dataset = build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
                             trim=cfg.data.trim, trim_values=cfg.data.trim_values,
                             held_out=[f.meta.get("file") in held for f in flights]
@@ -170,3 +177,20 @@ def resolve_log(path, fmt: str | None, config=None):
     data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
     validate(dataclasses.replace(cfg, data=data), "command line")
     return path, cfg, data
+
+
+def read_log_file(path, data: DataConfig, fmt: str | None = None) -> list[Flight]:
+    """The in-flight segments of one log, read with `data`'s pipeline settings; the format
+    from `fmt`, else data.format unless it is the default "generic", else the path."""
+    path = Path(path)
+    if not path.exists():
+        raise GpquadError("no such file or folder", source=str(path))
+    fmt = fmt or (data.format if data.format != "generic" else None) or guess_format(path)
+    reader = READERS.get(fmt)
+    if reader is None:
+        raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
+                          field="format")
+    flights = reader(path, data)
+    for f in flights:
+        f.meta["file"] = str(path)
+    return flights

@@ -6,7 +6,7 @@ p, q, r over non-overlapping windows of `--horizon-s`, each from the recorded st
 recorded inputs. A state the log does not measure is NaN; a window is diverged when the
 prediction is non-finite or leaves 10 x the data's largest |state|. Signals that leave the
 run's training range on more than 1 % of the scored samples are listed
-(gpquad.models.envelope). When the run's config names `evolution.mirror_inputs`, the
+(gpquad.models.envelope). When the run's vehicle is left-right symmetric (`vehicle`), the
 windows are also flown mirrored left-right (gpquad.data.mirror) and their diverged count is
 reported: an equation that holds only on the side of the flights the training log flew.
 """
@@ -93,7 +93,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     bound = np.full(len(SCORED_INDEX), DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
     n_diverged = int(diverged(pred, bound).sum())
     values = rse(pred, truth)
-    flipped = tuple(cfg.evolution.mirror_inputs)
+    flipped = cfg.vehicle.flipped(dataset.input_names)
     mirrored = None
     if flipped and all(n in dataset.input_names for n in flipped):
         mirrored = {"inputs": list(flipped),
@@ -141,7 +141,7 @@ def format_score(result: dict) -> str:
                 f"{mirrored['diverged']} of {result['windows']} window(s) diverged")
         if mirrored["diverged"]:
             line += ("; an equation holds only on the side of the flights the training log "
-                     "flew (README, mirror_inputs)")
+                     "flew (vehicle.mirror_inputs)")
         lines.append(line)
     lines.extend(f"note: {o['signal']} leaves the training range on {100 * o['fraction']:.1f} % "
                  f"of the scored samples (training {o['training'][0]:.3g}..{o['training'][1]:.3g}"

@@ -29,7 +29,7 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, OPERATORS, VAR_BASE
 from gpquad.engine.tree.variation import random_tree
 from gpquad.engine.variables import TARGET_NAMES, terminal_names
-from gpquad.study.config import Config, EvolutionConfig
+from gpquad.study.config import Config, preset_evolution
 
 
 def prefix_tree(tokens, input_names, delays=None) -> Tree:
@@ -114,12 +114,13 @@ def constant_fit_speed(evaluator, input_names, starts, n_steps: int,
 def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     cfg = Config()
     dataset = load_dataset(cfg)
-    ev = EvolutionConfig()
+    ev = preset_evolution("paper")  # the paper's 750-step windows and one delay per input
     rng = np.random.default_rng(seed)
     co = Coevolution(dataset, "p_dot", ev)
+    window = co.window_steps
     starts84 = co.space.starts(co.space.random(rng, 84))
-    steps84 = 84 * ev.window_steps
-    evaluators = {t: Evaluator(dataset, t, ev.window_steps) for t in TARGET_NAMES}
+    steps84 = 84 * window
+    evaluators = {t: Evaluator(dataset, t, window) for t in TARGET_NAMES}
     paths = {name: _rate(lambda t=target, tr=tree: evaluators[t].window_errors([tr], starts84),
                          steps84)
              for name, (target, tree) in path_trees(dataset.input_names).items()}
@@ -133,7 +134,7 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     trees = [random_tree(rng, co.params) for _ in range(14)]
     generation = _rate(lambda: evaluators["p_dot"].window_errors(trees, starts84[:6]), steps84)
     fit_ms, fit_steps_per_s = constant_fit_speed(evaluators["p_dot"], dataset.input_names,
-                                                 starts84[:6], ev.window_steps)
+                                                 starts84[:6], window)
     state = co.init_state(seed)
     t0 = time.perf_counter()
     co.iterate(state)

@@ -1,6 +1,8 @@
-"""The steps that make a model of six per-equation searches one model: stability repair
-(gpquad.models.stability), joint refit (gpquad.models.joint_fit) and printed precision
-(gpquad.models.precision)."""
+"""The steps that make six per-equation searches one model, in the order
+`evolution.finish` lists them: "symmetrize" (gpquad.models.symmetrize), "refine"
+(gpquad.models.refine), "repair" (gpquad.models.stability) and "joint_fit"
+(gpquad.models.joint_fit); then the printed precision (gpquad.models.precision). Every
+fit path (`gpquad run`, `sweep`, `benchmark`, `gpquad.fit`) finishes its model here."""
 
 from __future__ import annotations
 
@@ -15,36 +17,48 @@ from gpquad.models.stability import repair_stability
 from gpquad.models.symmetrize import symmetrize
 
 
-def mirror_inputs(evolution, dataset) -> tuple[str, ...]:
-    """The inputs the stability repair flips in its mirrored flights (gpquad.data.mirror):
-    `evolution.mirror_inputs` when the dataset has all of them, else none (off)."""
-    names = tuple(evolution.mirror_inputs)
-    return names if names and all(n in dataset.input_names for n in names) else ()
+def _symmetrize(model, dataset, evolution, flipped):
+    if not flipped:
+        return model
+    model, report = symmetrize(model, dataset, evolution, flipped)
+    return dataclasses.replace(model, symmetrized=report)
+
+
+def _refine(model, dataset, evolution, flipped):
+    if not any(evolution.refine_for(t) for t in model.equations):
+        return model
+    model, report = refine(model, dataset, evolution, flipped)
+    return dataclasses.replace(model, refined=report)
+
+
+def _repair(model, dataset, evolution, flipped):
+    if not all(t in model.equations for t in TARGET_NAMES):
+        return model
+    repaired, report = repair_stability(model, dataset, mirror=flipped)
+    return dataclasses.replace(repaired, stability=report)
+
+
+def _joint_fit(model, dataset, evolution, flipped):
+    if not all(t in model.equations for t in TARGET_NAMES):
+        return model
+    refitted, report = joint_refit(model, dataset)
+    return dataclasses.replace(refitted, joint_fit=report)
+
+
+STEPS = {"symmetrize": _symmetrize, "refine": _refine, "repair": _repair,
+         "joint_fit": _joint_fit}
 
 
 @one_blas_thread
-def finish_model(model, dataset, evolution):
-    """The model after the full-model steps the config asks for, when all six equations
-    are there: the refined equations (`evolution.refine_terms`, model.refined), the
-    stability repair (`evolution.stability_repair`) and full-model front
-    selection (`evolution.front_selection`; with the mirrored flights of
-    `evolution.mirror_inputs`), their report in model.stability, then the
-    joint refit (`evolution.joint_fit`, model.joint_fit); with
-    the significant digits its printed equations need."""
-    flipped = mirror_inputs(evolution, dataset)
-    if evolution.symmetric_equations and flipped:
-        model, report = symmetrize(model, dataset, evolution, flipped)
-        model = dataclasses.replace(model, symmetrized=report)
-    if any(evolution.refine_for(t) for t in model.equations):
-        model, report = refine(model, dataset, evolution, flipped)
-        model = dataclasses.replace(model, refined=report)
-    if all(t in model.equations for t in TARGET_NAMES):
-        if evolution.stability_repair or evolution.front_selection:
-            repaired, report = repair_stability(model, dataset,
-                                                select=evolution.front_selection,
-                                                mirror=flipped)
-            model = dataclasses.replace(repaired, stability=report)
-        if evolution.joint_fit:
-            refitted, report = joint_refit(model, dataset)
-            model = dataclasses.replace(refitted, joint_fit=report)
+def finish_model(model, dataset, evolution, vehicle=None, on_step=None):
+    """The model after `evolution.finish`'s steps, in their order, with the significant
+    digits its printed equations need. `vehicle` (the config's [vehicle], or None: no
+    mirror) says which inputs a left-right mirror flips; "repair" and "joint_fit" need
+    all six equations and leave a partial model as it is. `on_step(name)` is called
+    before each step (progress)."""
+    flipped = () if vehicle is None else vehicle.flipped(dataset.input_names)
+    for name in evolution.finish:
+        if on_step is not None:
+            on_step(name)
+        model = STEPS[name](model, dataset, evolution, flipped)
     return with_printed_digits(model, dataset)

@@ -77,15 +77,15 @@ class RefineProblem:
         self.delays = {tap_name(n, d): d for d in range(n_taps) for n in self.input_names}
         tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
-        self.ev = Evaluator(tapped, equation.target, cfg.window_steps, cfg.metric,
-                            cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
-        self.starts, self.steps = tile(dataset.train, cfg.window_steps, cfg.max_delay)
+        window_steps = cfg.window_steps(dataset.dt)
+        self.ev = Evaluator(tapped, equation.target, window_steps, cfg.metric, cfg.max_depth)
+        self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
         self.short = [(spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h),
                        h) for h in SEED_HORIZONS]
         samples = np.unique((self.starts[:, None] + np.arange(self.steps)[None, :]).ravel())
         self.samples = spread(samples[samples >= 1], SCREEN_SAMPLES)
         self.acc = self.arrays.acc[:, target_index(equation.target)]
-        self.window_steps, self.max_delay = cfg.window_steps, cfg.max_delay
+        self.window_steps, self.max_delay = window_steps, cfg.max_delay
 
     def canonical(self, equation) -> sp.Expr:
         """The equation's expression with each delayed input written as the tap at its
@@ -353,7 +353,7 @@ def refined_summary(report: dict) -> str:
         if entry.get("reverted"):
             parts.append(f"{target}: kept as found (refined, it made the full model fly worse)")
         elif entry.get("no_validation"):
-            parts.append(f"{target}: kept as found (no validation window of window_steps "
+            parts.append(f"{target}: kept as found (no validation window of window_s "
                          "to judge a refinement on: raise data.validation_fraction or name "
                          "validation files in data.validation)")
         elif entry["validation_after"] < entry["validation_before"]:

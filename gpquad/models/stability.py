@@ -1,8 +1,8 @@
 """Full-model front swaps: a model whose equations diverge, or fly badly, together.
 
 Each equation is identified with the other accelerations taken from the data, so each can
-be stable alone and the six together unstable: with `angle_tangents` the attitude loops
-of angle-mode flights are fitted as stiff as the data allow (p_dot = -1800 phi - 80 p + ...
+be stable alone and the six together unstable: the attitude loops of angle-mode flights
+can be fitted as stiff as the data allow (p_dot = -1800 phi - 80 p + ...
 at 25 Hz; for that loop alone and the integrator's explicit step the discrete poles are at
 |z| ~ 0.8, computed), and a coupling term of another equation (r theta, q u_R) is
 enough to push one of them out of the unit circle once every state is integrated
@@ -14,28 +14,17 @@ refit's longest horizon), each equation's size/error front (`Equation.candidates
 run's other climbers) is searched greedily: every single swap of one equation for one of
 its front's alternatives is flown, the swap with the fewest diverged windows (then the
 lowest full-model error, `FullModelError`) is kept if it beats the current model, and
-the search repeats until no window diverges or no swap helps. Without `select`, a model
-that does not diverge is returned unchanged.
+the search repeats until no window diverges or no swap helps. A model that does not diverge
+is returned unchanged.
 
-With `mirror` (`evolution.mirror_inputs`: the roll and yaw commands of a left-right
+With `mirror` (`vehicle.mirror_inputs`: the roll and yaw commands of a left-right
 symmetric vehicle), the judged windows are also flown mirrored (gpquad.data.mirror) and their
 divergences count after those of the recorded windows: a swap is scored by (diverged
 recorded windows, diverged mirrored windows, full-model error of the recorded windows), so
 the mirror never trades a recorded flight's accuracy for its own and only decides between
 models that fly the recorded flights equally.
 
-With `select` (`front_selection`, issue 9 lever 4: the final equations chosen by
-full-model validation rollouts), the search goes on once nothing diverges: a swap is kept
-when it diverges on no more windows and lowers the full-model error of the judged windows
-significantly (`joint_fit.significant_drop`: mean paired drop > 2 standard errors), the
-largest drop first; besides the front, each equation without one of its additive terms is
-offered (a product that fitted the one-equation problem and destabilises the others).
-Each equation's own BIC selection saw the other five accelerations from the data; this
-sees them flown. Measured (README, eleventh round), it is too lenient to choose structure:
-on rotorpy-angle it swapped a_x and a_y for set-point-driven front members that flew the
-validation windows better and the test flights worse, and on exact rigid-body models, whose
-errors are at round-off, any difference passed the test. Off in every shipped config. No
-random draw: the result is a function of model and data.
+No random draw: the result is a function of model and data.
 """
 
 from __future__ import annotations
@@ -45,34 +34,17 @@ import dataclasses
 import numpy as np
 
 from gpquad.data.mirror import mirror_dataset
-from gpquad.engine.evolve.term_search import model_terms
-from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import (
     JOINT_HORIZONS_S,
     FullModelError,
     judged_windows,
     measured_states,
-    significant_drop,
 )
 from gpquad.models.scoring import SCORED_INDEX, diverged, divergence_bound
 
 #: At most this many rounds of single swaps (each round flies every alternative once).
 MAX_ROUNDS = 6
-
-
-def term_drops(equation) -> list:
-    """The equation without each one of its additive terms (its monomials when it
-    multiplies out), constants as they are; none for a single term."""
-    terms = model_terms(equation.tree)
-    out = []
-    for k in range(len(terms) if len(terms) > 1 else 0):
-        prefix = shallow_sum(terms[:k] + terms[k + 1:])
-        tree = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
-                               equation.tree.delays)
-        out.append(dataclasses.replace(equation, tree=tree, candidates=[],
-                                       validation_error=np.nan))
-    return out
 
 
 class FullModelFlights:
@@ -96,17 +68,15 @@ def _swap(model, target: str, equation):
     return dataclasses.replace(model, equations={**model.equations, target: kept})
 
 
-def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
-                     select: bool = False, mirror=()):
+def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirror=()):
     """(model, report): the model with equations swapped for front alternatives until its
-    full-model flights stop diverging (or no swap helps); with `select`, also while a swap
-    lowers the full-model error significantly; with `mirror` (input names), the mirrored
-    flights count too (module notes). Unchanged when no swap is needed or helps.
+    full-model flights stop diverging (or no swap helps); with `mirror` (input names), the
+    mirrored flights count too (module notes). Unchanged when no swap is needed or helps.
 
     report: {"horizon_s", "judged_on", "windows", "diverged_before", "diverged_after",
-    "error_before", "error_after", "swaps": [{"target", "from", "to", "why"}], "flights",
-    "select"}, with mirror also "mirrored", "mirrored_diverged_before" and "_after"; why is
-    "diverged" or "error". None when the model lacks an equation or no window fits.
+    "error_before", "error_after", "swaps": [{"target", "from", "to", "why"}], "flights"},
+    with mirror also "mirrored", "mirrored_diverged_before" and "_after"; why is
+    "diverged" or "mirror diverged". None when the model lacks an equation or no window fits.
     """
     if not all(t in model.equations for t in TARGET_NAMES):
         return model, None
@@ -122,38 +92,30 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
         n_mirror = mirrored.windows(candidate)[0] if mirrored is not None else 0
         return (n_div, n_mirror, float(windows.sum())), windows
 
-    best, per_window = fly(model)
+    best = fly(model)[0]
     report = {"horizon_s": float(seconds), "judged_on": judged_on, "windows": int(len(starts)),
-              "diverged_before": best[0], "error_before": best[2], "swaps": [], "flights": 1,
-              "select": bool(select)}
+              "diverged_before": best[0], "error_before": best[2], "swaps": [], "flights": 1}
     if mirrored is not None:
         report.update(mirrored=list(mirror), mirrored_diverged_before=best[1])
     alternatives = ({t: model.equations[t].alternatives() for t in TARGET_NAMES}
-                    if best[0] or best[1] or select else {})
-    for _ in range(MAX_ROUNDS if not select else MAX_ROUNDS + len(TARGET_NAMES)):
-        if best[0] == 0 and best[1] == 0 and not select:
+                    if best[0] or best[1] else {})
+    for _ in range(MAX_ROUNDS):
+        if best[0] == 0 and best[1] == 0:
             break
         pick = None
         for target in TARGET_NAMES:
-            drops = term_drops(model.equations[target]) if select else []
-            for alt in alternatives[target] + drops:
-                score, alt_windows = fly(_swap(model, target, alt))
+            for alt in alternatives[target]:
+                score = fly(_swap(model, target, alt))[0]
                 report["flights"] += 1
-                if best[0] > 0 or best[1] > 0:
-                    better = score < (pick[0] if pick else best)
-                else:  # nothing diverges: only a significant drop, never a new divergence
-                    better = (score[0] == 0 and score[1] == 0
-                              and significant_drop(per_window, alt_windows)
-                              and score[2] < (pick[0][2] if pick else best[2]))
-                if better:
-                    pick = (score, target, alt, alt_windows)
+                if score < (pick[0] if pick else best):
+                    pick = (score, target, alt)
         if pick is None:
             break
-        score, target, alt, alt_windows = pick
-        why = "diverged" if best[0] else "mirror diverged" if best[1] else "error"
+        score, target, alt = pick
+        why = "diverged" if best[0] else "mirror diverged"
         report["swaps"].append({"target": target, "from": model.equations[target].text(),
                                 "to": alt.text(), "why": why})
-        model, best, per_window = _swap(model, target, alt), score, alt_windows
+        model, best = _swap(model, target, alt), score
     report.update(diverged_after=best[0], error_after=best[2])
     if mirrored is not None:
         report["mirrored_diverged_after"] = best[1]
@@ -163,7 +125,6 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1],
 def stability_summary(report: dict) -> str:
     """One line for the user: what the repair did."""
     n, before, after = report["windows"], report["diverged_before"], report["diverged_after"]
-    chosen = [s["target"] for s in report["swaps"] if s.get("why") == "error"]
     mirror = ""
     if "mirrored" in report:
         m_before, m_after = report["mirrored_diverged_before"], report["mirrored_diverged_after"]
@@ -173,10 +134,6 @@ def stability_summary(report: dict) -> str:
             mirror += f", {m_after} after swapping {', '.join(swapped) or 'none'}"
     if not before:
         line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
-        if report.get("select"):
-            line += (f"; front alternatives that fly significantly better: "
-                     f"{', '.join(chosen) or 'none'} (error {report['error_before']:.4g} -> "
-                     f"{report['error_after']:.4g})")
         return line + mirror
     swapped = ", ".join(s["target"] for s in report["swaps"]) or "none"
     return (f"full model diverged in {before} of {n} {report['horizon_s']:g} s "

@@ -1,4 +1,4 @@
-"""Equations of a left-right symmetric vehicle (`evolution.symmetric_equations`).
+"""Equations of a left-right symmetric vehicle (the "symmetrize" finishing step).
 
 Each equation's terms of the wrong left-right parity (gpquad.models.symmetry) are removed,
 constants excepted (a constant in p_dot may be a real offset: a centre of gravity off the
@@ -46,9 +46,10 @@ def refit(equation, tree, dataset, evolution):
     and its training error (the search's metric)."""
     taps = taps_of(len(tree.delays), len(equation.input_names))
     cfg = evolution.for_target(equation.target)  # the search's evaluator for this target
-    ev = Evaluator(with_taps(dataset, taps), equation.target, cfg.window_steps, cfg.metric,
-                   cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
-    starts, steps = tile(dataset.train, evolution.window_steps, evolution.max_delay)
+    window_steps = cfg.window_steps(dataset.dt)
+    ev = Evaluator(with_taps(dataset, taps), equation.target, window_steps, cfg.metric,
+                   cfg.max_depth)
+    starts, steps = tile(dataset.train, window_steps, evolution.max_delay)
 
     def error_of(t) -> float:
         return float(ev.window_errors([t], starts, n_steps=steps).mean())

@@ -1,7 +1,7 @@
 """Left-right parity of the equations: terms a symmetric vehicle cannot have.
 
 Under the left-right mirror of gpquad.data.mirror, phi, psi, v, p, r and the mirrored
-inputs (`evolution.mirror_inputs`, the roll and yaw commands) change sign, and so do a_y,
+inputs (`vehicle.mirror_inputs`, the roll and yaw commands) change sign, and so do a_y,
 p_dot and r_dot; everything else keeps it. A left-right symmetric vehicle's a_x, a_z and
 q_dot are therefore even functions of the odd variables, and its a_y, p_dot and r_dot odd
 ones: a term of the wrong parity, such as 3.72 r in a_z (a heave that depends on the

@@ -113,7 +113,7 @@ def model_of(choice: dict[str, int], runs, dataset: Dataset, cfg: Config) -> Dis
     eqs = {t: runs[t][k].equation for t, k in choice.items()}
     model = DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
                             cfg.to_dict(), envelope=training_envelope(dataset))
-    return finish_model(model, dataset, cfg.evolution)
+    return finish_model(model, dataset, cfg.evolution, cfg.vehicle)
 
 
 def noise_sd(dataset: Dataset, fraction: float) -> np.ndarray:

@@ -1,19 +1,24 @@
 """Experiment configuration: frozen dataclasses loaded from TOML.
 
-Unknown keys and wrong types are errors that name the file and the field.
-Defaults are the paper's numbers (coevolutionary-gp-rotorcraft, sections 2.2 and 3.2).
+Unknown keys and wrong types are errors that name the file and the field. The engine's
+defaults are the best engine measured; `preset = "paper"` gives the paper's method
+(gpquad.study.presets). Keys of older versions are migrated (gpquad.study.config_migrate).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gpquad.engine.variables import DEFAULT_INPUTS, TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.study.config_checks import validate
+from gpquad.study.config_evolution import FINISH_STEPS
+from gpquad.study.config_migrate import migrate
 from gpquad.study.config_tables import build_dataclass, read_toml
+from gpquad.study.presets import with_preset
 
 #: The dominant terms of the paper's median model (Table 1), used by the reference simulator.
 MEDIAN_MODEL = {
@@ -31,14 +36,14 @@ class DataConfig:
     """Where the flight data comes from and how it is read."""
 
     files: tuple[str, ...] = ()  # empty: fly the reference simulator
-    format: str = "generic"
-    frame: str = "NED/FRD"
+    format: str = "generic"  # generic | px4-csv | ulog | betaflight | ardupilot | table
+    frame: str = "NED/FRD"  # of the file's quaternion, velocities and rates: or "ENU/FLU"
     # input names, or a level for log readers: "rates" | "torque" | "sticks" | "motors"
     # (gpquad.data.levels); the default names take "rates" wherever a log has rate set-points
     inputs: tuple[str, ...] | str = DEFAULT_INPUTS
     columns: dict[str, str] = field(default_factory=dict)  # canonical name -> file column
     trim: str = "none"  # none | mean | given
-    trim_values: dict[str, float] = field(default_factory=dict)
+    trim_values: dict[str, float] = field(default_factory=dict)  # trim = "given": per input
     validation_fraction: float = 2000 / 13800  # paper: 11,800 train + 2,000 validation
     # "fraction" (the last validation_fraction of every flight) or files held out whole
     validation: tuple[str, ...] | str = "fraction"
@@ -87,129 +92,110 @@ class SimulatorConfig:
     measurement_noise: dict[str, float] = field(default_factory=dict)
 
 
+#: The value of a per-target field (input_taps, max_depth, max_degree, refine_terms) for a
+#: target that its {target: number} table leaves out.
+PER_TARGET_FALLBACK = {"input_taps": 1, "max_depth": 5, "max_degree": 0, "refine_terms": 0}
+RATE_TARGETS = ("p_dot", "q_dot", "r_dot")
+
+
+def _per_rate_target(value: int, translational: int | None = None) -> dict[str, int]:
+    table = {t: value for t in RATE_TARGETS}
+    if translational is not None:
+        table.update({t: translational for t in ("a_x", "a_y", "a_z")})
+    return table
+
+
+@dataclass(frozen=True)
+class GPConfig:
+    """The paper's variation operators (section 2.2): probabilities and constant ranges."""
+
+    p_leaf: float = 0.7  # a new node is a leaf with this probability
+    p_constant_leaf: float = 0.25  # share of new leaves that are constants (not in the paper)
+    const_low: float = -5.0  # new constants are uniform in [const_low, const_high]
+    const_high: float = 5.0  # upper end of the new constants' range
+    const_variance: float = 0.1  # a constant mutation adds N(0, const_variance)
+    p_const_perturb: float = 0.5  # a constant is perturbed with this probability
+    p_delay: float = 0.1  # each input delay is redrawn with this probability
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """What the engine may assume about the vehicle."""
+
+    # Left-right symmetric (a quadrotor, not a tricopter or a payload off to one side): the
+    # equations keep the parity of a left-right mirror ("symmetrize"), the stability repair
+    # also flies the mirrored validation flights, and `run` reports terms of the wrong parity.
+    symmetric: bool = True
+    # The inputs that change sign in the mirror image of a flight (roll and yaw commands).
+    mirror_inputs: tuple[str, ...] = ("u_R", "u_Y")
+
+    def flipped(self, input_names) -> tuple[str, ...]:
+        """The mirrored inputs when the vehicle is symmetric and the data has all of them."""
+        names = tuple(self.mirror_inputs)
+        if not self.symmetric or not names:
+            return ()
+        return names if all(n in input_names for n in names) else ()
+
+
 @dataclass(frozen=True)
 class EvolutionConfig:
-    """Coevolution settings; defaults are the paper's."""
+    """How each equation is searched and finished. The defaults are the best engine measured
+    (docs/decisions); `preset = "paper"` is the paper's method (gpquad.study.presets)."""
 
-    targets: tuple[str, ...] = TARGET_NAMES
-    iterations: int = 30
-    model_generations: int = 600
-    test_generations: int = 80
-    n_models: int = 14
-    n_tests: int = 5
-    suite_size: int = 6
-    window_steps: int = 750
-    # One number, or a table per target such as {p_dot = 7} (a target left out gets 5).
-    max_depth: int | dict[str, int] = 5
-    # Not in the paper: the highest polynomial degree of an equation (x y is 2, x y z 3, a
-    # quotient counts both sides); 0 = no limit. Mutations above it are drawn again. One
-    # number, or a table per target (a target left out gets 0).
-    max_degree: int | dict[str, int] = 0
-    p_leaf: float = 0.7
-    p_constant_leaf: float = 0.25
-    const_low: float = -5.0
-    const_high: float = 5.0
-    const_variance: float = 0.1
-    p_const_perturb: float = 0.5
-    p_delay: float = 0.1
-    max_delay: int = 5
-    metric: str = "mae"
-    simplify_generations: int = 50
-    simplify_tolerance: float = 0.0  # 0: keep a simplification only if better (paper 2.2);
-    # > 0 (extension): keep it if error <= (1 + tol) * before
-    test_offset_max: int = 375
-    # Not in the paper: a local search on every model after the model phase. "none" keeps
-    # the paper's method; "delays" tries every single-input delay change; "delays+constants"
-    # first runs Nelder-Mead on the constants (at most local_search_evals evaluations),
-    # then tries the delay changes, each with its constants re-fitted (evals / 5).
-    local_search: str = "none"
-    local_search_evals: int = 150
-    # Not in the paper: prune the final equation (subtrees -> constants, constants re-fitted)
-    # while its training error grows by less than prune_tolerance x the error of the best
-    # constant model (a parsimony threshold on the error scale); 0 = off.
-    prune_tolerance: float = 0.0
-    # Not in the paper: how local search and pruning re-fit constants. "nelder-mead" (at most
-    # local_search_evals evaluations) or "gauss-newton": Levenberg-Marquardt on the integrated
-    # error with forward-mode sensitivities (at most gradient_steps evaluations).
-    constant_fit: str = "nelder-mead"
-    gradient_steps: int = 20
-    # Not in the paper: a growing horizon for the gauss-newton fit. Each fit also starts at
-    # these short horizons (steps, ascending) on windows spread over the training data, each
-    # fit starting from the last, and then fits the full windows; the better of that and the
-    # direct fit is kept. A stiff loop such as 544 (u_R - phi) - 47 p sits in a narrow basin
-    # of the long-window error that short windows lead into. [] = off.
-    fit_horizons: tuple[int, ...] = ()
-    # Not in the paper: one climber starts from the linear model in every allowed variable,
-    # constants fitted through the integrator, cut to the terms that contribute most
-    # (gpquad.engine.evolve.linear_seed); needs constant_fit = "gauss-newton".
-    linear_seed: bool = False
-    # Not in the paper: how the final equation is chosen. "prune" = the best climber, pruned
-    # by prune_tolerance if > 0; "bic" = pruned while the training BIC of the integrated
-    # state does not grow, then the lowest BIC (training and validation windows) among it and
-    # the front's climbers.
-    final_selection: str = "prune"
-    # Not in the paper: after the local search, try adding c*x_i or c*x_i*x_j to the best
-    # climber (constants re-fitted); keep the best if the error drops by > term_min_gain.
-    term_search: bool = False
-    # Not in the paper: state or input names no equation may read (for example "psi": the
-    # heading, which the body-frame dynamics do not depend on and a model can overfit to).
-    exclude_leaves: tuple[str, ...] = ()
-    # Not in the paper: a name of exclude_leaves stays allowed when an input tracks it (an
-    # angle set-point: the input explains >= 30 % of the state's variance, correlation >= 0.6;
-    # gpquad.engine.evolve.leaves), e.g. psi when u_Y is a heading set-point.
-    keep_tracked: bool = False
-    term_min_gain: float = 0.01
-    # Not in the paper: after the six equations, refit all their constants jointly on
-    # full-model rollouts, kept if the validation error drops significantly
-    # (gpquad.models.joint_fit).
-    joint_fit: bool = False
-    # Not in the paper: when the six equations diverge flown together (validation flights
-    # of the joint refit's horizon), swap equations for their front's alternatives until
-    # they stop (gpquad.models.stability); runs before the joint refit.
-    stability_repair: bool = False
-    # Not in the paper: after the stability repair, keep swapping equations for their
-    # front's alternatives while the full model's validation flights get significantly
-    # better (paired test over the windows; gpquad.models.stability).
-    front_selection: bool = False
-    # Not in the paper: taps per input: an equation may read each input at up to this many
-    # evolvable delays, e.g. 110 u_R(t-1) - 70 u_R(t-3) for a lagging motor
-    # (gpquad.engine.taps). 1 = the paper's one delay per input and equation. Either one
-    # number for every equation or a table per target, e.g. {a_x = 4, p_dot = 6}
-    # (a target the table leaves out gets 1).
-    input_taps: int | dict[str, int] = 1
-    # Not in the paper: an angular equation's fitness also counts the error of the Euler
-    # angle its rate integrates into (p -> phi, q -> theta, r -> psi), this weight times the
-    # ratio of the two signals' spreads on the data; 0 = the rate alone (the paper).
-    # A roll equation without the attitude feedback of a stiff loop leaks a small rate bias
-    # that the angle integrates (gpquad.engine.kernels.fitness).
-    attitude_weight: float = 0.0
-    # Not in the paper: the gradient fit's Jacobian follows the constants through the Euler
-    # angles a tree reads (exact; off, they get zero tangent). Off by default: on angle-mode
-    # flights it lets LM fit attitude loops so stiff that they diverge flown together
-    # (gpquad.engine.kernels.sensitivity, README "Engine extensions").
-    angle_tangents: bool = False
-    # Not in the paper: on a left-right symmetric vehicle, the inputs that change sign in
-    # the mirror image of a flight (the roll and yaw commands, e.g. ["u_R", "u_Y"]). The
-    # stability repair then also flies the mirrored validation flights, and an equation set
-    # that diverges there is swapped for front alternatives that do not, where the recorded
-    # flights allow (gpquad.data.mirror, gpquad.models.stability); `gpquad run` reports
-    # each equation's part of the wrong left-right parity (gpquad.models.symmetry) and
-    # `gpquad score` the mirrored windows that diverge. [] = off.
-    mirror_inputs: tuple[str, ...] = ()
-    # Not in the paper: the equations of a left-right symmetric vehicle. After the searches,
-    # each equation loses its terms of the wrong left-right parity (constants excepted) and
-    # its constants are refitted (gpquad.models.symmetrize); needs mirror_inputs. Off by
-    # default (fifteenth round, README).
-    symmetric_equations: bool = False
-    # Not in the paper: after the searches (and the symmetric-equations step), each
-    # equation may gain up to this many terms: products of two of the states and input taps
-    # at every delay 0..max_delay, screened on the one-step residual and fitted through the
-    # integrator, each kept while it lowers the training error by term_min_gain; the
-    # equation may also get a first-order lag, tau da/dt + a = expr (a motor that lags its
-    # command; tau from gpquad.engine.lag.LAG_GRID). The refined equation replaces the found
-    # one only if it flies the validation windows better (gpquad.models.refine). One
-    # number, or a table per target, e.g. {r_dot = 16}; 0 = off (sixteenth round, README).
-    refine_terms: int | dict[str, int] = 0
+    targets: tuple[str, ...] = TARGET_NAMES  # the accelerations to identify, each alone
+    iterations: int = 12  # coevolution iterations (paper: 30)
+    model_generations: int = 600  # model hill-climber generations per iteration
+    test_generations: int = 80  # test hill-climber generations per iteration
+    n_models: int = 14  # model hill climbers
+    n_tests: int = 5  # test hill climbers
+    suite_size: int = 6  # tests in the suite the models are scored on
+    window_s: float = 10.0  # length of a test window, s (paper: 30); tests move by half of it
+    # Largest tree depth: one number, or a table per target (a target left out gets 5).
+    max_depth: int | dict[str, int] = field(default_factory=lambda: _per_rate_target(7))
+    # Largest polynomial degree (x y is 2; a quotient counts both sides); 0 = no limit.
+    # One number, or a table per target (a target left out gets 0).
+    max_degree: int | dict[str, int] = field(default_factory=lambda: _per_rate_target(2))
+    max_delay: int = 5  # input delays 0..max_delay samples
+    # Each input may appear at up to this many evolvable delays (taps) per equation: one
+    # number, or a table per target (a target left out gets 1, the paper's one delay).
+    input_taps: int | dict[str, int] = field(default_factory=lambda: _per_rate_target(6, 4))
+    metric: str = "mae"  # fitness: mean absolute ("mae") or squared ("mse") state error
+    simplify_generations: int = 50  # re-convergence generations of a bloat simplification
+    # Keep a simplification whose error is at most (1 + tolerance) x before (0: only better).
+    simplify_tolerance: float = 0.01
+    # Constants after every model phase: "lm" (Levenberg-Marquardt through the integrator,
+    # forward-mode sensitivities), "nelder-mead", or "none" (mutation only, the paper);
+    # "lm" and "nelder-mead" also search single-input delay changes.
+    constant_fit: str = "lm"
+    nelder_mead_evals: int = 150  # evaluations of one Nelder-Mead fit
+    gradient_steps: int = 20  # evaluations of one Levenberg-Marquardt fit
+    # The reported equation: "bic" (pruned while the BIC of the integrated state does not
+    # grow, then the lowest BIC among it and the Pareto front) or "prune" (the best climber,
+    # pruned within prune_tolerance x the error of the best constant model; 0 = not pruned).
+    selection: str = "bic"
+    prune_tolerance: float = 0.0  # selection = "prune": the allowed error growth (0 = off)
+    linear_seed: bool = True  # one climber starts from the linear model, fitted by LM
+    term_search: bool = True  # try best + c x and best + c x y after every model phase
+    term_min_gain: float = 0.01  # a term (search or refinement) must lower the error by this
+    # State or input names no equation may read: psi, the heading, does not act on the
+    # body-frame dynamics and does not carry over between flights.
+    exclude_leaves: tuple[str, ...] = ("psi",)
+    # An excluded name stays allowed when an input tracks it (an angle set-point: the input
+    # explains >= 30 % of its variance, correlation >= 0.6), e.g. psi under a heading set-point.
+    keep_tracked: bool = True
+    # The steps that make six searched equations one model, in order: "symmetrize" (drop
+    # terms of the wrong left-right parity, [vehicle]), "refine" (a first-order lag and up to
+    # refine_terms product terms per equation, kept by validation), "repair" (swap in front
+    # alternatives while the six diverge together), "joint_fit" (refit every constant on
+    # full-model flights, kept if validation improves). [] = the searched equations as found.
+    finish: tuple[str, ...] = FINISH_STEPS
+    # Terms the refinement may add: one number, or a table per target (left out: 0).
+    refine_terms: int | dict[str, int] = field(default_factory=lambda: _per_rate_target(20))
+    gp: GPConfig = field(default_factory=GPConfig)
+
+    def window_steps(self, dt: float) -> int:
+        """Samples in a test window at sample period dt (s)."""
+        return max(1, int(round(self.window_s / dt)))
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""
@@ -225,15 +211,16 @@ class EvolutionConfig:
 
     def refine_for(self, target: str) -> int:
         """Terms the refinement may add to `target`'s equation (0: none)."""
+        if "refine" not in self.finish:
+            return 0
         return self._per_target("refine_terms", target)
 
     def _per_target(self, name: str, target: str) -> int:
         """Field `name` for `target`: one number for every target, or a {target: number}
-        table whose left-out targets get the field's default."""
+        table whose left-out targets get PER_TARGET_FALLBACK[name]."""
         value = getattr(self, name)
         if isinstance(value, dict):
-            default = next(f.default for f in dataclasses.fields(self) if f.name == name)
-            return int(value.get(target, default))
+            return int(value.get(target, PER_TARGET_FALLBACK[name]))
         return int(value)
 
     def for_target(self, target: str) -> EvolutionConfig:
@@ -262,18 +249,23 @@ class SweepConfig:
 
 @dataclass(frozen=True)
 class OutputConfig:
-    dir: str = "results"
-    progress: bool = True
+    """Where run folders go and what is printed."""
+
+    dir: str = "results"  # run folders are written under this folder
+    progress: bool = True  # a progress line per iteration and finishing step
 
 
 @dataclass(frozen=True)
 class Config:
     """A whole experiment."""
 
-    seed: int = 0
-    name: str = "experiment"
+    seed: int = 0  # master seed: every random draw of the run derives from it
+    name: str = "experiment"  # the run folder is <output.dir>/<name>-seed<seed>-<time>
+    # The engine preset laid under this config: "recommended" (the defaults) or "paper".
+    preset: str = "recommended"
     data: DataConfig = field(default_factory=DataConfig)
     simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     evolution: EvolutionConfig = field(default_factory=EvolutionConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
@@ -289,21 +281,32 @@ class Config:
         return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
 
 
-def config_from_dict(table: dict, source: str = "config", base_dir: str = ".") -> Config:
-    cfg = build_dataclass(Config, table, source)
+def config_from_dict(table: dict, source: str = "config", base_dir: str = ".",
+                     dt: float | None = None, notes: list[str] | None = None) -> Config:
+    """A validated Config from a TOML-like table: older keys migrated (their notes appended
+    to `notes`), the preset laid underneath. `dt`: the data's sample period, when known."""
+    table, found = migrate(table, source, dt)
+    if notes is not None:
+        notes.extend(found)
+    cfg = build_dataclass(Config, with_preset(table, source), source)
     cfg = dataclasses.replace(cfg, base_dir=str(base_dir))
     return validate(cfg, source)
 
 
-def load_config(path) -> Config:
-    """Read and validate a TOML experiment file."""
+def load_config(path, quiet: bool = False) -> Config:
+    """Read and validate a TOML experiment file; notes on migrated keys go to stderr."""
     path = Path(path)
     table, _ = read_toml(path)
     data = table.get("data")
     if isinstance(data, dict) and data.get("files") == []:
         raise GpquadError("files = [] lists no flight; list flight files, or remove the key to "
                           "fly the reference simulator", source=str(path), field="data.files")
-    return config_from_dict(table, str(path), str(path.parent.resolve()))
+    notes: list[str] = []
+    cfg = config_from_dict(table, str(path), str(path.parent.resolve()), notes=notes)
+    if not quiet:
+        for line in notes:
+            print(f"gpquad: note: {line}", file=sys.stderr)
+    return cfg
 
 
 def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=None,
@@ -329,12 +332,30 @@ def folder_config_dict(cfg: Config) -> dict:
     return {**cfg.to_dict(), "base_dir": cfg.base_dir}
 
 
+def _folder_dt(folder: Path) -> float | None:
+    """The sample period a run or sweep folder's data had (model.json), if it says."""
+    import json
+
+    try:
+        return float(json.loads((folder / "model.json").read_text())["dt"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def load_folder_config(folder) -> Config:
-    """The config a run or sweep folder was made with (its config.json)."""
+    """The config a run or sweep folder was made with (its config.json; one written by an
+    older gpquad is migrated to today's keys)."""
     from gpquad.study.store import read_json
 
     path = Path(folder) / "config.json"
     table = read_json(path, "gpquad run or sweep folder",
                       "give a folder written by `gpquad run` or `gpquad sweep`")
     base = table.pop("base_dir", ".")
-    return config_from_dict(table, str(path), base)
+    return config_from_dict(table, str(path), base, dt=_folder_dt(Path(folder)))
+
+
+def preset_evolution(name: str = "paper", **fields) -> EvolutionConfig:
+    """The [evolution] of preset `name` with `fields` replaced (validated as a config is)."""
+    table = {"preset": name, "evolution": {k: list(v) if isinstance(v, tuple) else v
+                                           for k, v in fields.items()}}
+    return config_from_dict(table, f"preset {name}").evolution

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gpquad.engine.taps import MAX_TAPS
-from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
+from gpquad.study.config_evolution import validate_evolution
 from gpquad.study.config_names import validate_names
 
 if TYPE_CHECKING:
@@ -17,9 +17,6 @@ if TYPE_CHECKING:
 
 FRAMES = ("NED/FRD", "ENU/FLU")
 METRICS = ("mae", "mse")
-LOCAL_SEARCHES = ("none", "delays", "delays+constants")
-CONSTANT_FITS = ("nelder-mead", "gauss-newton")
-FINAL_SELECTIONS = ("prune", "bic")
 
 
 def _check_probability(value: float, source: str, where: str):
@@ -30,86 +27,7 @@ def _check_probability(value: float, source: str, where: str):
 
 def validate(cfg: Config, source: str = "config") -> Config:
     """Semantic checks that types alone cannot express."""
-    ev = cfg.evolution
-    for i, t in enumerate(ev.targets):
-        if t not in TARGET_NAMES:
-            raise GpquadError(f"unknown target '{t}'; choose from {list(TARGET_NAMES)}",
-                              source=source, field=f"evolution.targets[{i}]")
-    if not ev.targets:
-        raise GpquadError("at least one target is needed", source=source, field="evolution.targets")
-    for name in ("p_leaf", "p_constant_leaf", "p_const_perturb", "p_delay"):
-        _check_probability(getattr(ev, name), source, f"evolution.{name}")
-    positive = ("iterations", "n_models", "n_tests", "suite_size", "window_steps")
-    for name in positive:
-        if getattr(ev, name) < 1:
-            raise GpquadError("must be >= 1", source=source, field=f"evolution.{name}")
-    for name in ("model_generations", "test_generations", "simplify_generations", "max_delay",
-                 "test_offset_max"):
-        if getattr(ev, name) < 0:
-            raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
-    _check_table(ev.max_depth, "max_depth", 1, 8, "must be between 1 and 8", source)
-    _check_table(ev.max_degree, "max_degree", 0, 16, "must be between 0 (no limit) and 16",
-                 source)
-    if ev.n_models < 2:
-        raise GpquadError("tests are scored by the variance of the models' errors: need >= 2",
-                          source=source, field="evolution.n_models")
-    if ev.local_search not in LOCAL_SEARCHES:
-        raise GpquadError(f"choose one of {list(LOCAL_SEARCHES)}", source=source,
-                          field="evolution.local_search")
-    if ev.constant_fit not in CONSTANT_FITS:
-        raise GpquadError(f"choose one of {list(CONSTANT_FITS)}", source=source,
-                          field="evolution.constant_fit")
-    if ev.final_selection not in FINAL_SELECTIONS:
-        raise GpquadError(f"choose one of {list(FINAL_SELECTIONS)}", source=source,
-                          field="evolution.final_selection")
-    known = set(STATE_NAMES) | set(cfg.data.inputs if not isinstance(cfg.data.inputs, str)
-                                   else DEFAULT_INPUTS)
-    for i, name in enumerate(ev.exclude_leaves):
-        if name not in known:
-            raise GpquadError(f"unknown variable '{name}'; choose from the states "
-                              f"{list(STATE_NAMES)} or the inputs", source=source,
-                              field=f"evolution.exclude_leaves[{i}]")
-    inputs = set(cfg.data.inputs if not isinstance(cfg.data.inputs, str) else DEFAULT_INPUTS)
-    for i, name in enumerate(ev.mirror_inputs):
-        if name not in inputs:
-            raise GpquadError(f"unknown input '{name}'; list the inputs that change sign in a "
-                              f"left-right mirror (roll and yaw commands) among "
-                              f"{sorted(inputs)}", source=source,
-                              field=f"evolution.mirror_inputs[{i}]")
-    if ev.symmetric_equations and not ev.mirror_inputs:
-        raise GpquadError("the symmetric equations keep the parity of the mirror that flips "
-                          'mirror_inputs: name them (e.g. ["u_R", "u_Y"])', source=source,
-                          field="evolution.symmetric_equations")
-    if not 0.0 <= ev.attitude_weight <= 100.0:
-        raise GpquadError("must be in [0, 100] (1 counts the angle like the rate; 0 = off)",
-                          source=source, field="evolution.attitude_weight")
-    if not 0.0 <= ev.term_min_gain < 1.0:
-        raise GpquadError("must be in [0, 1)", source=source, field="evolution.term_min_gain")
-    _check_table(ev.input_taps, "input_taps", 1, min(MAX_TAPS, ev.max_delay + 1),
-                 f"must be between 1 and {MAX_TAPS}, and at most max_delay + 1 "
-                 f"({ev.max_delay + 1}): each tap needs its own delay", source)
-    if ev.gradient_steps < 0:
-        raise GpquadError("must be >= 0", source=source, field="evolution.gradient_steps")
-    if ev.linear_seed and ev.constant_fit != "gauss-newton":
-        raise GpquadError('the linear seed is fitted by Levenberg-Marquardt: set constant_fit = '
-                          '"gauss-newton"', source=source, field="evolution.linear_seed")
-    _check_table(ev.refine_terms, "refine_terms", 0, 64, "must be between 0 (off) and 64",
-                 source)
-    if any(ev.refine_for(t) for t in TARGET_NAMES) and ev.constant_fit != "gauss-newton":
-        raise GpquadError('the refined equations are fitted by Levenberg-Marquardt: set '
-                          'constant_fit = "gauss-newton"', source=source,
-                          field="evolution.refine_terms")
-    if any(not 1 <= h < ev.window_steps for h in ev.fit_horizons) or \
-            list(ev.fit_horizons) != sorted(set(ev.fit_horizons)):
-        raise GpquadError(f"give ascending step counts between 1 and window_steps - 1 "
-                          f"({ev.window_steps - 1})", source=source, field="evolution.fit_horizons")
-    if ev.simplify_tolerance < 0 or ev.local_search_evals < 0 or ev.prune_tolerance < 0:
-        raise GpquadError("must be >= 0", source=source, field="evolution.simplify_tolerance")
-    if ev.metric not in METRICS:
-        raise GpquadError(f"choose one of {list(METRICS)}", source=source, field="evolution.metric")
-    if ev.const_low >= ev.const_high or ev.const_variance < 0:
-        raise GpquadError("need const_low < const_high and const_variance >= 0", source=source,
-                          field="evolution.const_low")
+    validate_evolution(cfg, source)
     d = cfg.data
     if d.frame not in FRAMES:
         raise GpquadError(f"choose one of {list(FRAMES)}", source=source, field="data.frame")
@@ -211,16 +129,3 @@ def validate_inputs(d: DataConfig, source: str = "config") -> None:
                           source=source, field="data.validation")
     if d.max_attitude_step_deg <= 0:
         raise GpquadError("must be > 0", source=source, field="data.max_attitude_step_deg")
-
-
-def _check_table(value, name: str, low: int, high: int, message: str, source) -> None:
-    """One number in [low, high], or a {target: number} table of them (per-target fields:
-    input_taps, max_depth, max_degree); the error names the key."""
-    table = value if isinstance(value, dict) else {"": value}
-    for target, k in table.items():
-        where = f"evolution.{name}" + (f".{target}" if target else "")
-        if target and target not in TARGET_NAMES:
-            raise GpquadError(f"unknown target; the table's keys are targets {list(TARGET_NAMES)}",
-                              source=source, field=where)
-        if isinstance(k, bool) or not isinstance(k, int) or not low <= k <= high:
-            raise GpquadError(message, source=source, field=where)

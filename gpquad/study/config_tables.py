@@ -91,8 +91,12 @@ def build_dataclass(cls, table: dict, source: str, prefix: str = ""):
     for key, value in table.items():
         where = f"{prefix}{key}"
         if key not in names:
-            raise GpquadError(f"unknown key; allowed keys here are {names}", source=source,
-                              field=where)
+            import difflib
+
+            close = difflib.get_close_matches(key, names, n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            raise GpquadError(f"unknown key; {hint}allowed keys here are {names}",
+                              source=source, field=where)
         tp = hints[key]
         if dataclasses.is_dataclass(tp):
             if not isinstance(value, dict):

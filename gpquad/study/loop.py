@@ -42,7 +42,7 @@ def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: s
     """The reported equation and the run's size/error Pareto front (training errors).
 
     The equation is the final climbers' best, pruned or chosen by the configured
-    `final_selection`. With "prune", a front candidate that is no larger and has a lower
+    `selection`. With "prune", a front candidate that is no larger and has a lower
     training error than the pruned equation replaces it: the reported equation is never
     beaten by one the run already holds. With "bic" the choice is by BIC on the validation
     windows, which can prefer a smaller equation over a more accurate one by design.
@@ -50,7 +50,7 @@ def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: s
     train_errors = co.training_errors(state)
     tree, train, val = co.best(state, train_errors)
     front = co.front(state, train_errors)
-    if co.cfg.final_selection != "bic":
+    if co.cfg.selection != "bic":
         better = [(t, e) for t, e in front if t.size <= tree.size and e < train]
         if better:
             tree, train = min(better, key=lambda te: (te[1], te[0].size))

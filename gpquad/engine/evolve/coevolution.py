@@ -59,12 +59,12 @@ class RunState:
     rng_state: dict
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
 
-#: Steps of data each short-horizon fit flies (fit_horizons): windows are spread over the
-#: training data up to this many steps in all.
+#: Steps of data each short-horizon fit flies: windows are spread over the training data up
+#: to this many steps in all.
 SHORT_WINDOW_STEPS = 4000
 #: Training windows (spread over the data) on which the linear seed is fitted.
 SEED_WINDOWS = 24
-#: Growing horizon (steps) of the linear seed's fit when fit_horizons is off.
+#: Growing horizon (steps) of the linear seed's fit and of the gain refits.
 SEED_HORIZONS = (2, 10)
 
 
@@ -74,9 +74,10 @@ def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> Var
         n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
         taps=cfg.input_taps,
         max_depth=cfg.max_depth, max_degree=cfg.max_degree,
-        p_leaf=cfg.p_leaf, p_constant_leaf=cfg.p_constant_leaf, const_low=cfg.const_low,
-        const_high=cfg.const_high, const_sigma=float(np.sqrt(cfg.const_variance)),
-        p_const_perturb=cfg.p_const_perturb, p_delay=cfg.p_delay, max_delay=cfg.max_delay)
+        p_leaf=cfg.gp.p_leaf, p_constant_leaf=cfg.gp.p_constant_leaf,
+        const_low=cfg.gp.const_low, const_high=cfg.gp.const_high,
+        const_sigma=float(np.sqrt(cfg.gp.const_variance)),
+        p_const_perturb=cfg.gp.p_const_perturb, p_delay=cfg.gp.p_delay, max_delay=cfg.max_delay)
 
 
 def disagreement(errors: np.ndarray) -> np.ndarray:
@@ -103,12 +104,13 @@ class Coevolution:
         self.params = variation_params(cfg, len(dataset.input_names),
                                        measured_variables(dataset, cfg.exclude_leaves,
                                                           cfg.keep_tracked))
-        self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth,
-                                   cfg.attitude_weight, cfg.angle_tangents)
-        self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
-        self.short_windows = self.windows_for(cfg.fit_horizons)
-        # the growing horizon of the seed and of the gain refits (fit_horizons' if set)
-        self.regain_windows = self.short_windows or self.windows_for(SEED_HORIZONS)
+        #: samples in a test window, and how far a test mutation moves it (half a window)
+        self.window_steps = cfg.window_steps(dataset.dt)
+        self.test_offset_max = self.window_steps // 2
+        self.evaluator = Evaluator(dataset, target, self.window_steps, cfg.metric, cfg.max_depth)
+        self.space = WindowSpace(dataset.train, self.window_steps, cfg.max_delay)
+        # the growing horizon of the linear seed and of the gain refits
+        self.regain_windows = self.windows_for(SEED_HORIZONS)
 
     # ----------------------------------------------------------------- state
     def init_state(self, seed) -> RunState:
@@ -133,10 +135,10 @@ class Coevolution:
 
     def linear_seed(self) -> Tree | None:
         """The linear output-error climber (gpquad.engine.evolve.linear_seed), fitted with a
-        growing horizon (fit_horizons, or SEED_HORIZONS when that is off)."""
+        growing horizon (SEED_HORIZONS)."""
         cfg = self.cfg
         fit = self.regain_fitter(cfg.gradient_steps)
-        starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
+        starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         if fit is None or len(starts) == 0:
             return None
         variables = (self.params.variables if self.params.variables is not None
@@ -172,7 +174,7 @@ class Coevolution:
         ev = self.evaluator
         fitness = disagreement(ev.window_errors(state.models, self.space.starts(state.tests)))
         for _ in range(self.cfg.test_generations):
-            mutants = self.space.mutate(rng, state.tests, self.cfg.test_offset_max)
+            mutants = self.space.mutate(rng, state.tests, self.test_offset_max)
             f = disagreement(ev.window_errors(state.models, self.space.starts(mutants)))
             better = f > fitness
             state.tests[better] = mutants[better]
@@ -182,7 +184,7 @@ class Coevolution:
 
     def insert_test(self, state: RunState, start: int) -> None:
         """Replace the suite test the new one overlaps, else the oldest."""
-        overlap = np.abs(state.suite - start) < self.cfg.window_steps
+        overlap = np.abs(state.suite - start) < self.window_steps
         slot = int(np.argmax(overlap)) if overlap.any() else int(np.argmin(state.suite_age))
         state.suite[slot] = start
         state.suite_age[slot] = state.inserted
@@ -203,7 +205,7 @@ class Coevolution:
         and keep the result when it is no worse."""
         ev = self.evaluator
         state.model_errors = ev.mean_errors(state.models, state.suite)
-        samples = (state.suite[:, None] + np.arange(self.cfg.window_steps)[None, :]).ravel()
+        samples = (state.suite[:, None] + np.arange(self.window_steps)[None, :]).ravel()
 
         def constant_for(tree: Tree):
             return lambda start, end: self.subtree_mean(tree, start, end, samples)
@@ -228,12 +230,12 @@ class Coevolution:
 
     def gradient_fitter(self, steps: int, ev: Evaluator | None = None, short_windows=None):
         """fit(tree, error, starts, n_steps) by Levenberg-Marquardt, or None (Nelder-Mead).
-        Errors are those of `ev` (default: the run's evaluator); short_windows (default the
-        fit_horizons' windows) start each fit on a growing horizon."""
-        if self.cfg.constant_fit != "gauss-newton":
+        Errors are those of `ev` (default: the run's evaluator); short_windows (default none)
+        start each fit on a growing horizon."""
+        if self.cfg.constant_fit != "lm":
             return None
         ev = self.evaluator if ev is None else ev
-        short_windows = self.short_windows if short_windows is None else short_windows
+        short_windows = [] if short_windows is None else short_windows
 
         def fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
             def error_of(t: Tree) -> float:
@@ -246,18 +248,15 @@ class Coevolution:
 
     def local_search_phase(self, state: RunState) -> None:
         """Optional local search of delays and constants (not in the paper; see config)."""
-        mode = self.cfg.local_search
-        if mode == "none":
+        if self.cfg.constant_fit == "none":
             return
-        refit = self.cfg.local_search_evals // 5 if mode == "delays+constants" else 0
+        refit = self.cfg.nelder_mead_evals // 5
         fit = self.gradient_fitter(self.cfg.gradient_steps)
-        refit_fit = (self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
-                     if mode == "delays+constants" else None)
+        refit_fit = self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
         for i, model in enumerate(state.models):
             err = state.model_errors[i]
-            if mode == "delays+constants":
-                model, err = improve_constants(self.evaluator, model, err, state.suite,
-                                               self.cfg.local_search_evals, fit)
+            model, err = improve_constants(self.evaluator, model, err, state.suite,
+                                           self.cfg.nelder_mead_evals, fit)
             model, err = improve_delays(self.evaluator, model, err, state.suite,
                                         self.cfg.max_delay, refit, refit_fit)
             state.models[i], state.model_errors[i] = model, err
@@ -271,7 +270,7 @@ class Coevolution:
         if fit is None:
             def fit(tree, err, starts, n_steps):
                 return improve_constants(self.evaluator, tree, err, starts,
-                                         cfg.local_search_evals // 5)
+                                         cfg.nelder_mead_evals // 5)
         i = best_index(state.model_errors)
         state.models[i], state.model_errors[i] = improve_terms(
             self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
@@ -287,7 +286,7 @@ class Coevolution:
                 for k in range(1, self.params.taps) for j in range(n_in)}
 
     def regain_fitter(self, steps: int, ev: Evaluator | None = None):
-        """The LM fit with a growing horizon (SEED_HORIZONS unless fit_horizons is set),
+        """The LM fit with a growing horizon (SEED_HORIZONS),
         for the few candidates whose gains start far from their values; None without LM."""
         return self.gradient_fitter(steps, ev, short_windows=self.regain_windows)
 
@@ -307,7 +306,7 @@ class Coevolution:
     # ------------------------------------------------------------- selection
     def tiled_errors(self, trees: list[Tree], ranges) -> np.ndarray:
         """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none)."""
-        starts, steps = tile(ranges, self.cfg.window_steps, self.cfg.max_delay)
+        starts, steps = tile(ranges, self.window_steps, self.cfg.max_delay)
         if len(starts) == 0:
             return np.full(len(trees), np.nan)
         return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
@@ -324,18 +323,18 @@ class Coevolution:
         train = self.training_errors(state) if train is None else train
         i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
         model, error = state.models[i], float(train[i])
-        if self.cfg.final_selection == "bic":
+        if self.cfg.selection == "bic":
             model = self.select_by_bic(state, model, train)
             error = float(self.tiled_errors([model], self.dataset.train)[0])
         elif self.cfg.prune_tolerance > 0:
-            starts, steps = tile(self.dataset.train, self.cfg.window_steps, self.cfg.max_delay)
+            starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
             samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
             # The allowance is a fraction of the error of the best constant model.
             mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
             trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
             scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
             model, error = prune(self.evaluator, model, starts, steps,
-                                 self.cfg.prune_tolerance * scale, self.cfg.local_search_evals,
+                                 self.cfg.prune_tolerance * scale, self.cfg.nelder_mead_evals,
                                  lambda t, a, b: self.subtree_mean(t, a, b, samples),
                                  self.gradient_fitter(self.cfg.gradient_steps))
         validation = self.tiled_errors([model], self.dataset.validation)[0]
@@ -346,15 +345,14 @@ class Coevolution:
         the training and validation windows among it and the front's climbers
         (gpquad.engine.evolve.selection)."""
         cfg = self.cfg
-        ev_mse = Evaluator(self.dataset, self.target, cfg.window_steps, "mse", cfg.max_depth,
-                           cfg.attitude_weight, cfg.angle_tangents)
-        starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
+        ev_mse = Evaluator(self.dataset, self.target, self.window_steps, "mse", cfg.max_depth)
+        starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
         fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
         if fit is None:
             def fit(tree, err, starts, n_steps):
                 return fit_constants(tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps),
-                                     cfg.local_search_evals)
+                                     cfg.nelder_mead_evals)
         pruned = prune_by_bic(ev_mse, model, starts, steps,
                               lambda t, a, b: self.subtree_mean(t, a, b, samples), fit,
                               self.regain_fitter(cfg.gradient_steps, ev_mse))
@@ -363,7 +361,7 @@ class Coevolution:
         # constants were fitted on, and the validation windows alone are often one or two
         # (px4-s250: its 10 s of validation favoured r_dot = u_Y - r over 16.8 (u_Y - r),
         # which predicts the held-out flight 50 times better).
-        val_starts, val_steps = tile(self.dataset.validation, cfg.window_steps, cfg.max_delay)
+        val_starts, val_steps = tile(self.dataset.validation, self.window_steps, cfg.max_delay)
         if len(val_starts) and val_steps == steps:
             starts = np.concatenate([starts, val_starts])
         return select_by_bic(ev_mse, candidates, starts, steps)[0]

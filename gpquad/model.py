@@ -1,0 +1,345 @@
+"""`gpquad.Model`: a fitted model as a user holds it (gpquad.fit, gpquad.load).
+
+It wraps the engine's DiscoveredModel (gpquad.models.equations) with DataFrame in, DataFrame
+out methods: predict (one-step accelerations), simulate (flown windows of a flight), score
+(RSE beside the zero model), fly (from inputs alone) and export.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import sympy as sp
+
+from gpquad.data.flight import DT_TOLERANCE, Flight, flight_from_frame
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
+from gpquad.errors import GpquadError
+from gpquad.models.equations import DiscoveredModel, Equation
+
+#: States scored by RSE: the ones the six equations integrate into.
+SCORED = ("u", "v", "w", "p", "q", "r")
+
+
+@dataclasses.dataclass(frozen=True)
+class EquationForms:
+    """One equation in every printed form.
+
+    Attributes
+    ----------
+    target : str
+        The acceleration it gives ("p_dot").
+    text : str
+        One line, delayed inputs written ``u_R(t-1)`` (delays in samples of dt).
+    latex : str
+        LaTeX of the same equation.
+    sympy : sympy.Expr
+        The right-hand side; each delayed input is its own symbol named ``u_R(t-k)``.
+    lag : float
+        Time constant (s) of the first-order lag: ``lag * d(target)/dt + target = sympy``
+        (0: none, ``target = sympy``).
+    delays : dict
+        Delay (samples) of every input the equation reads.
+    """
+
+    target: str
+    text: str
+    latex: str
+    sympy: sp.Expr
+    lag: float
+    delays: dict
+
+
+class Model:
+    """Six (or fewer) discovered equations with what is needed to fly them.
+
+    Parameters
+    ----------
+    discovered : DiscoveredModel
+        The engine's model (model.json).
+    config : Config, optional
+        The config it was fitted with (recorded in the model too).
+    """
+
+    def __init__(self, discovered: DiscoveredModel, config=None):
+        self.discovered = discovered
+        self.config = config
+
+    # ------------------------------------------------------------------ description
+    @property
+    def dt(self) -> float:
+        """Sample period (s); equation delays are whole samples of it."""
+        return float(self.discovered.dt)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.discovered.input_names)
+
+    @property
+    def trim(self) -> dict[str, float]:
+        """Subtracted from the raw inputs before the equations read them."""
+        return dict(self.discovered.trim)
+
+    @property
+    def targets(self) -> tuple[str, ...]:
+        return tuple(t for t in TARGET_NAMES if t in self.discovered.equations)
+
+    @property
+    def equations(self) -> dict[str, EquationForms]:
+        """{target: EquationForms} in the order a_x, a_y, a_z, p_dot, q_dot, r_dot."""
+        out = {}
+        for t in self.targets:
+            e = self.discovered.equations[t]
+            out[t] = EquationForms(t, e.text(), e.latex(), e.sympy().xreplace(e.shown_inputs()),
+                                   float(e.lag), e.used_delays())
+        return out
+
+    def __str__(self) -> str:
+        head = f"dt = {self.dt:g} s (delays u(t-k) in samples)"
+        if any(self.trim.values()):
+            trims = ", ".join(f"{n} {v:.6g}" for n, v in self.trim.items() if v)
+            head += f"; inputs trim-subtracted ({trims})"
+        return head + "\n" + self.discovered.text()
+
+    def __repr__(self) -> str:
+        flag = ", interrupted" if self.discovered.interrupted else ""
+        return (f"<gpquad.Model {len(self.targets)} equations ({', '.join(self.targets)}), "
+                f"dt={self.dt:g} s, {self.discovered.n_parameters} constants{flag}>")
+
+    # ------------------------------------------------------------------ data
+    def _dataset(self, data):
+        """The data as a dataset whose every sample is scored, inputs in the model's view."""
+        from gpquad.data.dataset import build_dataset
+        from gpquad.models.scoring import model_view
+
+        flights = self._flights(data)
+        dataset = build_dataset(flights, validation_fraction=0.0, held_out=[True] * len(flights))
+        if abs(dataset.dt - self.dt) > DT_TOLERANCE * self.dt:
+            raise GpquadError(f"the data's sample period is {dataset.dt:.6g} s but the model's "
+                              f"delays are samples of {self.dt:.6g} s; resample the data",
+                              field="t")
+        return model_view(dataset, self.trim)
+
+    def _flights(self, data) -> list[Flight]:
+        items = list(data) if isinstance(data, (list, tuple)) else [data]
+        flights = []
+        for k, d in enumerate(items):
+            if isinstance(d, Flight):
+                flights.append(d)
+            elif isinstance(d, pd.DataFrame):
+                flights.append(flight_from_frame(d, self.input_names, source=f"DataFrame {k}",
+                                                 name=f"flight{k}"))
+            elif isinstance(d, (str, Path)):
+                from gpquad.data.io import read_log_file
+                from gpquad.study.config import DataConfig
+
+                data = DataConfig() if self.config is None else self.config.data
+                data = dataclasses.replace(data, inputs=self.input_names, files=(str(d),))
+                flights.extend(read_log_file(d, data))
+            else:
+                raise GpquadError(f"data[{k}] is a {type(d).__name__}; give DataFrames, "
+                                  "Flights or log paths", field="data")
+        for f in flights:
+            if tuple(f.input_names) != self.input_names:
+                raise GpquadError(f"the model reads inputs {list(self.input_names)} but the "
+                                  f"data gives {list(f.input_names)}", source=f.name,
+                                  field="inputs")
+        return flights
+
+    # ------------------------------------------------------------------ use
+    def predict(self, data) -> pd.DataFrame:
+        """One-step accelerations of every equation on the data's states and inputs.
+
+        Returns
+        -------
+        DataFrame
+            Index: sample of the concatenated flights (those with a full input history);
+            columns ``t`` (s, within its flight), ``flight`` and one per target (m/s^2,
+            rad/s^2). A lagged equation's value is its applied acceleration after one
+            step of its lag from the data's acceleration.
+        """
+        from gpquad.engine.kernels.tree_eval import eval_lanes
+        from gpquad.engine.lag import lag_alpha
+        from gpquad.engine.taps import with_taps
+
+        dataset = self._dataset(data)
+        rows = np.concatenate([np.arange(a + self._history(), b) for a, b in dataset.segments])
+        flight = np.concatenate([np.full(b - a - self._history(), k)
+                                 for k, (a, b) in enumerate(dataset.segments)])
+        out = {"t": (rows - np.array([dataset.segments[k][0] for k in flight])) * dataset.dt,
+               "flight": flight}
+        arrays = dataset.arrays
+        for t in self.targets:
+            e = self.discovered.equations[t]
+            taps = len(e.tree.delays) // len(self.input_names)
+            inputs = with_taps(dataset, taps).arrays.inputs
+            feats = np.empty((9 + len(e.tree.delays), len(rows)))
+            feats[:9] = arrays.states[rows].T
+            for j, d in enumerate(e.tree.delays):
+                feats[9 + j] = inputs[rows - int(d), j]
+            pred = np.empty(len(rows))
+            eval_lanes(e.tree.codes, e.tree.values, e.tree.size, np.ascontiguousarray(feats),
+                       np.empty((64, len(rows))), pred, len(rows))
+            alpha = lag_alpha(e.lag, self.dt)
+            if alpha < 1.0:
+                before = arrays.acc[rows - 1, target_index(t)]
+                pred = before + alpha * (pred - before)
+            out[t] = pred
+        return pd.DataFrame(out, index=rows)
+
+    def _history(self) -> int:
+        return max([int(np.max(e.tree.delays, initial=0))
+                    for e in self.discovered.equations.values()] + [1])
+
+    def _windows(self, dataset, horizon_s: float):
+        from gpquad.models.scoring import validation_windows
+
+        if not np.isfinite(horizon_s) or horizon_s <= 0:
+            raise GpquadError(f"horizon_s must be a positive number of seconds, got {horizon_s}",
+                              field="horizon_s")
+        steps = max(1, int(round(horizon_s / dataset.dt)))
+        return validation_windows(dataset, steps, self._history())
+
+    def simulate(self, data, horizon_s: float = 7.0) -> pd.DataFrame:
+        """Fly the equations over consecutive windows of the data, each from the data's
+        state at its start, driven by the recorded inputs.
+
+        Returns
+        -------
+        DataFrame
+            Columns ``window``, ``t`` (s from the window's start), the nine flown states
+            ``phi theta psi u v w p q r`` and the data's, suffixed ``_data``.
+        """
+        dataset = self._dataset(data)
+        starts, steps = self._windows(dataset, horizon_s)
+        with np.errstate(all="ignore"):
+            flown = self.discovered.simulate(dataset, starts, steps)
+        truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
+        n = len(starts)
+        frame = {"window": np.repeat(np.arange(n), steps + 1),
+                 "t": np.tile(np.arange(steps + 1) * dataset.dt, n)}
+        frame.update({s: flown[:, :, i].ravel() for i, s in enumerate(STATE_NAMES)})
+        frame.update({f"{s}_data": truth[:, :, i].ravel() for i, s in enumerate(STATE_NAMES)})
+        return pd.DataFrame(frame)
+
+    def score(self, data, horizon_s: float = 7.0) -> pd.DataFrame:
+        """RSE of the integrated states over consecutive windows of `horizon_s`, beside the
+        zero model (every acceleration zero), flown the same way.
+
+        RSE = sum of squared errors / sum of squared deviations of the data from its mean,
+        per state over the windows; 1 is no better than the data's mean; a diverged window
+        (non-finite, or beyond 10x the largest |state| of the windows) is left out and
+        counted.
+
+        Returns
+        -------
+        DataFrame
+            Rows ``model`` and ``zero``; columns u, v, w, p, q, r, ``diverged``,
+            ``windows`` and ``horizon_s``.
+        """
+        from gpquad.models.scoring import DIVERGENCE_FACTOR, SCORED_INDEX, diverged, rse
+
+        dataset = self._dataset(data)
+        starts, steps = self._windows(dataset, horizon_s)
+        truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
+        bound = np.full(len(SCORED_INDEX),
+                        DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
+        rows = {}
+        for name, model in (("model", self.discovered), ("zero", self._zero())):
+            with np.errstate(all="ignore"):
+                pred = model.simulate(dataset, starts, steps)
+            bad = diverged(pred, bound)
+            values = (rse(pred[~bad], truth[~bad]) if (~bad).any()
+                      else np.full(len(SCORED), np.nan))
+            rows[name] = {**dict(zip(SCORED, map(float, values), strict=True)),
+                          "diverged": int(bad.sum()), "windows": int(len(starts)),
+                          "horizon_s": float(steps * dataset.dt)}
+        return pd.DataFrame.from_dict(rows, orient="index")
+
+    def _zero(self) -> DiscoveredModel:
+        from gpquad.engine.tree.encoding import Tree
+        from gpquad.engine.tree.operators import CONST
+
+        zero = Tree.from_lists([CONST], [0.0], np.zeros(len(self.input_names), dtype=np.int64))
+        eqs = {t: Equation(t, zero, self.input_names, np.nan, np.nan) for t in TARGET_NAMES}
+        return DiscoveredModel(eqs, self.input_names, self.trim, self.dt, 0, {})
+
+    def fly(self, inputs: pd.DataFrame, x0=None) -> pd.DataFrame:
+        """Fly the model from an initial state, driven by raw inputs alone (no data).
+
+        Parameters
+        ----------
+        inputs : DataFrame
+            One column per model input (by name; other columns are ignored), one row per
+            sample of dt; an optional ``t`` column (s) must step by the model's dt. Rows
+            before the first are held at the first.
+        x0 : sequence of 9 floats or dict, optional
+            Initial ``phi theta psi`` (rad), ``u v w`` (m/s), ``p q r`` (rad/s); a dict may
+            name some of them; default all zero.
+
+        Returns
+        -------
+        DataFrame
+            ``t`` and the nine flown states, one row per input row.
+        """
+        if not isinstance(inputs, pd.DataFrame):
+            raise GpquadError(f"inputs must be a DataFrame with the columns "
+                              f"{list(self.input_names)} (named, not by position)",
+                              field="inputs")
+        missing = [n for n in self.input_names if n not in inputs.columns]
+        if missing:
+            raise GpquadError(f"inputs lack the columns {missing}; the model reads "
+                              f"{list(self.input_names)}", field="inputs")
+        if "t" in inputs.columns and len(inputs) > 1:
+            steps = np.diff(inputs["t"].to_numpy(dtype=float))
+            if not np.all(np.abs(steps - self.dt) <= DT_TOLERANCE * self.dt):
+                raise GpquadError(f"column t steps by {np.median(steps):.6g} s but the model's "
+                                  f"dt is {self.dt:.6g} s; resample the inputs", field="t")
+        state0 = np.zeros(9)
+        if isinstance(x0, dict):
+            unknown = [k for k in x0 if k not in STATE_NAMES]
+            if unknown:
+                raise GpquadError(f"unknown states {unknown}; name some of {list(STATE_NAMES)}",
+                                  field="x0")
+            for k, v in x0.items():
+                state0[STATE_NAMES.index(k)] = float(v)
+        elif x0 is not None:
+            state0 = np.asarray(x0, dtype=float)
+        values = inputs[list(self.input_names)].to_numpy(dtype=float)
+        flight = self.discovered.fly(values, state0)
+        from gpquad.engine.kernels.quaternion import euler_array
+
+        angles = euler_array(np.ascontiguousarray(flight.quat))
+        frame = {"t": flight.t}
+        frame.update({s: angles[:, i] for i, s in enumerate(STATE_NAMES[:3])})
+        frame.update({s: flight.vel[:, i] for i, s in enumerate(STATE_NAMES[3:6])})
+        frame.update({s: flight.rates[:, i] for i, s in enumerate(STATE_NAMES[6:9])})
+        return pd.DataFrame(frame)
+
+    def export(self, fmt: str, path=None):
+        """The model in another form: "text", "latex", "markdown", "json" (model.json);
+        written to `path` when given, else returned as a string."""
+        import json
+
+        forms = {"text": lambda: str(self) + "\n", "latex": lambda: self.discovered.latex(),
+                 "markdown": lambda: self.discovered.markdown(),
+                 "json": lambda: json.dumps(self.discovered.to_dict(), indent=1)}
+        if fmt not in forms:
+            raise GpquadError(f"unknown format '{fmt}'; choose one of {sorted(forms)}",
+                              field="fmt")
+        text = forms[fmt]()
+        if path is None:
+            return text
+        Path(path).write_text(text)
+        return Path(path)
+
+    def save(self, path) -> Path:
+        """Write model.json to `path` (a folder or a .json file); gpquad.load reads it."""
+        from gpquad.study.store import write_json
+
+        path = Path(path)
+        target = path if path.suffix == ".json" else path / "model.json"
+        write_json(target, self.discovered.to_dict())
+        return target

@@ -1,0 +1,132 @@
+"""The one fit path: every configured target searched (gpquad.study.runner.identify), then
+the model finished (gpquad.models.finish). `gpquad run` calls it with a run folder (history,
+checkpoints, resume), `gpquad benchmark` and `gpquad.fit` without one; `gpquad sweep` runs
+the same `identify` per repetition and the same finish on its assembled models."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+from gpquad.data.dataset import Dataset
+from gpquad.engine.variables import TARGET_STATE
+from gpquad.models.envelope import training_envelope
+from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.finish import finish_model
+from gpquad.models.joint_fit import joint_fit_summary
+from gpquad.models.refine import refined_summary
+from gpquad.models.stability import stability_summary
+from gpquad.models.symmetrize import symmetrized_summary
+from gpquad.models.symmetry import mirror_odd_terms, parity_summary
+from gpquad.study.config import Config
+from gpquad.study.search import Progress, identify
+from gpquad.study.store import HistoryWriter, write_json
+
+FINISH_WORDS = {"symmetrize": "symmetric equations", "refine": "refining the rate equations",
+                "repair": "full-model stability repair", "joint_fit": "joint refit"}
+
+
+def warn_unmeasured(dataset: Dataset, targets) -> None:
+    """One line per target whose integrated state the data does not measure."""
+    for target in targets:
+        missing = dataset.unmeasured(TARGET_STATE[target])
+        if missing:
+            print(f"gpquad: warning: {target} integrates {TARGET_STATE[target]}, which "
+                  f"{', '.join(missing)} does not measure; its equation fits the log's "
+                  "placeholder values", file=sys.stderr)
+
+
+def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
+    """A finished target's (equation, history end) from its record; None, with a warning,
+    when the record is damaged (the target is then identified again)."""
+    try:
+        record = json.loads(path.read_text())
+        equation = Equation.from_dict(path.stem, record["equation"], dataset.input_names,
+                                      dataset.trim)
+        return equation, int(record["history_bytes"])
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError) as exc:
+        print(f"gpquad: warning: {path}: damaged record of a finished equation "
+              f"({type(exc).__name__}); identifying {path.stem} again", file=sys.stderr)
+        return None
+
+
+def search_equations(dataset: Dataset, cfg: Config, report: Progress,
+                     run_dir: Path | None = None, resuming: bool = False
+                     ) -> tuple[dict[str, Equation], dict[str, float]]:
+    """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
+    history and checkpoints are written there and finished targets are resumed from it. On
+    KeyboardInterrupt the exception carries `partial` = the equations found so far."""
+    ev = cfg.evolution
+    equations: dict[str, Equation] = {}
+    timings: dict[str, float] = {}
+    history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
+    try:
+        # Where the history of finished targets ends (the header, before any target).
+        history_end = (len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
+                       if run_dir is not None else 0)
+        for target in ev.targets:
+            done = run_dir / "checkpoints" / f"{target}.json" if run_dir is not None else None
+            record = _finished_record(done, dataset) if resuming and done.exists() else None
+            if record is not None:  # finished before the interruption
+                equations[target], history_end = record
+                report.done += ev.iterations
+                report.say(f"  {target}: finished earlier (resumed from {done})")
+                continue
+            t0 = time.perf_counter()
+            equations[target], _ = identify(
+                dataset, target, cfg, history, report,
+                checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
+                history_start=history_end)
+            timings[target] = time.perf_counter() - t0
+            if done is not None:
+                history_end = history.size()
+                write_json(done, {"equation": equations[target].to_dict(),
+                                  "history_bytes": history_end})
+            report.say(f"  -> {equations[target].text()}  (validation error "
+                       f"{equations[target].validation_error:.4g})")
+    except KeyboardInterrupt as exc:
+        partial = getattr(exc, "partial", None)
+        if partial is not None:
+            equations[partial[0].target] = partial[0]
+        exc.equations = equations
+        raise
+    finally:
+        if history is not None:
+            history.close()
+    return equations, timings
+
+
+def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> DiscoveredModel:
+    """The unfinished model of `equations` with what is needed to reproduce and fly it."""
+    return DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
+                           cfg.to_dict(), envelope=training_envelope(dataset))
+
+
+def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
+           report: Progress | None = None) -> DiscoveredModel:
+    """The finished model (cfg.evolution.finish), each step's summary line reported, and
+    its terms of the wrong left-right parity when the vehicle is symmetric."""
+    say = (lambda text: None) if report is None else report.say
+    model = finish_model(model, dataset, cfg.evolution, cfg.vehicle,
+                         on_step=lambda name: say(f"gpquad: {FINISH_WORDS[name]} ..."))
+    for name, summary in (("symmetrized", symmetrized_summary), ("refined", refined_summary),
+                          ("stability", stability_summary), ("joint_fit", joint_fit_summary)):
+        if getattr(model, name) is not None:
+            say(summary(getattr(model, name)))
+    flipped = cfg.vehicle.flipped(dataset.input_names)
+    if flipped:
+        found = mirror_odd_terms(model, dataset, flipped)
+        model = dataclasses.replace(model, mirror_parity=found)
+        say(parity_summary(found, flipped))
+    return model
+
+
+def fit_dataset(dataset: Dataset, cfg: Config, report: Progress | None = None,
+                run_dir: Path | None = None, resuming: bool = False) -> DiscoveredModel:
+    """Search every configured target and finish the model (module notes)."""
+    report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
+    equations, _ = search_equations(dataset, cfg, report, run_dir, resuming)
+    return finish(new_model(equations, dataset, cfg), dataset, cfg, report)

@@ -1,0 +1,87 @@
+"""One target's search: the coevolution run to its last iteration (gpquad.study.loop), with
+optional history and checkpoints, and the progress line it prints."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gpquad.data.dataset import Dataset
+from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.engine.threads import one_blas_thread
+from gpquad.models.equations import Equation
+from gpquad.study import checkpoint
+from gpquad.study.config import Config
+from gpquad.study.loop import evolve, final_equation
+from gpquad.study.seeding import target_seed
+from gpquad.study.store import HistoryWriter
+
+
+class Progress:
+    """One line per iteration: target, iteration, best error on the current test suite (the
+    windows the models compete on, not the training error of model.json) and time left."""
+
+    def __init__(self, enabled: bool, total_iterations: int, stream=sys.stdout):
+        self.enabled = enabled
+        self.total = total_iterations
+        self.done = 0
+        self.start = time.perf_counter()
+        self.stream = stream
+
+    def iteration(self, target: str, state: RunState, iterations: int) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        elapsed = time.perf_counter() - self.start
+        left = elapsed / self.done * (self.total - self.done)
+        best = float(np.min(state.model_errors))
+        print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best suite error "
+              f"{best:.5g}  elapsed {elapsed:6.1f} s  left ~{left:6.1f} s",
+              file=self.stream, flush=True)
+
+    def say(self, text: str) -> None:
+        if self.enabled:
+            print(text, file=self.stream, flush=True)
+
+
+@one_blas_thread
+def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter | None = None,
+             progress: Progress | None = None, state: RunState | None = None,
+             checkpoint_path: Path | None = None, history_start: int | None = None
+             ) -> tuple[Equation, RunState]:
+    """Run the coevolution for one target; returns its best equation and final state.
+
+    With checkpoint_path, the state is saved atomically after every iteration together
+    with the history file's size, and a run is continued from an existing checkpoint
+    (the history is cut back to the size the checkpoint recorded; a run that starts
+    afresh cuts it back to `history_start`, where this target's rows begin).
+    On KeyboardInterrupt the exception is re-raised with the partial result attached
+    as `exc.partial = (equation, state)`.
+    """
+    ev = cfg.evolution
+    co = Coevolution(dataset, target, ev)
+    if state is None and checkpoint_path is not None and checkpoint_path.exists():
+        try:
+            state, meta = checkpoint.load(checkpoint_path)
+            if history is not None:
+                history.truncate(int(meta["history_bytes"]))
+        except (checkpoint.CorruptCheckpoint, KeyError) as exc:
+            print(f"gpquad: warning: {checkpoint_path}: {exc}; restarting {target}",
+                  file=sys.stderr)
+            state = None
+    if state is None:
+        state = co.init_state(target_seed(cfg.seed, target))
+        if history is not None and history_start is not None:
+            history.truncate(history_start)
+    report = None if progress is None else (
+        lambda st: progress.iteration(target, st, ev.iterations))
+    try:
+        evolve(co, state, ev.iterations, history, checkpoint_path, on_iteration=report)
+    except KeyboardInterrupt as exc:
+        tree, train, val = co.best(state)
+        exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
+        raise
+    return final_equation(co, state, dataset, target), state

@@ -1,0 +1,157 @@
+"""The Python API (gpquad.fit, load, read_log, reference_flight and Model): one fit path
+with `gpquad run`, DataFrames in and out, one-line errors for user mistakes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import gpquad
+from gpquad.data.dataset import build_dataset
+from gpquad.data.flight import flight_from_frame
+from gpquad.models.analysis import compare_to_truth
+from gpquad.study.config import MEDIAN_MODEL, Config, config_from_dict
+from gpquad.study.runner import run_experiment
+
+INPUTS = ("u_P", "u_R", "u_Y", "u_T")
+FAST = {"iterations": 1, "input_taps": 1, "targets": ["p_dot", "q_dot"]}
+
+
+@pytest.fixture(scope="module")
+def flight() -> pd.DataFrame:
+    return gpquad.reference_flight(seed=0, duration_s=80.0)
+
+
+@pytest.fixture(scope="module")
+def other() -> pd.DataFrame:
+    return gpquad.reference_flight(seed=7, duration_s=40.0)
+
+
+@pytest.fixture(scope="module")
+def model(flight) -> gpquad.Model:
+    return gpquad.fit(flight, seed=1, **FAST)
+
+
+def test_fit_recovers_the_truth_and_describes_itself(model, flight):
+    assert model.targets == ("p_dot", "q_dot") and model.dt == pytest.approx(0.04)
+    dataset = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
+    for t in model.targets:
+        assert compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t],
+                                dataset)["passed"], t
+    assert str(model).startswith("dt = 0.04 s") and "p_dot = " in str(model)
+    assert repr(model).startswith("<gpquad.Model 2 equations (p_dot, q_dot), dt=0.04 s")
+    forms = model.equations["p_dot"]
+    assert forms.delays == {"u_R": 1} and forms.lag == 0.0
+    assert {s.name for s in forms.sympy.free_symbols} == {"p", "u_R(t-1)"}
+    assert "u_R(t-1)" in forms.text and r"\dot" in forms.latex
+
+
+def test_fit_is_the_run_path_bit_for_bit(flight, tmp_path, model):
+    """gpquad.fit and `gpquad run` share one fit path: the same config and data give the
+    same model.json bytes, and fit(run_dir=) writes the folder `gpquad run` writes."""
+    path = tmp_path / "flight.csv"
+    flight.to_csv(path, index=False, float_format="%.17g")
+    cfg = config_from_dict({"seed": 1, "data": {"files": [str(path)]},
+                            "evolution": {"iterations": 1, "input_taps": 1,
+                                          "targets": ["p_dot", "q_dot"]}})
+    run_experiment(cfg, tmp_path / "run", progress=False)
+    again = gpquad.fit(path, seed=1, run_dir=tmp_path / "api", **FAST)
+    from_run = json.loads((tmp_path / "run" / "model.json").read_text())
+    from_api = json.loads((tmp_path / "api" / "model.json").read_text())
+    assert from_run["targets"] == from_api["targets"]
+    assert again.discovered.to_dict()["targets"] == model.discovered.to_dict()["targets"]
+    loaded = gpquad.load(tmp_path / "api")
+    assert str(loaded) == str(again)
+
+
+def test_score_predict_simulate_and_fly(model, other):
+    score = model.score(other, horizon_s=7.0)
+    assert list(score.index) == ["model", "zero"]
+    assert score.loc["model", ["p", "q"]].max() < 1e-6 < score.loc["zero", ["p", "q"]].min()
+    assert score.loc["model", "windows"] == 5 and score.loc["model", "diverged"] == 0
+    pred = model.predict(other)
+    assert list(pred.columns) == ["t", "flight", "p_dot", "q_dot"]
+    flown = model.simulate(other, horizon_s=4.0)
+    assert set(flown["window"]) == set(range(9)) and "p_data" in flown.columns
+    assert np.abs(flown["p"] - flown["p_data"]).max() < 1e-9
+    inputs = other[["t", *INPUTS]]
+    trace = model.fly(inputs, {"phi": 0.01})
+    assert len(trace) == len(other) and trace.loc[0, "phi"] == pytest.approx(0.01)
+    # the columns are taken by name, not by position
+    reordered = model.fly(inputs[["t", "u_T", "u_Y", "u_R", "u_P"]], {"phi": 0.01})
+    assert np.array_equal(reordered.to_numpy(), trace.to_numpy())
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y"]]), r"lack the columns \['u_T'\]"),
+    (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y", "u_T"]].to_numpy()), "named"),
+    (lambda m, d: m.fly(d.assign(t=d["t"] * 2)[["t", "u_P", "u_R", "u_Y", "u_T"]]), "dt"),
+    (lambda m, d: m.fly(d[list(INPUTS)], {"alpha": 1.0}), "unknown states"),
+    (lambda m, d: m.score(d, horizon_s=0.0), "horizon_s"),
+    (lambda m, d: m.score(d.rename(columns={"u_T": "thrust"})), "u_T"),
+    (lambda m, d: m.score([3]), "DataFrames"),
+    (lambda m, d: m.export("pdf"), "unknown format"),
+])
+def test_user_mistakes_are_one_line_errors(model, other, call, message):
+    with pytest.raises(gpquad.GpquadError, match=message) as info:
+        call(model, other)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"iteratons": 2}, "did you mean 'iterations'"),
+    ({"targets": ["x_dot"]}, "unknown target"),
+    ({"config": 3}, "config must be"),
+    ({"config": "fastest"}, "config file not found"),
+    ({"window_s": -1.0}, "window_s"),
+])
+def test_bad_settings_fail_before_any_work(flight, kwargs, message):
+    with pytest.raises(gpquad.GpquadError, match=message):
+        gpquad.fit(flight, **kwargs)
+
+
+def test_config_forms_and_presets():
+    from gpquad.api import _config
+
+    assert _config(None) == Config()
+    assert _config("paper").evolution.constant_fit == "none"
+    assert _config("recommended") == config_from_dict({})
+    assert gpquad.Config is Config
+
+
+def test_read_log_gives_flights(tmp_path, flight):
+    path = tmp_path / "f.csv"
+    flight.to_csv(path, index=False, float_format="%.17g")
+    flights = gpquad.read_log(path)
+    assert len(flights) == 1 and flights[0].input_names == INPUTS
+    assert np.allclose(flights[0].rates, flight[["p", "q", "r"]].to_numpy())
+    with pytest.raises(gpquad.GpquadError, match="no such file"):
+        gpquad.read_log(tmp_path / "missing.csv")
+
+
+def test_help_documents_the_api():
+    import pydoc
+
+    text = pydoc.render_doc(gpquad.fit, renderer=pydoc.plaintext)
+    for word in ("Parameters", "data", "config", "seed", "run_dir", "overrides", "Returns"):
+        assert word in text
+    for name in ("predict", "simulate", "score", "fly", "export"):
+        assert getattr(gpquad.Model, name).__doc__
+
+
+@pytest.mark.slow
+def test_default_fit_recovers_the_six_equations_of_the_quickstart_flight():
+    """gpquad.fit(df) with every default on the quickstart's simulated flight (a few
+    minutes on 2 cores)."""
+    df = gpquad.reference_flight()
+    model = gpquad.fit(df, seed=1)
+    dataset = build_dataset([flight_from_frame(df, INPUTS)], validation_fraction=0.15)
+    assert all(compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t],
+                                dataset)["passed"] for t in MEDIAN_MODEL)
+
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "notebook_workflow.py"
