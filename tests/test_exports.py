@@ -142,6 +142,8 @@ def test_sympy_form_carries_delays_lags_trim_and_dt():
     assert lagged.lhs.has(sp.Derivative) and sp.Float(0.05) in lagged.lhs.atoms(sp.Float)
     assert form.equations["q_dot"].lhs == sp.Symbol("q_dot", real=True)
     assert form.equations["q_dot"].rhs.has(sp.Piecewise)  # the protected division
+    assert model.to_sympy() == form.equations
+    assert model.to_sympy(raw=True) == sympy_equations(model, raw=True).equations
     raw = sympy_equations(model, raw=True)
     u_p = sp.Symbol("u_P", real=True)
     q = sp.Symbol("q", real=True)

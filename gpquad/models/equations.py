@@ -257,10 +257,15 @@ class DiscoveredModel:
             raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
                               "model.json a `gpquad run` wrote", source=str(path)) from None
 
-    def to_sympy(self) -> dict[str, sp.Expr]:
-        """Each equation's right-hand side; where an equation has a lag (Equation.lag > 0)
-        it is the commanded value the target follows, tau d(target)/dt + target = expr."""
-        return {t: e.sympy() for t, e in self.equations.items()}
+    def to_sympy(self, raw: bool = False) -> dict[str, sp.Eq]:
+        """Each equation as a sympy.Eq that is the model: a delayed input is its own symbol
+        'u_R(t-1)' (delays in samples of self.dt), a lagged equation (Equation.lag > 0) is
+        Eq(tau*Derivative(p_dot(t), t) + p_dot(t), rhs), protected division a Piecewise;
+        raw=True: in the untrimmed inputs. gpquad.models.exports.sympy_equations gives the
+        symbols, dt, trim and lambdify as well."""
+        from gpquad.models.exports.symbolic import sympy_equations
+
+        return sympy_equations(self, raw).equations
 
     def latex(self, raw: bool = False) -> str:
         rows = [self.equations[t].latex(raw=raw) for t in TARGET_NAMES if t in self.equations]
