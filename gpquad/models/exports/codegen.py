@@ -168,7 +168,9 @@ def describe(spec: ModelSpec) -> list[str]:
     """The comment header every code export carries: dt, inputs, trim, delays, lags and the
     equations in text (constants rounded for reading; the code holds them in full)."""
     lines = [
-        f"dt = {short_number(spec.dt)} s (exactly {spec.dt!r}); delays in samples of dt",
+        f"dt = {short_number(spec.dt)} s"
+        + (f" (exactly {spec.dt!r})" if short_number(spec.dt) != repr(spec.dt) else "")
+        + "; delays in samples of dt",
         "state x = [" + ", ".join(STATE_NAMES) + "] (rad, m/s, rad/s; Euler ZYX)",
         "inputs, in order: " + ", ".join(spec.input_names) + " (raw units)",
         "trim (subtracted from each raw input before the equations): "
