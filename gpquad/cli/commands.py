@@ -51,20 +51,18 @@ def _cmd_simulate(args) -> int:
 
 def _cmd_export(args) -> int:
     from gpquad.models.equations import DiscoveredModel
+    from gpquad.models.exports import export, write_export
 
     model = DiscoveredModel.load(args.run)
-    if args.format == "latex":
-        print(model.latex(raw=args.raw_inputs), end="")
-    elif args.format == "markdown":
-        print(model.markdown(), end="")
-    elif args.format == "sympy":
-        for target, eq in model.equations.items():
-            expr = eq.sympy_raw() if args.raw_inputs else eq.sympy()
-            print(f"{target} = {expr}    delays {eq.used_delays()}")
-    elif args.format == "text":
-        print(model.text(raw=args.raw_inputs))
-    else:
-        print(json.dumps(model.to_dict(), indent=2))
+    if args.out:
+        for path in write_export(model, args.format, args.out, raw=args.raw_inputs):
+            print(f"wrote {path}")
+        return 0
+    result = export(model, args.format, **({"raw": True} if args.raw_inputs else {}))
+    if isinstance(result, dict):  # c: the header, then the source
+        result = "".join(f"/* ---- {name} ---- */\n{text}\n"
+                         for name, text in sorted(result.items(), key=lambda kv: kv[0][-1]))
+    print(result, end="" if result.endswith("\n") else "\n")
     return 0
 
 
@@ -152,12 +150,23 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", required=True, help="output .csv or .parquet")
     sim.set_defaults(func=_cmd_simulate)
 
-    exp = sub.add_parser("export", help="print a run's equations")
+    from gpquad.models.exports import FORMATS
+
+    exp = sub.add_parser(
+        "export", help="a run's model as text, LaTeX, sympy, python, C or casadi",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Every format states dt (delays are in samples of dt), the lags and the "
+        "trim; python, c and casadi fly as `gpquad fly`.\nformats:\n" + "\n".join(
+            f"  {f.name:9s}{f.about}" for f in FORMATS.values()),
+        epilog="examples:\n  gpquad export results/run --format text\n"
+        "  gpquad export results/run --format python --out model.py\n"
+        "  gpquad export results/run --format c --out model.c   (writes model.c and model.h)\n"
+        "  cc -std=c99 -O2 -c model.c")
     exp.add_argument("run", help="run folder or model.json")
-    exp.add_argument("--format", choices=["text", "latex", "markdown", "sympy", "json"],
-                     default="text")
+    exp.add_argument("--format", choices=list(FORMATS), default="text")
+    exp.add_argument("--out", help="file to write (c: PATH.c and PATH.h); default: print")
     exp.add_argument("--raw-inputs", action="store_true",
-                     help="write equations in untrimmed inputs")
+                     help="text, latex, sympy: write equations in untrimmed inputs")
     exp.set_defaults(func=_cmd_export)
 
     fly = sub.add_parser("fly", help="fly a run's equations with given inputs")

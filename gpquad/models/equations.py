@@ -257,10 +257,15 @@ class DiscoveredModel:
             raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
                               "model.json a `gpquad run` wrote", source=str(path)) from None
 
-    def to_sympy(self) -> dict[str, sp.Expr]:
-        """Each equation's right-hand side; where an equation has a lag (Equation.lag > 0)
-        it is the commanded value the target follows, tau d(target)/dt + target = expr."""
-        return {t: e.sympy() for t, e in self.equations.items()}
+    def to_sympy(self, raw: bool = False) -> dict[str, sp.Eq]:
+        """Each equation as a sympy.Eq that is the model: a delayed input is its own symbol
+        'u_R(t-1)' (delays in samples of self.dt), a lagged equation (Equation.lag > 0) is
+        Eq(tau*Derivative(p_dot(t), t) + p_dot(t), rhs), protected division a Piecewise;
+        raw=True: in the untrimmed inputs. gpquad.models.exports.sympy_equations gives the
+        symbols, dt, trim and lambdify as well."""
+        from gpquad.models.exports.symbolic import sympy_equations
+
+        return sympy_equations(self, raw).equations
 
     def latex(self, raw: bool = False) -> str:
         rows = [self.equations[t].latex(raw=raw) for t in TARGET_NAMES if t in self.equations]
@@ -283,20 +288,21 @@ class DiscoveredModel:
         return "\n".join(self.equations[t].text(raw=raw) for t in TARGET_NAMES
                          if t in self.equations)
 
-    def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
-        """Fly the model from an initial state with given inputs (no data needed).
+    def fly_states(self, inputs, initial_state=None, raw_inputs: bool = True) -> np.ndarray:
+        """The flown states of `fly`: shape (N, 9), [phi, theta, psi, u, v, w, p, q, r]
+        (rad, m/s, rad/s), row k at time k dt; row 0 is the initial state (its Euler angles
+        as read back from the attitude quaternion).
 
         inputs: (N, n_inputs) control inputs, one row per sample of dt = self.dt; raw (the
-        trim is subtracted here) unless raw_inputs=False. initial_state: 9 values
-        [phi, theta, psi, u, v, w, p, q, r] (rad, m/s, rad/s), default all zero. Inputs
-        before the first row are held at the first row. Targets without an equation have
-        zero acceleration. Returns a Flight (NED/FRD, position from x = 0) that
-        gpquad.data.flight.write_flight_file can save.
+        trim is subtracted here) unless raw_inputs=False. initial_state: 9 values, default
+        all zero. Inputs before the first row are held at the first row; a lagged
+        equation starts from zero acceleration. Targets without an equation have zero
+        acceleration. This is the reference every export (gpquad.models.exports) flies to.
         """
         inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
         n_in = len(self.input_names)
-        if inputs.shape[1] != n_in or len(inputs) < 2:
-            raise GpquadError(f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}",
+        if inputs.ndim != 2 or inputs.shape[1] != n_in or len(inputs) < 1:
+            raise GpquadError(f"inputs must have shape (N >= 1, {n_in}) for {self.input_names}",
                               field="inputs")
         state0 = np.zeros(9) if initial_state is None else np.asarray(initial_state, float)
         if state0.shape != (9,) or not np.all(np.isfinite(state0)):
@@ -304,7 +310,8 @@ class DiscoveredModel:
                               "p, q, r]", field="initial_state")
         trim = np.array([self.trim.get(n, 0.0) for n in self.input_names])
         model_inputs = inputs - trim if raw_inputs else inputs
-        history = max([int(e.tree.delays.max()) for e in self.equations.values()] + [0])
+        history = max([int(e.tree.delays.max(initial=0)) for e in self.equations.values()]
+                      + [0])
         n = len(inputs)
         rows = history + n
         padded = np.vstack([np.repeat(model_inputs[:1], history, axis=0), model_inputs])
@@ -315,7 +322,26 @@ class DiscoveredModel:
         arrays = FlightArrays(quat=quat, states=states, acc=np.zeros((rows, 6)),
                               inputs=np.ascontiguousarray(padded), rot=np.zeros((rows, 9)),
                               dt=float(self.dt))
-        flown = self._rollout(arrays, np.array([history]), n - 1, None, missing_from_data=False)[0]
+        return self._rollout(arrays, np.array([history]), n - 1, None,
+                             missing_from_data=False)[0]
+
+    def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
+        """Fly the model from an initial state with given inputs (no data needed).
+
+        inputs: (N, n_inputs) control inputs, one row per sample of dt = self.dt; raw (the
+        trim is subtracted here) unless raw_inputs=False. initial_state: 9 values
+        [phi, theta, psi, u, v, w, p, q, r] (rad, m/s, rad/s), default all zero. Inputs
+        before the first row are held at the first row. Targets without an equation have
+        zero acceleration. Returns a Flight (NED/FRD, position from x = 0) that
+        gpquad.data.flight.write_flight_file can save; its states are `fly_states`.
+        """
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+        n_in = len(self.input_names)
+        if inputs.shape[1] != n_in or len(inputs) < 2:
+            raise GpquadError(f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}",
+                              field="inputs")
+        flown = self.fly_states(inputs, initial_state, raw_inputs)
+        n = len(inputs)
         out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
         world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
         pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
