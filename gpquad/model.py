@@ -35,8 +35,10 @@ class EquationForms:
         One line, delayed inputs written ``u_R(t-1)`` (delays in samples of dt).
     latex : str
         LaTeX of the same equation.
-    sympy : sympy.Expr
-        The right-hand side; each delayed input is its own symbol named ``u_R(t-k)``.
+    sympy : sympy.Eq
+        The equation: each delayed input is its own symbol named ``u_R(t-k)``, a lagged
+        equation reads ``Eq(tau*Derivative(p_dot(t), t) + p_dot(t), rhs)``, and protected
+        division is a ``Piecewise`` (``sympy.lambdify`` of ``.rhs`` gives the model's value).
     lag : float
         Time constant (s) of the first-order lag: ``lag * d(target)/dt + target = sympy``
         (0: none, ``target = sympy``).
@@ -89,11 +91,14 @@ class Model:
     @property
     def equations(self) -> dict[str, EquationForms]:
         """{target: EquationForms} in the order a_x, a_y, a_z, p_dot, q_dot, r_dot."""
+        from gpquad.models.exports import sympy_equations
+
+        exact = sympy_equations(self.discovered).equations
         out = {}
         for t in self.targets:
             e = self.discovered.equations[t]
-            out[t] = EquationForms(t, e.text(), e.latex(), e.sympy().xreplace(e.shown_inputs()),
-                                   float(e.lag), e.used_delays())
+            out[t] = EquationForms(t, e.text(), e.latex(), exact[t], float(e.lag),
+                                   e.used_delays())
         return out
 
     def __str__(self) -> str:
@@ -318,22 +323,27 @@ class Model:
         frame.update({s: flight.rates[:, i] for i, s in enumerate(STATE_NAMES[6:9])})
         return pd.DataFrame(frame)
 
-    def export(self, fmt: str, path=None):
-        """The model in another form: "text", "latex", "markdown", "json" (model.json);
-        written to `path` when given, else returned as a string."""
-        import json
+    def export(self, fmt: str, path=None, raw: bool = False):
+        """The model in another form, every one stating dt, the delays, the lags and the trim.
 
-        forms = {"text": lambda: str(self) + "\n", "latex": lambda: self.discovered.latex(),
-                 "markdown": lambda: self.discovered.markdown(),
-                 "json": lambda: json.dumps(self.discovered.to_dict(), indent=1)}
-        if fmt not in forms:
-            raise GpquadError(f"unknown format '{fmt}'; choose one of {sorted(forms)}",
-                              field="fmt")
-        text = forms[fmt]()
+        Parameters
+        ----------
+        fmt : str
+            "text", "latex", "markdown", "json" (model.json), "sympy" (a script of sympy
+            equations), "python" (a numpy module with ``accel`` and ``fly``), "c" (a C99
+            source and header with ``gpquad_fly`` and ``gpquad_accel``) or "casadi" (a
+            casadi Function, needs the ``casadi`` extra).
+        path : str or Path, optional
+            Write there ("c": ``model.c`` writes model.c and model.h) and return the paths;
+            default: return the text ({file name: text} for "c").
+        raw : bool
+            text, latex, sympy: write the equations in the raw (untrimmed) inputs.
+        """
+        from gpquad.models.exports import export, write_export
+
         if path is None:
-            return text
-        Path(path).write_text(text)
-        return Path(path)
+            return export(self.discovered, fmt, **({"raw": True} if raw else {}))
+        return write_export(self.discovered, fmt, path, raw)
 
     def save(self, path) -> Path:
         """Write model.json to `path` (a folder or a .json file); gpquad.load reads it."""

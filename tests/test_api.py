@@ -46,7 +46,7 @@ def test_fit_recovers_the_truth_and_describes_itself(model, flight):
     assert repr(model).startswith("<gpquad.Model 2 equations (p_dot, q_dot), dt=0.04 s")
     forms = model.equations["p_dot"]
     assert forms.delays == {"u_R": 1} and forms.lag == 0.0
-    assert {s.name for s in forms.sympy.free_symbols} == {"p", "u_R(t-1)"}
+    assert {s.name for s in forms.sympy.rhs.free_symbols} == {"p", "u_R(t-1)"}
     assert "u_R(t-1)" in forms.text and r"\dot" in forms.latex
 
 
@@ -94,7 +94,7 @@ def test_score_predict_simulate_and_fly(model, other):
     (lambda m, d: m.score(d, horizon_s=0.0), "horizon_s"),
     (lambda m, d: m.score(d.rename(columns={"u_T": "thrust"})), "u_T"),
     (lambda m, d: m.score([3]), "DataFrames"),
-    (lambda m, d: m.export("pdf"), "unknown format"),
+    (lambda m, d: m.export("pdf"), "unknown export format"),
 ])
 def test_user_mistakes_are_one_line_errors(model, other, call, message):
     with pytest.raises(gpquad.GpquadError, match=message) as info:
@@ -155,3 +155,20 @@ def test_default_fit_recovers_the_six_equations_of_the_quickstart_flight():
 
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "notebook_workflow.py"
+
+
+def test_the_example_runs_from_dataframe_to_compiled_c(tmp_path):
+    """examples/notebook_workflow.py, as a user copies it: fit, score, simulate, export C,
+    compile, fly; the C model flies as model.fly does."""
+    import importlib.util
+    import shutil
+
+    spec = importlib.util.spec_from_file_location("notebook_workflow", EXAMPLE)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    difference = example.main(tmp_path)
+    if shutil.which("cc") or shutil.which("gcc"):
+        assert difference < 1e-9
+    else:
+        pytest.skip("no C compiler: the export was written, not compiled")
+    assert (tmp_path / "quad_model.h").is_file()
