@@ -12,8 +12,7 @@ quaternion integrator over data windows, while test windows co-evolve.
 See `fit`, `read_log`, `load` and `Model`.
 """
 
-__version__ = "0.2.0"
-
+from gpquad._version import __version__
 from gpquad.api import fit, load, read_log, reference_flight
 from gpquad.errors import GpquadError
 from gpquad.model import EquationForms, Model

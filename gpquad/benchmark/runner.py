@@ -61,7 +61,7 @@ def method_settings(method: str, engine) -> dict:
     """What a method's cells depend on besides the scenario and seed (`engine`: gpquad's
     Config)."""
     if method == "gpquad":
-        from gpquad import __version__
+        from gpquad._version import __version__
         from gpquad.benchmark.engine import engine_config
 
         # the parsed settings, not a file's text: a comment does not recompute the cells

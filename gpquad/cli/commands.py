@@ -78,8 +78,13 @@ def _cmd_fly(args) -> int:
     path = Path(args.inputs)
     if not path.is_file():
         raise GpquadError("file not found", source=str(path))
-    table = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else \
-        pd.read_csv(path)
+    if path.suffix.lower() in (".parquet", ".pq"):
+        from gpquad.extras import require
+
+        require("pyarrow", "reading Parquet files")
+        table = pd.read_parquet(path)
+    else:
+        table = pd.read_csv(path)
     missing = [n for n in model.input_names if n not in table.columns]
     if missing:
         raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
@@ -127,13 +132,59 @@ def _cmd_bench(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="gpquad", description="Discover multirotor acceleration equations from flight logs "
-        "by coevolutionary genetic programming.")
-    sub = parser.add_subparsers(dest="command", required=True)
+class _Parser(argparse.ArgumentParser):
+    """argparse with a "did you mean" for a mistyped command or choice."""
 
-    run = sub.add_parser("run", help="identify equations from a config")
+    def error(self, message: str):
+        import difflib
+        import re
+
+        found = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if found:
+            choices = re.findall(r"'([^']*)'", found.group(2))
+            close = difflib.get_close_matches(found.group(1), choices, n=1)
+            if close:
+                message += f"; did you mean '{close[0]}'?"
+        super().error(message)
+
+
+class _Version(argparse.Action):
+    """--version: the version and the source's git revision."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, help="print the version and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from gpquad._version import __version__
+        from gpquad.study.store import git_revision
+
+        print(f"gpquad {__version__} (git {git_revision()})")
+        parser.exit()
+
+
+EXAMPLES = """examples:
+  gpquad run experiments/quickstart.toml          identify the reference flight's equations
+  gpquad run my.toml --data flight.ulg            the same engine on your log
+  gpquad score results/RUN --data other.ulg       RSE on another flight, beside the zero model
+  gpquad export results/RUN --format c --out m.c  C99 code that flies the model
+  gpquad data check flight.ulg                    is the log fit for identification?
+  gpquad sweep experiments/paper.toml --jobs 2    the paper's full study
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="gpquad", description="Discover multirotor acceleration equations from flight logs "
+        "by coevolutionary genetic programming.", epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action=_Version)
+    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
+
+    run = sub.add_parser("run", help="identify equations from a config",
+                         formatter_class=argparse.RawDescriptionHelpFormatter,
+                         epilog="examples:\n  gpquad run experiments/quickstart.toml\n"
+                         "  gpquad run my.toml --data a.ulg --data b.ulg --seed 2 --out res/ab\n"
+                         "  gpquad run my.toml --target p_dot --iterations 3   (a quick look)")
     run.add_argument("config", help="experiment TOML file")
     run.add_argument("--data", action="append",
                      help="flight file (repeatable); replaces data.files")
@@ -210,6 +261,9 @@ def _extensions():
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
     try:
         return int(args.func(args) or 0)
     except GpquadError as exc:

@@ -45,7 +45,9 @@ def evolve_gains(plant: Plant, start: Controller, cfg: PidConfig, noise_sd: np.n
                  seed: int, say=None) -> Evolution:
     """Run CMA-ES for cfg.generations. The result is the better, on 4 fresh courses, of the
     final distribution mean and the best candidate seen (on its own generation's courses)."""
-    import cma
+    from gpquad.extras import require
+
+    cma = require("cma", "tuning the PID gains (CMA-ES)")
 
     seq = np.random.SeedSequence([seed, 12])
     course_rng, cma_rng = (np.random.default_rng(s) for s in seq.spawn(2))

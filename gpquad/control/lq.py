@@ -69,7 +69,9 @@ class Tracker:
 
 def lq_tracker(Phi, Gamma, C, D, Q_y, R) -> Tracker:
     """K, F and Pi of the tracker (see the module docstring)."""
-    import control
+    from gpquad.extras import require
+
+    control = require("control", "the LQ controller design")
 
     Phi, Gamma, C, D = (np.asarray(m, float) for m in (Phi, Gamma, C, D))
     Q_y, R = np.asarray(Q_y, float), np.asarray(R, float)
@@ -129,7 +131,9 @@ def linearise(theta, vehicle, omega_h: float | None = None, h: float = 1e-6):
 
 def discretise(A, B, C, D, dt: float):
     """Zero-order-hold (Phi, Gamma, C, D) with python-control."""
-    import control
+    from gpquad.extras import require
+
+    control = require("control", "the LQ controller design")
 
     sysd = control.c2d(control.ss(A, B, C, D), dt, method="zoh")
     return (np.asarray(sysd.A), np.asarray(sysd.B), np.asarray(sysd.C), np.asarray(sysd.D))

@@ -44,7 +44,9 @@ HEADER_KEYS = ("Firmware revision", "Craft name", "looptime", "P interval", "mot
 
 
 def _open(path: Path):
-    from orangebox import Parser
+    from gpquad.extras import require
+
+    Parser = require("orangebox", "reading Betaflight blackbox logs").Parser
 
     if not path.is_file():
         raise GpquadError("file not found", source=str(path))

@@ -53,6 +53,9 @@ def write_export(flights: list[Flight], path) -> Path:
     if path.suffix.lower() == ".csv":
         frame.to_csv(path, index=False, float_format="%.17g")
     else:
+        from gpquad.extras import require
+
+        require("pyarrow", "writing Parquet files")
         frame.to_parquet(path, index=False)
     return path
 

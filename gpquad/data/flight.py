@@ -29,6 +29,7 @@ from gpquad.engine.variables import (
     WORLD_VEL_COLUMNS,
 )
 from gpquad.errors import GpquadError
+from gpquad.extras import require
 
 #: Allowed relative jitter of the sample period.
 DT_TOLERANCE = 0.01
@@ -111,7 +112,10 @@ def _read_table(path: Path) -> pd.DataFrame:
         if suffix == ".csv":
             return pd.read_csv(path)
         if suffix in (".parquet", ".pq"):
+            require("pyarrow", "reading Parquet files")
             return pd.read_parquet(path)
+    except GpquadError:
+        raise
     except Exception as exc:  # truncated or corrupt files
         raise GpquadError(f"cannot read the file ({type(exc).__name__}: {exc})",
                           source=str(path)) from None
@@ -223,5 +227,6 @@ def write_flight_file(flight: Flight, path) -> Path:
     if suffix == ".csv":
         frame.to_csv(path, index=False, float_format="%.17g")
     else:
+        require("pyarrow", "writing Parquet files")
         frame.to_parquet(path, index=False)
     return path

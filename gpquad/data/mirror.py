@@ -14,7 +14,7 @@ M = diag(1, -1, 1) of body and world frames maps
 
 and a model of such a vehicle must fly the mirrored flights as it flies the recorded ones.
 gpquad.models.stability uses this as a test the recorded flights cannot give: an equation
-such as a_z = 12.9 r w - 3.6 w (px4-s250, seed 2 of the fourteenth round) damps w only
+such as a_z = 12.9 r w - 3.6 w (fitted to a px4-s250 log) damps w only
 while r < 0.28 rad/s; the recorded flights turn right too rarely to show it, the mirrored
 ones turn right as often as the recorded ones turn left.
 """

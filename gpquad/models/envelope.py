@@ -4,7 +4,7 @@ and how much of other data lies outside it (`gpquad score` reports it).
 Equations are fitted where the training flights went; outside that range nothing in the
 data constrained them (a product such as r w can change the sign of a damping there).
 Scoring cannot say the model is wrong there, but it can say that it is extrapolating. A
-range is a coarse envelope: px4-s250's seed 2 of the fourteenth round (a_z = 12.91 r w -
+range is a coarse envelope: an a_z fitted to a px4-s250 log (a_z = 12.91 r w -
 3.586 w, damping w only for r < 0.28 rad/s) diverged where r stayed positive for long,
 rare in training (2.3 % of its samples) but inside its range.
 """

@@ -1,4 +1,4 @@
-"""Joint refit of a full model's constants on six-equation rollouts (issue 9, lever 5).
+"""Joint refit of a full model's constants on six-equation rollouts (the "joint_fit" step).
 
 Each equation is identified with the other five accelerations taken from the data (paper
 section 3.2), so each is right with the data's states around it. Flown together, a small

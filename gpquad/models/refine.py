@@ -1,11 +1,11 @@
 """Refined equations: a first-order lag and greedy product terms after the search
-(`evolution.refine_terms`; sixteenth round, not in the paper).
+(the "refine" finishing step, `evolution.refine_terms`; not in the paper).
 
 A parsimonious search with depth 7 finds the loop of a closed-loop rate equation but not
 what a controller's attitude error adds to it through a motor's lag: on rotorpy's
 crazyflie (angle mode, 72 ms motors) r_dot needs the yaw part of the SO(3) error, products
-of the roll and pitch set-points at several delays, filtered by the motors (README,
-fifteenth round). This step gives each found equation, flown alone through the integrator
+of the roll and pitch set-points at several delays, filtered by the motors
+(docs/decisions). This step gives each found equation, flown alone through the integrator
 as in the search:
 
 1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried, the

@@ -33,7 +33,9 @@ def fit(X: np.ndarray, y: np.ndarray, names: list[str], method: str = "ols", *,
         X_val: np.ndarray | None = None, y_val: np.ndarray | None = None,
         window: int = 25) -> dict:
     """Fit y = X theta; coefficients, standard errors, R^2 and RMSE (training, validation)."""
-    import statsmodels.api as sm
+    from gpquad.extras import require
+
+    sm = require("statsmodels.api", "the physics regressions")
 
     if method not in METHODS:
         raise GpquadError(f"unknown regression method '{method}'; use one of {METHODS}",

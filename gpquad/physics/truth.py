@@ -93,6 +93,9 @@ def simulate(manoeuvre: str, *, side: float = 4.0, speed: float = 3.0, yaw: bool
     """Fly one manoeuvre with rotorpy; arrays per sample (see the module docstring). The
     vehicle hovers `pre` s before the trajectory starts (for sensor calibration) and `tail` s
     after it ends."""
+    from gpquad.extras import require
+
+    require("rotorpy", "simulated rotorpy flights")
     from rotorpy.controllers.quadrotor_control import SE3Control
     from rotorpy.trajectories.minsnap import MinSnap
     from rotorpy.vehicles.multirotor import Multirotor

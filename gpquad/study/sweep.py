@@ -204,7 +204,10 @@ def _parallel(jobs: int, backend: str, address: str | None):
         if backend == "loky":
             yield Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
             return
-        from dask.distributed import Client, LocalCluster
+        from gpquad.extras import require
+
+        distributed = require("dask.distributed", "gpquad sweep --backend dask")
+        Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
         cluster = None
         if address:
