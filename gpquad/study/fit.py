@@ -69,7 +69,8 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
                        if run_dir is not None else 0)
         for target in ev.targets:
             done = run_dir / "checkpoints" / f"{target}.json" if run_dir is not None else None
-            record = _finished_record(done, dataset) if resuming and done.exists() else None
+            record = (_finished_record(done, dataset)
+                      if done is not None and resuming and done.exists() else None)
             if record is not None:  # finished before the interruption
                 equations[target], history_end = record
                 report.done += ev.iterations
@@ -81,7 +82,7 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
                 checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
                 history_start=history_end)
             timings[target] = time.perf_counter() - t0
-            if done is not None:
+            if done is not None and history is not None:
                 history_end = history.size()
                 write_json(done, {"equation": equations[target].to_dict(),
                                   "history_bytes": history_end})
@@ -91,7 +92,7 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
         partial = getattr(exc, "partial", None)
         if partial is not None:
             equations[partial[0].target] = partial[0]
-        exc.equations = equations
+        exc.equations = equations  # type: ignore[attr-defined]
         raise
     finally:
         if history is not None:

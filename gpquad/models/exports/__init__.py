@@ -88,10 +88,11 @@ def write_export(model, fmt: str, out, raw: bool = False) -> list[Path]:
     <stem>.c and <stem>.h beside each other (out may end in .c, .h or neither); "casadi"
     saves the accel Function (casadi.Function.load reads it)."""
     out = Path(out)
-    options = {"raw": True} if raw else {}
+    options: dict[str, object] = {"raw": True} if raw else {}
     if fmt == "c":
-        options["name"] = out.stem if out.suffix in (".c", ".h") else out.name
-        if not options["name"].replace("-", "_").isidentifier():
+        name = out.stem if out.suffix in (".c", ".h") else out.name
+        options["name"] = name
+        if not name.replace("-", "_").isidentifier():
             raise GpquadError(f"'{out.name}' cannot name a C source and header; give a path "
                               "such as model.c (writes model.c and model.h)", field="--out")
     out.parent.mkdir(parents=True, exist_ok=True)
