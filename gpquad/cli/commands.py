@@ -258,12 +258,51 @@ def _extensions():
     return registers
 
 
+class WarningLines:
+    """Python warnings as gpquad lines: the first of each kind (the message with its numbers
+    blanked) printed when it happens, one line at the end for the rest of that kind; no
+    source paths."""
+
+    def __init__(self, stream=None):
+        self.stream = stream
+        self.kinds: dict[tuple[str, str], list] = {}
+
+    def show(self, message, category, filename, lineno, file=None, line=None):
+        import re
+
+        text = " ".join(str(message).split())
+        key = (category.__name__, re.sub(r"\d+(\.\d+)?(e-?\d+)?", "#", text))
+        seen = self.kinds.setdefault(key, [text, 0])
+        seen[1] += 1
+        if seen[1] == 1:
+            print(f"gpquad: warning: {text}", file=self.stream or sys.stderr, flush=True)
+
+    def summary(self) -> None:
+        for first, count in self.kinds.values():
+            if count > 1:
+                print(f"gpquad: warning: {count - 1} more warning(s) like \"{first}\"",
+                      file=self.stream or sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
         return 0
+    lines = WarningLines()
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = lines.show
+        try:
+            return _run(args)
+        finally:
+            lines.summary()
+
+
+def _run(args) -> int:
     try:
         return int(args.func(args) or 0)
     except GpquadError as exc:

@@ -35,7 +35,7 @@ def _log_tables(path: Path, fmt: str, data) -> list:
             warnings.simplefilter("ignore")
             tables, skipped = read_betaflight_logs(path, data)
         for s in skipped:
-            print(f"  warning: {s}")
+            warnings.warn(s, stacklevel=2)  # grouped by kind (gpquad.cli.commands.WarningLines)
         return tables
     module, name = _LOG_READERS[fmt]
     return [getattr(__import__(module, fromlist=[name]), name)(path, data)]
