@@ -1,5 +1,6 @@
-"""`gpquad physics thrust|drag|deadreckon CONFIG`: identification and dead reckoning on
-ground-truth flights, written as run folders (JSON, Markdown table, figures, run.json)."""
+"""`gpquad physics thrust|drag|deadreckon CONFIG`: identification and dead reckoning on a
+user's log (gpquad.physics.log_runs) or on simulated ground-truth flights (here), written as
+run folders (JSON, Markdown table, figures, run.json)."""
 
 from __future__ import annotations
 
@@ -65,7 +66,11 @@ def _ordered(rmse: dict, models=THESIS_ORDER) -> bool:
 
 
 def deadreckon_markdown(res: dict, cfg: PhysicsConfig) -> str:
-    lines = [f"# Dead-reckoning position RMSE, m ({cfg.truth.vehicle}, seed {cfg.seed})", "",
+    what = (f"{cfg.truth.vehicle}, seed {cfg.seed}" if cfg.source == "truth" else
+            f"{', '.join(Path(f).name for f in cfg.data['files'])}, "
+            + (f"windows of {cfg.deadreckon.window_s:g} s" if cfg.deadreckon.window_s
+               else "whole segments"))
+    lines = [f"# Dead-reckoning position RMSE, m ({what})", "",
              "| manoeuvre | model | x | y | z | norm |", "|---|---|---|---|---|---|"]
     for flight in res["flights"]:
         for m in MODELS:
@@ -150,20 +155,46 @@ def run_deadreckon(cfg: PhysicsConfig, out: Path) -> dict:
             "coriolis_best_count": sum(f["best"] == "coriolis" for f in flights)}
 
 
+def _runner(kind: str, source: str):
+    """(run, markdown) of a command for a source of flights."""
+    if source == "log":
+        from gpquad.physics import log_runs as lr
+
+        return {"thrust": (lr.run_thrust_log, lr.thrust_markdown_log),
+                "drag": (lr.run_drag_log, lr.drag_markdown_log),
+                "deadreckon": (lr.run_deadreckon_log, deadreckon_markdown)}[kind]
+    return {"thrust": (run_thrust, thrust_markdown), "drag": (run_drag, drag_markdown),
+            "deadreckon": (run_deadreckon, deadreckon_markdown)}[kind]
+
+
+def json_summary(kind: str, result: dict, cfg: PhysicsConfig) -> dict:
+    """The --json line (gpquad.physics.summary), in SI units."""
+    from gpquad.physics.summary import deadreckon_json, drag_json, thrust_json
+    from gpquad.physics.truth import vehicle_params
+
+    mass = cfg.vehicle.mass if cfg.source == "log" else \
+        vehicle_params(cfg.truth.vehicle)["mass"]
+    if kind == "thrust":
+        return thrust_json(result, mass)
+    if kind == "drag":
+        return drag_json(result, mass, cfg.regression.parasitic_drag)
+    return deadreckon_json(result)
+
+
 def run_command(kind: str, config_path, out=None, seed: int | None = None,
-                progress: bool = False) -> Path:
-    """Load the config (errors before any work), run, write the run folder."""
+                progress: bool = False, summary: bool = False):
+    """Load the config (errors before any work), run, write the run folder. Returns the
+    folder, or (folder, JSON summary) with summary=True."""
     started = time.time()
     cfg = load_physics_config(config_path)
     if seed is not None:
         cfg = dataclasses.replace(cfg, seed=seed)
     out = Path(out) if out else default_out(kind, cfg.name)
     out.mkdir(parents=True, exist_ok=True)
-    runner = {"thrust": (run_thrust, thrust_markdown), "drag": (run_drag, drag_markdown),
-              "deadreckon": (run_deadreckon, deadreckon_markdown)}[kind]
+    runner = _runner(kind, cfg.source)
     result = runner[0](cfg, out)
     md = runner[1](result, cfg)
     write_run(out, kind, result, md, config=cfg.to_dict(), seed=cfg.seed, started=started)
     if progress:
         print(md)
-    return out
+    return (out, json_summary(kind, result, cfg)) if summary else out
