@@ -99,6 +99,15 @@ def identify_thrust_log(cfg, segs: list[dict]) -> dict:
     return out
 
 
+def _drag_design(seg: dict, axis: int, parasitic: bool, intercept: bool):
+    """Columns and names of eq. (18) for one axis, optionally with a constant (bias)."""
+    X, names = drag_regressors(axis, seg["rotor"], seg["vel_body"], parasitic)
+    if intercept:
+        X = np.column_stack([X, np.ones(len(X))])
+        names = names + [f"bias_{'xy'[axis]}"]
+    return X, names
+
+
 def identify_drag_log(cfg, segs: list[dict]) -> dict:
     """k_dx, k_dy of eq. (18) pooled over the segments, with and without parasitic drag."""
     frac = cfg.regression.validation_fraction
@@ -110,19 +119,14 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
     series = {}
     for axis in (0, 1):
         for parasitic in variants:
-            names = []
-
             def make(seg, axis=axis, parasitic=parasitic):
-                X, nm = drag_regressors(axis, seg["rotor"], seg["vel_body"], parasitic)
-                if cfg.regression.drag_intercept:
-                    X = np.column_stack([X, np.ones(len(X))])
-                    nm = nm + [f"bias_{'xy'[axis]}"]
-                names[:] = nm
+                X, _ = _drag_design(seg, axis, parasitic, cfg.regression.drag_intercept)
                 return X, seg["force"][:, axis]
 
+            names = _drag_design(segs[0], axis, parasitic, cfg.regression.drag_intercept)[1]
             p = _pooled(segs, every, make, frac)
             key = f"{'xy'[axis]}{'_parasitic' if parasitic else ''}"
-            res = _fit_pooled(p, list(names), cfg, f"drag {key}", source, "log a longer flight")
+            res = _fit_pooled(p, names, cfg, f"drag {key}", source, "log a longer flight")
             out["fits"][key] = res
             series[key] = p
             if res["coef"][0] >= 0:

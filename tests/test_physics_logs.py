@@ -1,0 +1,214 @@
+"""`gpquad physics thrust|drag|deadreckon` on logs: rotorpy flights written as files (generic
+CSV and a PX4 ulog2csv folder, not through the simulated-truth path) give the vehicle's own
+coefficients; bad logs are one line and exit code 2; the simulated-truth results are the
+ones the truth mode gave before logs were read."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("rotorpy")
+
+from gpquad.cli.commands import main  # noqa: E402
+from gpquad.data.motors import erpm_to_rad_s, on_clock  # noqa: E402
+from gpquad.errors import GpquadError  # noqa: E402
+from gpquad.physics.commands import run_command  # noqa: E402
+from gpquad.physics.truth import cached_flight, vehicle_params  # noqa: E402
+
+FLIGHTS = {"hover": False, "forward": False, "lateral": False, "L": True}
+PARAMS = vehicle_params("hummingbird")
+K_D_FORCE = -4 * PARAMS["k_d"]           # N per (rad/s) per (m/s), eq. (18) times the mass
+
+
+def _flight(name: str, cache: Path) -> dict:
+    return cached_flight({"manoeuvre": name, "side": 1.5, "speed": 2.0, "yaw": FLIGHTS[name],
+                          "vehicle": "hummingbird", "dt": 0.02}, cache)
+
+
+def _csv_columns(f: dict, rng: np.random.Generator) -> dict:
+    """A rotorpy flight as generic ENU/FLU columns, with sensor noise."""
+    n = len(f["t"])
+    q = f["quat"]
+    cols = {"t": f["t"], "qw": q[:, 3], "qx": q[:, 0], "qy": q[:, 1], "qz": q[:, 2]}
+    vel = f["vel"] + rng.normal(0, 0.01, (n, 3))
+    force = f["force"] + rng.normal(0, 0.2, (n, 3))
+    rotor = f["rotor"] + rng.normal(0, 2.0, (n, 4))
+    cols.update({f"v{a}": vel[:, i] for i, a in enumerate("xyz")})
+    cols.update({a: f["pos"][:, i] for i, a in enumerate("xyz")})
+    cols.update({f"rotor_{i + 1}": rotor[:, i] for i in range(4)})
+    cols.update({f"acc_{a}": force[:, i] for i, a in enumerate("xyz")})
+    return cols
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("physics_logs")
+    rng = np.random.default_rng(11)
+    for name in FLIGHTS:
+        cols = _csv_columns(_flight(name, root / "flights"), rng)
+        pd.DataFrame(cols).to_csv(root / f"{name}.csv", index=False, float_format="%.17g")
+    return root
+
+
+def _config(root: Path, files, extra: str = "", frame: str = "ENU/FLU",
+            vehicle: str = f"mass = {PARAMS['mass']}") -> Path:
+    path = root / f"cfg{abs(hash((tuple(files), extra, frame, vehicle)))}.toml"
+    path.write_text(f'name = "log"\n[data]\nfiles = {list(files)}\nframe = "{frame}"\n'
+                    f"min_segment_s = 1.0\n{extra}\n[vehicle]\n{vehicle}\n"
+                    "[regression]\nparasitic_drag = true\n")
+    return path
+
+
+ID_FILES = ["hover.csv", "forward.csv", "lateral.csv"]
+
+
+def test_generic_csv_gives_the_vehicles_thrust_and_drag(root, tmp_path):
+    cfg = _config(root, ID_FILES)
+    out, thrust = run_command("thrust", cfg, tmp_path / "t", summary=True)
+    assert abs(thrust["k_t"] / PARAMS["k_eta"] - 1) < 0.03, thrust
+    assert 0 < thrust["k_t_se"] < 0.01 * thrust["k_t"] and thrust["rmse_val"] > 0
+    assert abs(thrust["k_t_refined"] / PARAMS["k_eta"] - 1) < 0.03
+    assert (out / "thrust_standard_hover.png").is_file() and (out / "thrust.md").is_file()
+    out, drag = run_command("drag", cfg, tmp_path / "d", summary=True)
+    for axis in "xy":
+        assert abs(drag[f"k_d{axis}"] / K_D_FORCE - 1) < 0.15, drag
+        assert drag[f"k_d{axis}_se"] > 0 and np.isfinite(drag[f"rmse_val_{axis}"])
+        assert drag[f"k_d{axis}_specific"] == pytest.approx(drag[f"k_d{axis}"] / PARAMS["mass"])
+    assert (out / "drag_x.png").is_file()
+
+
+def test_deadreckon_on_the_logs_segments(root, tmp_path):
+    out, res = run_command("deadreckon", _config(root, ID_FILES + ["L.csv"]), tmp_path / "r",
+                           summary=True)
+    (seg,) = [s for s in res["segments"] if s["name"].startswith("L.csv")]
+    norm = {m: np.linalg.norm(r) for m, r in seg["rmse_m"].items()}
+    assert norm["coriolis"] < norm["refined"] < norm["base"]
+    assert norm["coriolis"] < 0.5
+    assert "| L.csv" in (out / "deadreckon.md").read_text()
+
+
+def _run_cli(capsys, kind: str, cfg: Path, tmp_path) -> str:
+    assert main(["physics", kind, str(cfg), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+def _variant(root: Path, name: str, change) -> str:
+    df = change(pd.read_csv(root / "hover.csv"))
+    df.to_csv(root / name, index=False)
+    return name
+
+
+def test_a_log_without_motor_speeds_is_one_line(root, tmp_path, capsys):
+    name = _variant(root, "no_rotor.csv",
+                    lambda df: df.drop(columns=[f"rotor_{i}" for i in range(1, 5)]))
+    err = _run_cli(capsys, "thrust", _config(root, [name]), tmp_path)
+    assert "no motor speeds" in err and "rotor_1" in err and "four rotor speeds" in err
+
+
+def test_an_accelerometer_in_g_is_caught_by_the_hover_level(root, tmp_path, capsys):
+    def in_g(df):
+        for a in "xyz":
+            df[f"acc_{a}"] /= 9.81
+        return df
+    err = _run_cli(capsys, "thrust", _config(root, [_variant(root, "in_g.csv", in_g)]),
+                   tmp_path)
+    assert "in g" in err and "9.81" in err and "acc_z" in err
+
+
+def test_a_wrong_frame_is_one_line(root, tmp_path, capsys):
+    err = _run_cli(capsys, "drag", _config(root, ["hover.csv"], frame="NED/FRD"), tmp_path)
+    assert "data.frame" in err and "NED/FRD" in err
+
+
+def test_drag_without_velocity_and_a_missing_mass_are_one_line(root, tmp_path, capsys):
+    name = _variant(root, "no_vel.csv",
+                    lambda df: df.drop(columns=["vx", "vy", "vz"]))
+    err = _run_cli(capsys, "drag", _config(root, [name]), tmp_path)
+    assert "no measured velocity" in err and "vx, vy, vz" in err
+    err = _run_cli(capsys, "thrust", _config(root, ["hover.csv"], vehicle=""), tmp_path)
+    assert "vehicle.mass" in err
+
+
+TRUTH = """name = "test"
+seed = 5
+[truth]
+vehicle = "hummingbird"
+dt = 0.02
+side = 1.5
+speed = 2.0
+cache = "{cache}"
+[noise]
+accel_noise_sd = 0.2
+accel_bias_sd = 0.05
+calibration_s = 0.4
+rotor_noise_sd = 2.0
+velocity_noise_sd = 0.01
+[regression]
+parasitic_drag = true
+drag_intercept = true
+method = "wls"
+smoothing_window = 5
+[drag]
+flights = ["forward", "lateral"]
+[deadreckon]
+manoeuvres = ["L"]
+yaw = [true]
+"""
+# What the simulated-truth mode gave on this config before it could read logs.
+PINNED = {"standard_hover": [5.598260398007303e-06],
+          "refined_forward": [5.569977065104268e-06, 6.251782310647938e-05,
+                              -0.010002256488235387],
+          "x_parasitic": [-0.0009992600074056554, 0.014229688049811185,
+                          0.00022870871401020143],
+          "coriolis": [0.6562214377870201, 0.16612794721029583, 0.1920461587312781]}
+
+
+def test_simulated_truth_results_are_unchanged(root, tmp_path):
+    import json
+
+    cfg = tmp_path / "truth.toml"
+    cfg.write_text(TRUTH.format(cache=(root / "flights").as_posix()))
+    got = {}
+    for kind in ("thrust", "drag", "deadreckon"):
+        out = run_command(kind, cfg, tmp_path / kind)
+        res = json.loads((out / f"{kind}.json").read_text())
+        if kind == "deadreckon":
+            got["coriolis"] = res["flights"][0]["models"]["coriolis"]["rmse"]
+        else:
+            got.update({k: v["coef"] for k, v in res["fits"].items() if k in PINNED})
+    for key, values in PINNED.items():
+        np.testing.assert_allclose(got[key], values, rtol=1e-9, err_msg=key)
+
+
+def test_erpm_and_clock_helpers_against_hand_values():
+    # 14 magnets = 7 pole pairs: 21000 eRPM is 3000 RPM = 100 pi rad/s
+    assert erpm_to_rad_s(np.array([21000.0, -21000.0]), 7) == pytest.approx([100 * np.pi] * 2)
+    t = np.array([0.0, 0.1, 0.2, 1.0, 1.1])
+    v, covered = on_clock(np.array([0.05, 0.15, 0.5, 1.05, 1.2]), t, t * 2, max_gap_s=0.3)
+    assert v[:, 0] == pytest.approx([0.1, 0.3, 1.0, 2.1, 2.2])
+    assert covered.tolist() == [True, True, False, True, False]   # a gap; past the end
+
+
+def test_betaflight_pole_pairs_from_header_or_vehicle():
+    from gpquad.data.motors import betaflight_pole_pairs
+
+    assert betaflight_pole_pairs({"motor_poles": "14"}, 0, "log") == 7
+    assert betaflight_pole_pairs({"motor_poles": "14"}, 6, "log") == 6
+    with pytest.raises(GpquadError, match="motor_pole_pairs"):
+        betaflight_pole_pairs({}, 0, "log")
+
+
+def test_bundled_betaflight_42_log_says_it_has_no_erpm(tmp_path, capsys):
+    log = Path("/work/shared/data/betaflight/btfl_001.bbl")
+    if not log.is_file():
+        pytest.skip("shared Betaflight logs not present")
+    cfg = tmp_path / "bf.toml"
+    cfg.write_text(f'[data]\nfiles = ["{log}"]\nformat = "betaflight"\n[vehicle]\nmass = 0.6\n')
+    err = _run_cli(capsys, "thrust", cfg, tmp_path)
+    assert "no motor speeds" in err and "eRPM[0..3]" in err and "4.2" in err
