@@ -212,3 +212,79 @@ def test_bundled_betaflight_42_log_says_it_has_no_erpm(tmp_path, capsys):
     cfg.write_text(f'[data]\nfiles = ["{log}"]\nformat = "betaflight"\n[vehicle]\nmass = 0.6\n')
     err = _run_cli(capsys, "thrust", cfg, tmp_path)
     assert "no motor speeds" in err and "eRPM[0..3]" in err and "4.2" in err
+
+
+def _px4_folder(folder: Path, flights: list[dict], rng, esc: bool = True) -> Path:
+    """Rotorpy flights, 1 s apart (a gap: one segment each), as the topic CSVs of `ulog2csv`
+    (NED/FRD)."""
+    from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
+
+    parts, t0 = [], 0.0
+    for f in flights:
+        parts.append({**f, "t": f["t"] + t0})
+        t0 += f["t"][-1] + 1.0
+    f = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    us = np.round(f["t"] * 1e6).astype(np.int64) + 1_000_000
+    n = len(us)
+    q = enu_flu_quat(f["quat"][:, [3, 0, 1, 2]])
+    rates, pos, vel = flip_body(f["omega"]), flip_world(f["pos"]), flip_world(f["vel"])
+    acc = flip_body(f["force"]) + rng.normal(0, 0.2, (n, 3))
+    topics = {
+        "vehicle_attitude": {**{f"q[{i}]": q[:, i] for i in range(4)},
+                             "rollspeed": rates[:, 0], "pitchspeed": rates[:, 1],
+                             "yawspeed": rates[:, 2]},
+        "vehicle_local_position": {**{a: pos[:, i] for i, a in enumerate("xyz")},
+                                   **{f"v{a}": vel[:, i] for i, a in enumerate("xyz")},
+                                   "v_xy_valid": np.ones(n), "v_z_valid": np.ones(n),
+                                   "xy_valid": np.ones(n), "z_valid": np.ones(n)},
+        "actuator_controls_0": {**{f"control[{i}]": np.zeros(n) for i in range(3)},
+                                "control[3]": np.full(n, 0.5)},
+        "vehicle_status": {"arming_state": np.full(n, 2), "nav_state": np.zeros(n)},
+        "sensor_combined": {f"accelerometer_m_s2[{i}]": acc[:, i] for i in range(3)},
+    }
+    if esc:
+        rpm = (f["rotor"] + rng.normal(0, 2.0, f["rotor"].shape)) * 60 / (2 * np.pi)
+        topics["esc_status"] = {f"esc[{i}].esc_rpm": rpm[:, i] for i in range(4)}
+    folder.mkdir(parents=True, exist_ok=True)
+    for topic, cols in topics.items():
+        pd.DataFrame({"timestamp": us, **cols}).to_csv(folder / f"sim_{topic}_0.csv",
+                                                       index=False)
+    return folder
+
+
+def test_px4_topics_give_the_vehicles_thrust_and_drag(root, tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    flights = [_flight(n, root / "flights") for n in ("hover", "forward", "lateral")]
+    folder = _px4_folder(tmp_path / "px4", flights, rng)
+    cfg = _config(tmp_path, [str(folder)], extra='format = "px4-csv"', frame="NED/FRD")
+    _, thrust = run_command("thrust", cfg, tmp_path / "t", summary=True)
+    assert abs(thrust["k_t"] / PARAMS["k_eta"] - 1) < 0.03, thrust
+    _, drag = run_command("drag", cfg, tmp_path / "d", summary=True)
+    assert abs(drag["k_dx"] / K_D_FORCE - 1) < 0.15 and abs(drag["k_dy"] / K_D_FORCE - 1) < 0.15
+    bare = _px4_folder(tmp_path / "px4_no_esc", flights, rng, esc=False)
+    err = _run_cli(capsys, "thrust", _config(tmp_path, [str(bare)], extra='format = "px4-csv"',
+                                             frame="NED/FRD"), tmp_path)
+    assert "no motor speeds" in err and "esc_status" in err
+
+
+def test_betaflight_erpm_fields_become_rad_s_with_the_headers_pole_pairs(monkeypatch):
+    import gpquad.data.betaflight as bf
+    from gpquad.data.motors import read_betaflight_motors
+    from gpquad.physics.config import PhysicsConfig
+
+    log = Path("/work/shared/data/betaflight/btfl_001.bbl")
+    if not log.is_file():
+        pytest.skip("shared Betaflight logs not present")
+    real = bf.read_frames
+
+    def with_erpm(path, index):     # a 4.2 log with eRPM fields added: 300 x 100 eRPM
+        df, headers, stop = real(path, index)
+        df = df.assign(**{f"eRPM[{i}]": 300.0 for i in range(4)})
+        return df, {**headers, "motor_poles": "14"}, stop
+
+    monkeypatch.setattr(bf, "read_frames", with_erpm)
+    data = PhysicsConfig(data={"files": [str(log)], "format": "betaflight"}).data_config()
+    logs = read_betaflight_motors(log, data)
+    rotor = np.concatenate([lg.rotor[lg.valid] for lg in logs])
+    assert rotor == pytest.approx(np.full_like(rotor, 30000 / 7 * 2 * np.pi / 60))
+    assert all(lg.acc is not None and lg.vel is None and lg.pos is None for lg in logs)

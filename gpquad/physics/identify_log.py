@@ -129,7 +129,11 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
             res = _fit_pooled(p, names, cfg, f"drag {key}", source, "log a longer flight")
             out["fits"][key] = res
             series[key] = p
-            if res["coef"][0] >= 0:
+            if not abs(res["se"][0]) < 0.5 * abs(res["coef"][0]):
+                out.setdefault("warnings", []).append(
+                    f"{key}: {names[0]} = {res['coef'][0]:.3g} +- {res['se'][0]:.2g} is not "
+                    f"identified: the training parts barely move along {'xy'[axis]}")
+            elif res["coef"][0] >= 0:
                 out.setdefault("warnings", []).append(
                     f"{key}: {names[0]} = {res['coef'][0]:.3g} is not negative (drag must "
                     f"oppose the velocity); the log barely moves along {'xy'[axis]}")
