@@ -288,3 +288,26 @@ def test_betaflight_erpm_fields_become_rad_s_with_the_headers_pole_pairs(monkeyp
     rotor = np.concatenate([lg.rotor[lg.valid] for lg in logs])
     assert rotor == pytest.approx(np.full_like(rotor, 30000 / 7 * 2 * np.pi / 60))
     assert all(lg.acc is not None and lg.vel is None and lg.pos is None for lg in logs)
+
+
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+@pytest.mark.parametrize("name, fmt, says", [
+    ("ardupilot_copter_cut.bin", "ardupilot", ("no motor speeds", "ESC messages")),
+    ("px4_v114_sitl.ulg", "ulog", ("no accelerometer", "sensor_combined"))])
+def test_real_log_fixtures_name_the_signal_they_lack(name, fmt, says, tmp_path, capsys):
+    cfg = tmp_path / "fx.toml"
+    cfg.write_text(f'[data]\nfiles = ["{(FIXTURES / name).as_posix()}"]\nformat = "{fmt}"\n'
+                   "min_segment_s = 2.0\nthrust_threshold = 0.1\n[vehicle]\nmass = 1.0\n")
+    err = _run_cli(capsys, "thrust", cfg, tmp_path)
+    assert all(s in err for s in says) and "four rotor speeds and the accelerometer" in err
+
+
+def test_deadreckon_windows_cover_the_segment():
+    from gpquad.physics.identify_log import windows
+
+    seg = {"t": np.arange(0, 10.0, 0.1)}                    # 100 samples
+    assert windows(seg, 0.0) == [(0, 100)]
+    assert windows(seg, 3.0) == [(0, 30), (30, 60), (60, 100)]   # the 10-sample rest joins
+    assert windows(seg, 4.0) == [(0, 40), (40, 80), (80, 100)]

@@ -228,7 +228,7 @@ def _px4(tp, data, name: str) -> MotorLog:
         extra["rotor"] = [(t, np.abs(np.column_stack([tp.column("esc_status", c)
                                                       for c in rpm_cols])) * RPM_TO_RAD_S)]
     else:
-        missing["rotor"] = "topic esc_status, esc[0..3].esc_rpm (enable ESC telemetry)"
+        missing["rotor"] = "topic esc_status esc[0..3].esc_rpm, from ESC telemetry"
     for topic, fields in (("vehicle_acceleration", [f"xyz[{i}]" for i in range(3)]),
                           ("sensor_combined", [f"accelerometer_m_s2[{i}]" for i in range(3)])):
         if tp.has(topic) and all(f in tp.get(topic).columns for f in fields):
@@ -305,8 +305,8 @@ def read_betaflight_motors(path, data, pole_pairs: int = 0) -> list[MotorLog]:
             extra["rotor"] = [(t, erpm_to_rad_s(erpm, pp))]
         else:
             firmware = headers.get("Firmware revision", "unknown firmware")
-            missing["rotor"] = (f"fields eRPM[0..3] ({firmware}; Betaflight 4.3+ logs them "
-                                "with dshot_bidir = ON and the RPM blackbox field enabled)")
+            missing["rotor"] = (f"fields eRPM[0..3]: {firmware}; Betaflight 4.3+ logs them "
+                                "with dshot_bidir = ON and the RPM blackbox field enabled")
         out.append(_from_table(log, extra, missing, data))
     return out
 
@@ -327,7 +327,7 @@ def read_ardupilot_motors(path, data, pole_pairs: int = 0) -> list[MotorLog]:
         if all(len(p[0]) >= 2 for p in parts):
             extra["rotor"] = parts
     if "rotor" not in extra:
-        missing["rotor"] = "ESC messages with RPM for instances 0..3 (ESC telemetry)"
+        missing["rotor"] = "ESC messages with RPM for instances 0..3, from ESC telemetry"
     _, imu = _first(df, ("IMU",))
     if imu and all(f in imu for f in ("AccX", "AccY", "AccZ")):
         extra["acc"] = [(np.asarray(imu["TimeUS"], float) * 1e-6,

@@ -52,7 +52,8 @@ def require(logs, needs: tuple[str, ...], command: str) -> None:
 
 
 def _needs_text(needs) -> str:
-    return ", ".join(NEEDS[k] for k in needs)
+    names = [NEEDS[k] for k in needs]
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def physics_segments(log, data, smoothing_window: int) -> list[dict]:
