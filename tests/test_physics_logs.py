@@ -19,6 +19,7 @@ from gpquad.errors import GpquadError  # noqa: E402
 from gpquad.physics.commands import run_command  # noqa: E402
 from gpquad.physics.truth import cached_flight, vehicle_params  # noqa: E402
 
+FIXTURES = Path(__file__).parent / "fixtures"
 FLIGHTS = {"hover": False, "forward": False, "lateral": False, "L": True}
 PARAMS = vehicle_params("hummingbird")
 K_D_FORCE = -4 * PARAMS["k_d"]           # N per (rad/s) per (m/s), eq. (18) times the mass
@@ -205,11 +206,10 @@ def test_betaflight_pole_pairs_from_header_or_vehicle():
 
 
 def test_bundled_betaflight_42_log_says_it_has_no_erpm(tmp_path, capsys):
-    log = Path("/work/shared/data/betaflight/btfl_001.bbl")
-    if not log.is_file():
-        pytest.skip("shared Betaflight logs not present")
+    log = FIXTURES / "btfl_001_cut.bbl"
     cfg = tmp_path / "bf.toml"
-    cfg.write_text(f'[data]\nfiles = ["{log}"]\nformat = "betaflight"\n[vehicle]\nmass = 0.6\n')
+    cfg.write_text(f'[data]\nfiles = ["{log.as_posix()}"]\nformat = "betaflight"\n'
+                   "[vehicle]\nmass = 0.6\n")
     err = _run_cli(capsys, "thrust", cfg, tmp_path)
     assert "no motor speeds" in err and "eRPM[0..3]" in err and "4.2" in err
 
@@ -272,9 +272,7 @@ def test_betaflight_erpm_fields_become_rad_s_with_the_headers_pole_pairs(monkeyp
     from gpquad.data.motors import read_betaflight_motors
     from gpquad.physics.config import PhysicsConfig
 
-    log = Path("/work/shared/data/betaflight/btfl_001.bbl")
-    if not log.is_file():
-        pytest.skip("shared Betaflight logs not present")
+    log = FIXTURES / "btfl_001_cut.bbl"
     real = bf.read_frames
 
     def with_erpm(path, index):     # a 4.2 log with eRPM fields added: 300 x 100 eRPM
@@ -288,9 +286,6 @@ def test_betaflight_erpm_fields_become_rad_s_with_the_headers_pole_pairs(monkeyp
     rotor = np.concatenate([lg.rotor[lg.valid] for lg in logs])
     assert rotor == pytest.approx(np.full_like(rotor, 30000 / 7 * 2 * np.pi / 60))
     assert all(lg.acc is not None and lg.vel is None and lg.pos is None for lg in logs)
-
-
-FIXTURES = Path(__file__).parent / "fixtures"
 
 
 @pytest.mark.parametrize("name, fmt, says", [

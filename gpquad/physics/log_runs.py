@@ -73,7 +73,10 @@ def run_thrust_log(cfg, out: Path) -> dict:
     if len(fwd["yva"]):
         preds = {f"{m} (RMSE val {res['fits'][m + '_forward']['rmse_val']:.3g} N)": p
                  for m, p in s["preds"].items()}
-        series_figure(fwd["tva"], fwd["yva"], preds, "m f_z (N)",
+        cut = np.flatnonzero(np.diff(fwd["tva"]) > 0.5) + 1   # no line between segments
+        t_plot = np.insert(fwd["tva"], cut, np.nan)
+        preds = {k: np.insert(v, cut, np.nan) for k, v in preds.items()}
+        series_figure(t_plot, np.insert(fwd["yva"], cut, np.nan), preds, "m f_z (N)",
                       "Thrust on the validation parts (segments joined)",
                       out / "thrust_forward.png")
     return res

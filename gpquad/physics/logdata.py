@@ -5,8 +5,10 @@ coefficients.
 From each `gpquad.data.motors.MotorLog` (NED/FRD): world vectors turned by
 C_w = [[0, 1, 0], [1, 0, 0], [0, 0, -1]] (NED -> ENU), body vectors by C_b = diag(1, -1, -1)
 (FRD -> FLU), attitude R = C_w R_ned C_b. Segments are the runs of valid, in-flight samples of
-at least `data.min_segment_s`; the accelerometer is smoothed per segment by the thesis's
-causal moving average (`regression.smoothing_window`).
+at least `data.min_segment_s`. The thesis's causal moving average
+(`regression.smoothing_window`) smooths, per segment, the accelerometer and, with the same
+window (so that the two keep the same delay), the rotor speeds and the velocity; the raw
+accelerometer is kept for the checks.
 
 Checks, each one line naming the file, the field and the fix:
 - the regression's signals are in the log (motor speeds, accelerometer; velocity and position
@@ -69,6 +71,9 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
             ok &= np.all(np.isfinite(arr), axis=1)
     rate = 1.0 / float(np.median(np.diff(log.t)))
     need = max(int(round(data.min_segment_s * rate)), 2 * smoothing_window, 20)
+    def smooth(x):
+        return causal_moving_average(x, smoothing_window) if smoothing_window > 1 else x
+
     out = []
     for a, b in _runs(ok):
         if b - a < need:
@@ -78,14 +83,13 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
         seg = {"name": f"{log.name}@{log.t[a]:.1f}s", "source": log.source,
                "t": log.t[a:b] - log.t[a], "t0": float(log.t[a]), "rot": rot}
         if log.rotor is not None:
-            seg["rotor"] = log.rotor[a:b]
+            seg["rotor"] = smooth(log.rotor[a:b])
         if log.acc is not None:
             raw = log.acc[a:b] @ C_BODY
             seg["force_raw"] = raw
-            seg["force"] = causal_moving_average(raw, smoothing_window) \
-                if smoothing_window > 1 else raw
+            seg["force"] = smooth(raw)
         if log.vel is not None:
-            seg["vel"] = log.vel[a:b] @ C_WORLD.T
+            seg["vel"] = smooth(log.vel[a:b] @ C_WORLD.T)
             seg["vel_body"] = np.einsum("nji,nj->ni", rot, seg["vel"])
         if log.pos is not None:
             seg["pos"] = log.pos[a:b] @ C_WORLD.T

@@ -20,7 +20,9 @@ UNITS = {"k_t": "N/(rad/s)^2", "k_z": "N/((rad/s)(m/s))", "k_h": "N/(m/s)^2",
 
 
 def _num(x):
-    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+    if isinstance(x, int) or x is None:
+        return x
+    return None if not math.isfinite(x) else float(x)
 
 
 def thrust_json(res: dict, mass: float) -> dict:
