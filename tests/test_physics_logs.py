@@ -306,3 +306,21 @@ def test_deadreckon_windows_cover_the_segment():
     assert windows(seg, 0.0) == [(0, 100)]
     assert windows(seg, 3.0) == [(0, 30), (30, 60), (60, 100)]   # the 10-sample rest joins
     assert windows(seg, 4.0) == [(0, 40), (40, 80), (80, 100)]
+
+
+def test_px4_sitl_log_with_esc_rpm_gives_coefficients(tmp_path, capsys):
+    import json
+
+    cfg = tmp_path / "sitl.toml"
+    cfg.write_text(f'[data]\nfiles = ["{(FIXTURES / "px4_v114_sitl_esc.ulg").as_posix()}"]\n'
+                   'format = "ulog"\nmin_segment_s = 2.0\nthrust_threshold = 0.1\n'
+                   "[vehicle]\nmass = 1.5\n[thrust]\nmin_height = 0.3\n"
+                   "[regression]\nsmoothing_window = 25\n")
+    assert main(["physics", "thrust", str(cfg), "--json", "--out", str(tmp_path / "t")]) == 0
+    res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert 1e-5 < res["k_t"] < 1e-4 and 0 < res["k_t_se"] < 0.05 * res["k_t"]
+    assert res["n"] > 50 and res["units"]["k_t"] == "N/(rad/s)^2"
+    assert main(["physics", "deadreckon", str(cfg), "--json", "--out", str(tmp_path / "d")]) == 0
+    dr = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert dr["segments"] and set(dr["segments"][0]["rmse_m"]) == {
+        "accelerometer", "base", "refined", "coriolis"}

@@ -83,7 +83,8 @@ def deadreckon_markdown(res: dict, cfg: PhysicsConfig) -> str:
               f"accelerometer worse than base on "
               f"{res['accelerometer_worst_count']}; Coriolis best on "
               f"{res['coriolis_best_count']}.", ""]
-    return "\n".join(lines)
+    lines += [f"Note: {n}" for n in res.get("notes", [])]
+    return "\n".join(lines + [""] if res.get("notes") else lines)
 
 
 def run_thrust(cfg: PhysicsConfig, out: Path) -> dict:

@@ -47,6 +47,8 @@ class ThrustConfig:
     forward: str = "forward"
     hover_max_speed: float = 0.5      # log: hover samples are slower than this (m/s) ...
     hover_max_rate: float = 1.0       # ... and turn slower than this (rad/s)
+    min_height: float = 0.0           # log with position: fit only this high above the
+    #                                   segment's lowest point (m; drops ground contact)
 
 
 @dataclass(frozen=True)
@@ -178,6 +180,9 @@ def _check_log(cfg: PhysicsConfig, source: str) -> None:
     for name in ("hover_max_speed", "hover_max_rate"):
         if not getattr(cfg.thrust, name) > 0:
             raise GpquadError("must be > 0", source=source, field=f"thrust.{name}")
+    if cfg.thrust.min_height < 0:
+        raise GpquadError("must be >= 0 m (0: keep every in-flight sample)", source=source,
+                          field="thrust.min_height")
     if cfg.deadreckon.window_s < 0:
         raise GpquadError("must be >= 0 (0: whole segments)", source=source,
                           field="deadreckon.window_s")

@@ -66,7 +66,7 @@ def identify_thrust_log(cfg, segs: list[dict]) -> dict:
             return thrust_regressors(model, seg["rotor"], vel), mass * seg["force"][:, 2]
         return make
 
-    every = [np.ones(len(s["t"]), dtype=bool) for s in segs]
+    every = [s["airborne"] for s in segs]
     hover = _pooled(segs, [s["hover"] for s in segs], build("standard"), frac)
     fits = {"standard_hover": _fit_pooled(
         hover, THRUST_MODELS["standard"], cfg, "hover thrust", source,
@@ -114,7 +114,7 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
     source = segs[0]["source"]
     out = {"source": "log", "mass": cfg.vehicle.mass, "truth": {}, "fits": {},
            "flights": [s["name"] for s in segs]}
-    every = [np.ones(len(s["t"]), dtype=bool) for s in segs]
+    every = [s["airborne"] for s in segs]
     variants = [False, True] if cfg.regression.parasitic_drag else [False]
     series = {}
     for axis in (0, 1):

@@ -107,6 +107,12 @@ def run_deadreckon_log(cfg, out: Path) -> dict:
     segs, summary = load_log_segments(cfg, ("rotor", "acc", "vel", "pos"), "deadreckon")
     thrust, drag = identify_thrust_log(cfg, segs), identify_drag_log(cfg, segs)
     coef = coefficients(thrust, drag, cfg.regression.parasitic_drag)
+    notes = []
+    for name in ("k_dx", "k_dy", "c_dx", "c_dy"):   # drag that pushes along the velocity
+        if coef["drag"].get(name, 0.0) > 0:         # would make dead reckoning diverge
+            notes.append(f"{name} = {coef['drag'][name]:.3g} is positive (the log does not "
+                         "identify it); dead reckoning uses 0")
+            coef["drag"][name] = 0.0
     mass = cfg.vehicle.mass
     flights = []
     for seg in segs:
@@ -127,7 +133,8 @@ def run_deadreckon_log(cfg, out: Path) -> dict:
                 tracks_figure(seg["t"][a:b], seg["pos"][a:b],
                               {m: cmp[m]["_track"] for m in MODELS},
                               f"Dead reckoning, {name}", out / f"tracks_{safe}.png")
-    return {"source": "log", "log": summary, "coefficients": coef, "flights": flights,
+    return {"source": "log", "log": summary, "coefficients": coef, "notes": notes,
+            "warnings": drag.get("warnings", []), "flights": flights,
             "ordered_count": sum(f["thesis_order"] for f in flights),
             "model_order_count": sum(f["model_order"] for f in flights),
             "accelerometer_worst_count": sum(f["accelerometer_worse_than_base"]

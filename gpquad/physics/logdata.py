@@ -80,7 +80,7 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
             continue
         q = log.quat[a:b]
         rot = C_WORLD @ Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix() @ C_BODY
-        seg = {"name": f"{log.name}@{log.t[a]:.1f}s", "source": log.source,
+        seg = {"name": f"{log.name}@{log.t[a] - log.t[0]:.1f}s", "source": log.source,
                "t": log.t[a:b] - log.t[a], "t0": float(log.t[a]), "rot": rot}
         if log.rotor is not None:
             seg["rotor"] = smooth(log.rotor[a:b])
@@ -108,6 +108,16 @@ def hover_mask(seg: dict, max_speed: float, max_rate: float) -> np.ndarray:
     if "omega" in seg:
         mask &= np.linalg.norm(seg["omega"], axis=1) < max_rate
     return mask
+
+
+def airborne_mask(seg: dict, min_height: float) -> np.ndarray:
+    """Samples at least min_height above the segment's lowest position (all without a
+    position or with min_height 0): on the ground the spinning rotors' thrust is not what
+    the accelerometer reads."""
+    if min_height <= 0 or "pos" not in seg:
+        return np.ones(len(seg["t"]), dtype=bool)
+    z = seg["pos"][:, 2]
+    return z >= z.min() + min_height
 
 
 def check_levels(segs: list[dict], masks: list[np.ndarray], data) -> str:
@@ -158,7 +168,10 @@ def load_log_segments(cfg, needs: tuple[str, ...], command: str) -> tuple[list[d
                           f"(mean in-flight valid fraction {total / len(logs):.0%}); lower "
                           "data.min_segment_s or check the segmentation", source=logs[0].source,
                           field="data.min_segment_s")
-    masks = [hover_mask(s, cfg.thrust.hover_max_speed, cfg.thrust.hover_max_rate) for s in segs]
+    for s in segs:
+        s["airborne"] = airborne_mask(s, cfg.thrust.min_height)
+    masks = [hover_mask(s, cfg.thrust.hover_max_speed, cfg.thrust.hover_max_rate)
+             & s["airborne"] for s in segs]
     note = check_levels(segs, masks, data)
     for s, m in zip(segs, masks):
         s["hover"] = m
@@ -166,4 +179,5 @@ def load_log_segments(cfg, needs: tuple[str, ...], command: str) -> tuple[list[d
     return segs, {"files": [str(p) for p in cfg.data_paths()], "format": data.format,
                   "frame": data.frame, "notes": notes,
                   "segments": [{"name": s["name"], "duration_s": float(s["t"][-1]),
-                                "hover_samples": int(s["hover"].sum())} for s in segs]}
+                                "hover_samples": int(s["hover"].sum()),
+                                "airborne_samples": int(s["airborne"].sum())} for s in segs]}
