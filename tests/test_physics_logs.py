@@ -324,3 +324,68 @@ def test_px4_sitl_log_with_esc_rpm_gives_coefficients(tmp_path, capsys):
     dr = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert dr["segments"] and set(dr["segments"][0]["rmse_m"]) == {
         "accelerometer", "base", "refined", "coriolis"}
+
+
+def _dataflash(path: Path, messages: dict) -> Path:
+    """A DataFlash .bin: one FMT record per message, then its records. messages: name ->
+    (type id, format, column names, {column: array})."""
+    import struct
+
+    sizes = {"Q": 8, "B": 1, "f": 4}
+    out = bytearray()
+    for name, (typ, fmt, cols, values) in messages.items():
+        length = 3 + sum(sizes[c] for c in fmt)
+        out += b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", typ, length, name.encode(),
+                                             fmt.encode(), ",".join(cols).encode())
+        dtype = np.dtype([("h", "u1", (3,))] + [(c, {"Q": "<u8", "B": "u1", "f": "<f4"}[f])
+                                                 for c, f in zip(cols, fmt)])
+        rec = np.zeros(len(values[cols[0]]), dtype=dtype)
+        rec["h"] = (0xA3, 0x95, typ)
+        for c in cols:
+            rec[c] = values[c]
+        out += rec.tobytes()
+    path.write_bytes(bytes(out))
+    return path
+
+
+def test_ardupilot_esc_and_imu_give_the_vehicles_thrust(root, tmp_path):
+    from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
+
+    rng = np.random.default_rng(4)
+    parts, t0 = [], 0.0
+    for name in ("hover", "forward", "lateral"):
+        f = _flight(name, root / "flights")
+        parts.append({**f, "t": f["t"] + t0})
+        t0 += f["t"][-1] + 1.0
+    f = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    us = np.round(f["t"] * 1e6).astype(np.uint64) + 1_000_000
+    n = len(us)
+    q = enu_flu_quat(f["quat"][:, [3, 0, 1, 2]])
+    gyr, acc = flip_body(f["omega"]), flip_body(f["force"]) + rng.normal(0, 0.2, (n, 3))
+    vel, pos = flip_world(f["vel"]), flip_world(f["pos"])
+    zero = np.zeros(n)
+    esc_t = np.repeat(us, 4)
+    rpm = (f["rotor"] + rng.normal(0, 2.0, (n, 4))).reshape(-1) * 60 / (2 * np.pi)
+    path = _dataflash(tmp_path / "sim.bin", {
+        "XKQ": (130, "QBffff", ("TimeUS", "C", "Q1", "Q2", "Q3", "Q4"),
+                {"TimeUS": us, "C": zero, **{f"Q{i + 1}": q[:, i] for i in range(4)}}),
+        "IMU": (131, "QBffffff", ("TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"),
+                {"TimeUS": us, "I": zero, **{f"Gyr{a}": gyr[:, i] for i, a in enumerate("XYZ")},
+                 **{f"Acc{a}": acc[:, i] for i, a in enumerate("XYZ")}}),
+        "XKF1": (132, "QBffffff", ("TimeUS", "C", "VN", "VE", "VD", "PN", "PE", "PD"),
+                 {"TimeUS": us, "C": zero, **{k: vel[:, i] for i, k in enumerate(("VN", "VE",
+                                                                                  "VD"))},
+                  **{k: pos[:, i] for i, k in enumerate(("PN", "PE", "PD"))}}),
+        "RATE": (133, "Qffffff", ("TimeUS", "RDes", "PDes", "YDes", "ROut", "POut", "YOut"),
+                 {"TimeUS": us, **{k: zero for k in ("RDes", "PDes", "YDes", "ROut", "POut",
+                                                     "YOut")}}),
+        "CTUN": (134, "Qf", ("TimeUS", "ThO"), {"TimeUS": us, "ThO": np.full(n, 0.5)}),
+        "EV": (135, "QB", ("TimeUS", "Id"), {"TimeUS": us[[0, -1]], "Id": np.array([10, 11])}),
+        "ESC": (136, "QBf", ("TimeUS", "Instance", "RPM"),
+                {"TimeUS": esc_t, "Instance": np.tile(np.arange(4), n), "RPM": rpm}),
+    })
+    cfg = _config(tmp_path, [str(path)], extra='format = "ardupilot"', frame="NED/FRD")
+    _, thrust = run_command("thrust", cfg, tmp_path / "t", summary=True)
+    assert abs(thrust["k_t"] / PARAMS["k_eta"] - 1) < 0.03, thrust
+    _, drag = run_command("drag", cfg, tmp_path / "d", summary=True)
+    assert abs(drag["k_dx"] / K_D_FORCE - 1) < 0.15 and abs(drag["k_dy"] / K_D_FORCE - 1) < 0.15
