@@ -214,9 +214,9 @@ def test_bundled_betaflight_42_log_says_it_has_no_erpm(tmp_path, capsys):
     assert "no motor speeds" in err and "eRPM[0..3]" in err and "4.2" in err
 
 
-def _px4_folder(folder: Path, flights: list[dict], rng, esc: bool = True) -> Path:
-    """Rotorpy flights, 1 s apart (a gap: one segment each), as the topic CSVs of `ulog2csv`
-    (NED/FRD)."""
+def _ned_log(flights: list[dict], rng) -> dict:
+    """Rotorpy flights 1 s apart (a gap: one segment each) in NED/FRD with sensor noise:
+    us (timestamps), q, rates, acc, vel, pos, rotor (rad/s)."""
     from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
 
     parts, t0 = [], 0.0
@@ -224,11 +224,19 @@ def _px4_folder(folder: Path, flights: list[dict], rng, esc: bool = True) -> Pat
         parts.append({**f, "t": f["t"] + t0})
         t0 += f["t"][-1] + 1.0
     f = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    us = np.round(f["t"] * 1e6).astype(np.int64) + 1_000_000
+    n = len(f["t"])
+    return {"us": np.round(f["t"] * 1e6).astype(np.int64) + 1_000_000,
+            "q": enu_flu_quat(f["quat"][:, [3, 0, 1, 2]]), "rates": flip_body(f["omega"]),
+            "acc": flip_body(f["force"]) + rng.normal(0, 0.2, (n, 3)),
+            "vel": flip_world(f["vel"]), "pos": flip_world(f["pos"]),
+            "rotor": f["rotor"] + rng.normal(0, 2.0, f["rotor"].shape)}
+
+
+def _px4_folder(folder: Path, flights: list[dict], rng, esc: bool = True) -> Path:
+    """Rotorpy flights as the topic CSVs of `ulog2csv` (NED/FRD)."""
+    g = _ned_log(flights, rng)
+    us, q, rates, acc, vel, pos = (g[k] for k in ("us", "q", "rates", "acc", "vel", "pos"))
     n = len(us)
-    q = enu_flu_quat(f["quat"][:, [3, 0, 1, 2]])
-    rates, pos, vel = flip_body(f["omega"]), flip_world(f["pos"]), flip_world(f["vel"])
-    acc = flip_body(f["force"]) + rng.normal(0, 0.2, (n, 3))
     topics = {
         "vehicle_attitude": {**{f"q[{i}]": q[:, i] for i in range(4)},
                              "rollspeed": rates[:, 0], "pitchspeed": rates[:, 1],
@@ -243,7 +251,7 @@ def _px4_folder(folder: Path, flights: list[dict], rng, esc: bool = True) -> Pat
         "sensor_combined": {f"accelerometer_m_s2[{i}]": acc[:, i] for i in range(3)},
     }
     if esc:
-        rpm = (f["rotor"] + rng.normal(0, 2.0, f["rotor"].shape)) * 60 / (2 * np.pi)
+        rpm = g["rotor"] * 60 / (2 * np.pi)
         topics["esc_status"] = {f"esc[{i}].esc_rpm": rpm[:, i] for i in range(4)}
     folder.mkdir(parents=True, exist_ok=True)
     for topic, cols in topics.items():
@@ -349,23 +357,14 @@ def _dataflash(path: Path, messages: dict) -> Path:
 
 
 def test_ardupilot_esc_and_imu_give_the_vehicles_thrust(root, tmp_path):
-    from gpquad.data.flight import enu_flu_quat, flip_body, flip_world
-
     rng = np.random.default_rng(4)
-    parts, t0 = [], 0.0
-    for name in ("hover", "forward", "lateral"):
-        f = _flight(name, root / "flights")
-        parts.append({**f, "t": f["t"] + t0})
-        t0 += f["t"][-1] + 1.0
-    f = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    us = np.round(f["t"] * 1e6).astype(np.uint64) + 1_000_000
+    g = _ned_log([_flight(n, root / "flights") for n in ("hover", "forward", "lateral")], rng)
+    us = g["us"].astype(np.uint64)
+    q, gyr, acc, vel, pos = (g[k] for k in ("q", "rates", "acc", "vel", "pos"))
     n = len(us)
-    q = enu_flu_quat(f["quat"][:, [3, 0, 1, 2]])
-    gyr, acc = flip_body(f["omega"]), flip_body(f["force"]) + rng.normal(0, 0.2, (n, 3))
-    vel, pos = flip_world(f["vel"]), flip_world(f["pos"])
     zero = np.zeros(n)
     esc_t = np.repeat(us, 4)
-    rpm = (f["rotor"] + rng.normal(0, 2.0, (n, 4))).reshape(-1) * 60 / (2 * np.pi)
+    rpm = g["rotor"].reshape(-1) * 60 / (2 * np.pi)
     path = _dataflash(tmp_path / "sim.bin", {
         "XKQ": (130, "QBffff", ("TimeUS", "C", "Q1", "Q2", "Q3", "Q4"),
                 {"TimeUS": us, "C": zero, **{f"Q{i + 1}": q[:, i] for i in range(4)}}),
@@ -389,3 +388,32 @@ def test_ardupilot_esc_and_imu_give_the_vehicles_thrust(root, tmp_path):
     assert abs(thrust["k_t"] / PARAMS["k_eta"] - 1) < 0.03, thrust
     _, drag = run_command("drag", cfg, tmp_path / "d", summary=True)
     assert abs(drag["k_dx"] / K_D_FORCE - 1) < 0.15 and abs(drag["k_dy"] / K_D_FORCE - 1) < 0.15
+
+
+@pytest.mark.parametrize("text, match", [
+    ('[data]\nfiles = ["a.csv"]\n[truth]\nvehicle = "hummingbird"\n[vehicle]\nmass = 1.0\n',
+     "two sources"),
+    ('[data]\nfiles = ["a.csv"]\n[vehicle]\nmass = 1.0\nmagnets = 14\n', "vehicle.magnets"),
+    ('[vehicle]\nmass = 1.0\n', "lists no files"),
+    ('[data]\nfiles = ["a.csv"]\nformat = "table"\n[vehicle]\nmass = 1.0\n',
+     "no motor-speed reader"),
+    ('[data]\nfiles = ["a.csv"]\n[vehicle]\nmass = 1.0\n[thrust]\nmin_height = -1.0\n',
+     "thrust.min_height"),
+    ('[data]\nfiles = ["a.csv"]\nsegment = "sometimes"\n[vehicle]\nmass = 1.0\n',
+     "data.segment")])
+def test_log_config_errors_name_the_field(tmp_path, text, match):
+    from gpquad.physics.config import load_physics_config
+
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(GpquadError, match=match):
+        load_physics_config(path)
+
+
+def test_a_time_range_keeps_part_of_a_generic_file(root, tmp_path):
+    import json
+
+    cfg = _config(root, ["hover.csv"], extra='segment = "range"\ntime_range = [1.0, 4.0]')
+    out = run_command("thrust", cfg, tmp_path / "t")
+    (seg,) = json.loads((out / "thrust.json").read_text())["log"]["segments"]
+    assert seg["name"] == "hover.csv@1.0s" and 2.9 < seg["duration_s"] <= 3.0

@@ -7,7 +7,8 @@ Every reader returns `MotorLog`s on one uniform clock, in NED/FRD and SI units:
   `u, v, w`) and `x, y, z`, rotor speeds `rotor_1 .. rotor_4` (rad/s) or `erpm_1 .. erpm_4`
   (electrical RPM; `[vehicle] motor_pole_pairs` converts), and `acc_x, acc_y, acc_z` (body
   specific force, m/s^2); `[data.columns]` renames, `data.frame` declares NED/FRD or ENU/FLU;
-  a `segment` column splits the file. The rows must be uniformly sampled.
+  a `segment` column splits the file. The rows must be uniformly sampled; every row is in
+  flight unless `data.segment = "range"` keeps `data.time_range` (s from the file's start).
 - Betaflight 4.3+ (format "betaflight"): `eRPM[0..3]` (bidirectional DShot telemetry, logged
   as eRPM / 100) divided by the motor pole pairs (`[vehicle] motor_pole_pairs`, else the
   header's `motor_poles` / 2); accSmooth via the Betaflight reader. No velocity or position.
@@ -152,10 +153,13 @@ def _generic_piece(df: pd.DataFrame, name: str, source: str, data, pole_pairs: i
                           source=source, field="data.frame")
     if body is not None:
         world = _rotate(quat, body)
-    n = len(t)
-    return MotorLog(name=name, source=source, t=t - t[0], quat=quat, rotor=rotor, acc=acc,
-                    vel=world, pos=pos, rates=rates, valid=np.ones(n, dtype=bool),
-                    in_flight=np.ones(n, dtype=bool), missing=missing)
+    t = t - t[0]
+    in_flight = np.ones(len(t), dtype=bool)
+    if data.segment == "range":
+        in_flight = (t >= data.time_range[0]) & (t <= data.time_range[1])
+    return MotorLog(name=name, source=source, t=t, quat=quat, rotor=rotor, acc=acc,
+                    vel=world, pos=pos, rates=rates, valid=np.ones(len(t), dtype=bool),
+                    in_flight=in_flight, missing=missing)
 
 
 def _rotate(quat: np.ndarray, vectors: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from gpquad.physics.deadreckon import MODELS, compare_models
 from gpquad.physics.identify import coefficients
 from gpquad.physics.identify_log import identify_drag_log, identify_thrust_log, windows
 from gpquad.physics.logdata import load_log_segments
+from gpquad.physics.mixer import runs_of
 
 MAX_TRACK_FIGURES = 12
 
@@ -116,12 +117,14 @@ def run_deadreckon_log(cfg, out: Path) -> dict:
     mass = cfg.vehicle.mass
     flights = []
     for seg in segs:
-        parts = windows(seg, cfg.deadreckon.window_s)
+        parts = [(a0 + a, a0 + b) for a0, b0 in runs_of(seg["airborne"]) if b0 - a0 >= 10
+                 for a, b in windows({"t": seg["t"][a0:b0]}, cfg.deadreckon.window_s)]
         for a, b in parts:
             cmp = compare_models(seg, coef, mass, a, b)
             rmse = {m: cmp[m]["rmse"] for m in MODELS}
             norms = {m: float(np.linalg.norm(rmse[m])) for m in MODELS}
-            name = seg["name"] if len(parts) == 1 else f"{seg['name']}+{seg['t'][a]:.1f}s"
+            name = seg["name"] if (a, b) == (0, len(seg["t"])) else \
+                f"{seg['name']}+{seg['t'][a]:.1f}s"
             flights.append({"name": name, "duration_s": float(seg["t"][b - 1] - seg["t"][a]),
                             "models": {m: {"rmse": rmse[m]} for m in MODELS},
                             "thesis_order": _ordered(rmse),

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.errors import GpquadError
+from gpquad.physics.mixer import runs_of
 from gpquad.physics.sync import causal_moving_average
 
 G = 9.81
@@ -34,12 +35,6 @@ NEEDS = {"rotor": "the four rotor speeds", "acc": "the accelerometer (body speci
          "vel": "a measured velocity", "pos": "a measured position (motion capture or GPS)"}
 #: Hover level of |specific force| (m/s^2) accepted as m/s^2; about 1 is a log in g.
 LEVEL_RANGE = (6.0, 15.0)
-
-
-def _runs(flag: np.ndarray) -> list[tuple[int, int]]:
-    f = np.concatenate([[False], np.asarray(flag, dtype=bool), [False]])
-    d = np.diff(f.astype(np.int8))
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
 def require(logs, needs: tuple[str, ...], command: str) -> None:
@@ -75,7 +70,7 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
         return causal_moving_average(x, smoothing_window) if smoothing_window > 1 else x
 
     out = []
-    for a, b in _runs(ok):
+    for a, b in runs_of(ok):
         if b - a < need:
             continue
         q = log.quat[a:b]
