@@ -14,26 +14,7 @@ from gpquad.physics.config import PhysicsConfig, load_physics_config
 from gpquad.physics.deadreckon import MODELS, compare_models
 from gpquad.physics.identify import coefficients, identify_drag, identify_thrust, load_flight
 from gpquad.physics.runfolder import default_out, write_run
-
-THESIS_ORDER = ("coriolis", "refined", "base", "accelerometer")
-
-
-def _pct(x):
-    return "-" if x is None else f"{100 * x:+.2f} %"
-
-
-def _fits_table(fits: dict, truth: dict) -> list[str]:
-    lines = ["| fit | coefficient | estimate | SE | truth | error | R^2 | R^2 val | RMSE val |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for key, res in fits.items():
-        for name, c, se in zip(res["names"], res["coef"], res["se"]):
-            true = truth.get(name)
-            true_text = "-" if true is None else f"{true:.4g}"
-            lines.append(f"| {key} | {name} | {c:.4g} | {se:.2g} | {true_text} | "
-                         f"{_pct(res['relative_error'].get(name))} | {res['r2']:.4f} | "
-                         f"{res.get('r2_val', float('nan')):.4f} | "
-                         f"{res.get('rmse_val', float('nan')):.4f} |")
-    return lines
+from gpquad.physics.tables import THESIS_ORDER, fits_table, models_ordered
 
 
 def thrust_markdown(res: dict, cfg: PhysicsConfig) -> str:
@@ -43,7 +24,7 @@ def thrust_markdown(res: dict, cfg: PhysicsConfig) -> str:
         f"seed {cfg.seed})", "",
         "Target m f_z (N); standard: k_t sum(w^2) (eq. 5); refined: k_t sum(w^2) - "
         "k_z w sum(w) + k_h (u^2 + v^2) (eq. 19). Truth from rotorpy's parameters (k_h = 4 "
-        "rotor k_h).", ""] + _fits_table(res["fits"], res["truth"]) + [
+        "rotor k_h).", ""] + fits_table(res["fits"], res["truth"]) + [
         "", f"Hover fit applied to the forward flight's validation part: R^2 {hov['r2']:.4f}, "
         f"RMSE {hov['rmse']:.4f} N.",
         f"Refined beats standard on forward flight (validation RMSE): "
@@ -56,13 +37,8 @@ def drag_markdown(res: dict, cfg: PhysicsConfig) -> str:
         f"method {cfg.regression.method}, seed {cfg.seed})", "",
         "Target f_x, f_y (m/s^2); eq. (18): k_d v w_s, optionally + c |V| v (parasitic). "
         "Truth: -4 k_d / m and -c_D / m from rotorpy's parameters.", ""]
-        + _fits_table(res["fits"], res["truth"]) + [""]
+        + fits_table(res["fits"], res["truth"]) + [""]
         + [f"Warning: {w}" for w in res.get("warnings", [])] + [""])
-
-
-def _ordered(rmse: dict, models=THESIS_ORDER) -> bool:
-    total = [float(np.linalg.norm(rmse[m])) for m in models]
-    return all(a < b for a, b in zip(total, total[1:]))
 
 
 def deadreckon_markdown(res: dict, cfg: PhysicsConfig) -> str:
@@ -141,8 +117,8 @@ def run_deadreckon(cfg: PhysicsConfig, out: Path) -> dict:
             norms = {m: float(np.linalg.norm(rmse[m])) for m in MODELS}
             flights.append({"name": meas["name"], "duration_s": float(meas["t"][-1]),
                             "models": {m: {"rmse": rmse[m]} for m in MODELS},
-                            "thesis_order": _ordered(rmse),
-                            "model_order": _ordered(rmse, THESIS_ORDER[:3]),
+                            "thesis_order": models_ordered(rmse),
+                            "model_order": models_ordered(rmse, THESIS_ORDER[:3]),
                             "accelerometer_worse_than_base": norms["accelerometer"] >
                             norms["base"],
                             "best": min(norms, key=norms.get)})

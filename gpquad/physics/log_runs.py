@@ -12,6 +12,7 @@ from gpquad.physics.identify import coefficients
 from gpquad.physics.identify_log import identify_drag_log, identify_thrust_log, windows
 from gpquad.physics.logdata import load_log_segments
 from gpquad.physics.mixer import runs_of
+from gpquad.physics.tables import THESIS_ORDER, fits_table, models_ordered
 
 MAX_TRACK_FIGURES = 12
 
@@ -31,15 +32,13 @@ def _log_lines(res: dict) -> list[str]:
 
 
 def thrust_markdown_log(res: dict, cfg) -> str:
-    from gpquad.physics.commands import _fits_table
-
     hov = res["hover_fit_on_forward_validation"]
     beats = res["refined_beats_standard"]
     return "\n".join([
         f"# Thrust identification ({_title(cfg)}, method {cfg.regression.method})", "",
         "Target m f_z (N); standard: k_t sum(w^2) (eq. 5) on near-hover samples and on all; "
         "refined: k_t sum(w^2) - k_z w sum(w) + k_h (u^2 + v^2) (eq. 19) on all.", ""]
-        + _log_lines(res) + [""] + _fits_table(res["fits"], {}) + [
+        + _log_lines(res) + [""] + fits_table(res["fits"], {}) + [
         "", f"Hover fit applied to the flight's validation part: R^2 {hov['r2']:.4f}, "
         f"RMSE {hov['rmse']:.4f} N.",
         f"Refined beats standard on the validation parts (RMSE): "
@@ -47,13 +46,11 @@ def thrust_markdown_log(res: dict, cfg) -> str:
 
 
 def drag_markdown_log(res: dict, cfg) -> str:
-    from gpquad.physics.commands import _fits_table
-
     return "\n".join([
         f"# Drag identification ({_title(cfg)}, method {cfg.regression.method})", "",
         "Target f_x, f_y (m/s^2); eq. (18): k_d v w_s, optionally + c |V| v (parasitic) and "
         "a constant (accelerometer bias). In N: multiply by the mass.", ""]
-        + _log_lines(res) + [""] + _fits_table(res["fits"], {}) + [""])
+        + _log_lines(res) + [""] + fits_table(res["fits"], {}) + [""])
 
 
 def run_thrust_log(cfg, out: Path) -> dict:
@@ -102,7 +99,6 @@ def run_drag_log(cfg, out: Path) -> dict:
 
 
 def run_deadreckon_log(cfg, out: Path) -> dict:
-    from gpquad.physics.commands import THESIS_ORDER, _ordered
     from gpquad.physics.plots import tracks_figure
 
     segs, summary = load_log_segments(cfg, ("rotor", "acc", "vel", "pos"), "deadreckon")
@@ -127,8 +123,8 @@ def run_deadreckon_log(cfg, out: Path) -> dict:
                 f"{seg['name']}+{seg['t'][a]:.1f}s"
             flights.append({"name": name, "duration_s": float(seg["t"][b - 1] - seg["t"][a]),
                             "models": {m: {"rmse": rmse[m]} for m in MODELS},
-                            "thesis_order": _ordered(rmse),
-                            "model_order": _ordered(rmse, THESIS_ORDER[:3]),
+                            "thesis_order": models_ordered(rmse),
+                            "model_order": models_ordered(rmse, THESIS_ORDER[:3]),
                             "accelerometer_worse_than_base": norms["accelerometer"] >
                             norms["base"], "best": min(norms, key=norms.get)})
             if len(flights) <= MAX_TRACK_FIGURES:
