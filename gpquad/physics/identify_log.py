@@ -129,14 +129,17 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
             res = _fit_pooled(p, names, cfg, f"drag {key}", source, "log a longer flight")
             out["fits"][key] = res
             series[key] = p
-            if not abs(res["se"][0]) < 0.5 * abs(res["coef"][0]):
-                out.setdefault("warnings", []).append(
-                    f"{key}: {names[0]} = {res['coef'][0]:.3g} +- {res['se'][0]:.2g} is not "
-                    f"identified: the training parts barely move along {'xy'[axis]}")
-            elif res["coef"][0] >= 0:
-                out.setdefault("warnings", []).append(
-                    f"{key}: {names[0]} = {res['coef'][0]:.3g} is not negative (drag must "
-                    f"oppose the velocity); the log barely moves along {'xy'[axis]}")
+            for name, c, se in zip(names, res["coef"], res["se"]):
+                if name.startswith("bias"):
+                    continue
+                if not abs(se) < 0.5 * abs(c):
+                    out.setdefault("warnings", []).append(
+                        f"{key}: {name} = {c:.3g} +- {se:.2g} is not identified: the "
+                        f"training parts barely move along {'xy'[axis]}")
+                elif c >= 0:
+                    out.setdefault("warnings", []).append(
+                        f"{key}: {name} = {c:.3g} is not negative (drag must oppose the "
+                        f"velocity); the log barely moves along {'xy'[axis]}")
     out["_series"] = series
     return out
 
