@@ -71,9 +71,14 @@ def _cmd_mixer(args) -> int:
 
 def _cmd_fit(args) -> int:
     from gpquad.physics.commands import run_command
+    from gpquad.physics.runfolder import plain
 
-    out = run_command(args.kind, args.config, args.out, seed=args.seed, progress=True)
-    print(f"Run folder: {out}")
+    out, summary = run_command(args.kind, args.config, args.out, seed=args.seed,
+                               progress=not args.json, summary=True)
+    if args.json:
+        print(json.dumps(plain(summary)))
+    else:
+        print(f"Run folder: {out}")
     return 0
 
 
@@ -103,7 +108,10 @@ def register(subparsers) -> None:
                        ("deadreckon", "dead-reckoning position with four acceleration "
                         "models (Table III)")):
         p = sub.add_parser(kind, help=text)
-        p.add_argument("config", help="TOML (experiments/physics_*.toml)")
+        p.add_argument("config", help="TOML (experiments/physics_*.toml): [data] files and "
+                       "[vehicle] for a log, or [truth] for rotorpy flights")
+        p.add_argument("--json", action="store_true",
+                       help="print one JSON object of the coefficients (SI units) instead")
         p.add_argument("--seed", type=int, help="override the config's seed")
         p.add_argument("--out", help="run folder (default results/physics-<kind>-<time>)")
         p.set_defaults(func=_cmd_fit, kind=kind)

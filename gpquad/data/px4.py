@@ -140,6 +140,7 @@ def read_px4_folder(path) -> Topics:
 
 
 _WANTED = {"vehicle_attitude", "vehicle_angular_velocity", "vehicle_local_position",
+           "sensor_combined", "vehicle_acceleration",
            "actuator_controls_0", "vehicle_status", "vehicle_rates_setpoint", "input_rc",
            "actuator_outputs", "control_state", "vehicle_torque_setpoint",
            "vehicle_thrust_setpoint", "actuator_motors", "esc_status"}

@@ -1,5 +1,6 @@
-"""`gpquad physics thrust|drag|deadreckon CONFIG`: identification and dead reckoning on
-ground-truth flights, written as run folders (JSON, Markdown table, figures, run.json)."""
+"""`gpquad physics thrust|drag|deadreckon CONFIG`: identification and dead reckoning on a
+user's log (gpquad.physics.log_runs) or on simulated ground-truth flights (here), written as
+run folders (JSON, Markdown table, figures, run.json)."""
 
 from __future__ import annotations
 
@@ -13,26 +14,7 @@ from gpquad.physics.config import PhysicsConfig, load_physics_config
 from gpquad.physics.deadreckon import MODELS, compare_models
 from gpquad.physics.identify import coefficients, identify_drag, identify_thrust, load_flight
 from gpquad.physics.runfolder import default_out, write_run
-
-THESIS_ORDER = ("coriolis", "refined", "base", "accelerometer")
-
-
-def _pct(x):
-    return "-" if x is None else f"{100 * x:+.2f} %"
-
-
-def _fits_table(fits: dict, truth: dict) -> list[str]:
-    lines = ["| fit | coefficient | estimate | SE | truth | error | R^2 | R^2 val | RMSE val |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for key, res in fits.items():
-        for name, c, se in zip(res["names"], res["coef"], res["se"]):
-            true = truth.get(name)
-            true_text = "-" if true is None else f"{true:.4g}"
-            lines.append(f"| {key} | {name} | {c:.4g} | {se:.2g} | {true_text} | "
-                         f"{_pct(res['relative_error'].get(name))} | {res['r2']:.4f} | "
-                         f"{res.get('r2_val', float('nan')):.4f} | "
-                         f"{res.get('rmse_val', float('nan')):.4f} |")
-    return lines
+from gpquad.physics.tables import THESIS_ORDER, fits_table, models_ordered
 
 
 def thrust_markdown(res: dict, cfg: PhysicsConfig) -> str:
@@ -42,7 +24,7 @@ def thrust_markdown(res: dict, cfg: PhysicsConfig) -> str:
         f"seed {cfg.seed})", "",
         "Target m f_z (N); standard: k_t sum(w^2) (eq. 5); refined: k_t sum(w^2) - "
         "k_z w sum(w) + k_h (u^2 + v^2) (eq. 19). Truth from rotorpy's parameters (k_h = 4 "
-        "rotor k_h).", ""] + _fits_table(res["fits"], res["truth"]) + [
+        "rotor k_h).", ""] + fits_table(res["fits"], res["truth"]) + [
         "", f"Hover fit applied to the forward flight's validation part: R^2 {hov['r2']:.4f}, "
         f"RMSE {hov['rmse']:.4f} N.",
         f"Refined beats standard on forward flight (validation RMSE): "
@@ -55,17 +37,16 @@ def drag_markdown(res: dict, cfg: PhysicsConfig) -> str:
         f"method {cfg.regression.method}, seed {cfg.seed})", "",
         "Target f_x, f_y (m/s^2); eq. (18): k_d v w_s, optionally + c |V| v (parasitic). "
         "Truth: -4 k_d / m and -c_D / m from rotorpy's parameters.", ""]
-        + _fits_table(res["fits"], res["truth"]) + [""]
+        + fits_table(res["fits"], res["truth"]) + [""]
         + [f"Warning: {w}" for w in res.get("warnings", [])] + [""])
 
 
-def _ordered(rmse: dict, models=THESIS_ORDER) -> bool:
-    total = [float(np.linalg.norm(rmse[m])) for m in models]
-    return all(a < b for a, b in zip(total, total[1:]))
-
-
 def deadreckon_markdown(res: dict, cfg: PhysicsConfig) -> str:
-    lines = [f"# Dead-reckoning position RMSE, m ({cfg.truth.vehicle}, seed {cfg.seed})", "",
+    what = (f"{cfg.truth.vehicle}, seed {cfg.seed}" if cfg.source == "truth" else
+            f"{', '.join(Path(f).name for f in cfg.data['files'])}, "
+            + (f"windows of {cfg.deadreckon.window_s:g} s" if cfg.deadreckon.window_s
+               else "whole segments"))
+    lines = [f"# Dead-reckoning position RMSE, m ({what})", "",
              "| manoeuvre | model | x | y | z | norm |", "|---|---|---|---|---|---|"]
     for flight in res["flights"]:
         for m in MODELS:
@@ -78,7 +59,8 @@ def deadreckon_markdown(res: dict, cfg: PhysicsConfig) -> str:
               f"accelerometer worse than base on "
               f"{res['accelerometer_worst_count']}; Coriolis best on "
               f"{res['coriolis_best_count']}.", ""]
-    return "\n".join(lines)
+    lines += [f"Note: {n}" for n in res.get("notes", [])]
+    return "\n".join(lines + [""] if res.get("notes") else lines)
 
 
 def run_thrust(cfg: PhysicsConfig, out: Path) -> dict:
@@ -135,8 +117,8 @@ def run_deadreckon(cfg: PhysicsConfig, out: Path) -> dict:
             norms = {m: float(np.linalg.norm(rmse[m])) for m in MODELS}
             flights.append({"name": meas["name"], "duration_s": float(meas["t"][-1]),
                             "models": {m: {"rmse": rmse[m]} for m in MODELS},
-                            "thesis_order": _ordered(rmse),
-                            "model_order": _ordered(rmse, THESIS_ORDER[:3]),
+                            "thesis_order": models_ordered(rmse),
+                            "model_order": models_ordered(rmse, THESIS_ORDER[:3]),
                             "accelerometer_worse_than_base": norms["accelerometer"] >
                             norms["base"],
                             "best": min(norms, key=norms.get)})
@@ -150,20 +132,46 @@ def run_deadreckon(cfg: PhysicsConfig, out: Path) -> dict:
             "coriolis_best_count": sum(f["best"] == "coriolis" for f in flights)}
 
 
+def _runner(kind: str, source: str):
+    """(run, markdown) of a command for a source of flights."""
+    if source == "log":
+        from gpquad.physics import log_runs as lr
+
+        return {"thrust": (lr.run_thrust_log, lr.thrust_markdown_log),
+                "drag": (lr.run_drag_log, lr.drag_markdown_log),
+                "deadreckon": (lr.run_deadreckon_log, deadreckon_markdown)}[kind]
+    return {"thrust": (run_thrust, thrust_markdown), "drag": (run_drag, drag_markdown),
+            "deadreckon": (run_deadreckon, deadreckon_markdown)}[kind]
+
+
+def json_summary(kind: str, result: dict, cfg: PhysicsConfig) -> dict:
+    """The --json line (gpquad.physics.summary), in SI units."""
+    from gpquad.physics.summary import deadreckon_json, drag_json, thrust_json
+    from gpquad.physics.truth import vehicle_params
+
+    mass = cfg.vehicle.mass if cfg.source == "log" else \
+        vehicle_params(cfg.truth.vehicle)["mass"]
+    if kind == "thrust":
+        return thrust_json(result, mass)
+    if kind == "drag":
+        return drag_json(result, mass, cfg.regression.parasitic_drag)
+    return deadreckon_json(result)
+
+
 def run_command(kind: str, config_path, out=None, seed: int | None = None,
-                progress: bool = False) -> Path:
-    """Load the config (errors before any work), run, write the run folder."""
+                progress: bool = False, summary: bool = False):
+    """Load the config (errors before any work), run, write the run folder. Returns the
+    folder, or (folder, JSON summary) with summary=True."""
     started = time.time()
     cfg = load_physics_config(config_path)
     if seed is not None:
         cfg = dataclasses.replace(cfg, seed=seed)
     out = Path(out) if out else default_out(kind, cfg.name)
     out.mkdir(parents=True, exist_ok=True)
-    runner = {"thrust": (run_thrust, thrust_markdown), "drag": (run_drag, drag_markdown),
-              "deadreckon": (run_deadreckon, deadreckon_markdown)}[kind]
+    runner = _runner(kind, cfg.source)
     result = runner[0](cfg, out)
     md = runner[1](result, cfg)
     write_run(out, kind, result, md, config=cfg.to_dict(), seed=cfg.seed, started=started)
     if progress:
         print(md)
-    return out
+    return (out, json_summary(kind, result, cfg)) if summary else out
