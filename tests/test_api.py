@@ -172,3 +172,16 @@ def test_the_example_runs_from_dataframe_to_compiled_c(tmp_path):
     else:
         pytest.skip("no C compiler: the export was written, not compiled")
     assert (tmp_path / "quad_model.h").is_file()
+
+
+def test_time_left_leaves_out_the_first_iteration():
+    """The first iteration compiles the kernels: the estimate starts after it."""
+    import io
+
+    from gpquad.study.search import Progress
+
+    progress = Progress(True, 4, stream=io.StringIO())
+    progress.done, progress.first = 1, 60.0
+    assert progress.time_left(60.0) == "estimating"
+    progress.done = 2
+    assert progress.time_left(62.0) == "~4.0 s"  # 2 s per iteration, 2 to go; not 31 s each

@@ -305,3 +305,44 @@ def test_check_reads_an_engine_ready_file_as_gpquad_run_does(capsys, tmp_path, s
     assert main(["data", "check", str(path), "--plot", str(tmp_path / "s.png")]) == 0
     out = capsys.readouterr().out
     assert "(format generic)" in out and "verdict: PASS" in out
+
+
+def test_a_failing_check_still_writes_its_figure(capsys, tmp_path):
+    """When the integration check fails the figure is needed most: it is written, and the
+    command still exits 2 with one error line."""
+    png = tmp_path / "fail.png"
+    strict = _cfg(tmp_path, 'segment = "none"\nmin_segment_s = 2.0\ncheck_max_rse = 1e-12\n')
+    code = main(["data", "check", str(FIXTURES / "px4_sample_20s.ulg"), "--plot", str(png),
+                 "--config", str(strict)])
+    captured = capsys.readouterr()
+    assert code == 2 and "integration check failed" in captured.err
+    assert [line for line in captured.err.splitlines() if "error" in line][0].count("\n") == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "quick-look plot" in captured.out
+
+
+def test_quick_look_marks_unmeasured_signals(tmp_path, sim_flight):
+    """u and v not measured: drawn apart and labelled so (the check can fail: a measured
+    flight has no such label)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from unittest import mock
+
+    from gpquad.cli import data as cli_data
+
+    labels = []
+    real = matplotlib.axes.Axes.plot
+
+    def spy(self, *args, **kwargs):
+        labels.append(kwargs.get("label"))
+        return real(self, *args, **kwargs)
+
+    blind = dataclasses.replace(sim_flight, meta={**sim_flight.meta, "measured": {
+        "u": "not measured (no GPS)", "v": "not measured (no GPS)", "w": "measured (baro)"}})
+    with mock.patch.object(matplotlib.axes.Axes, "plot", spy):
+        cli_data.quick_look([blind], tmp_path / "a.png", "t")
+    assert "u (not measured)" in labels and "w" in labels
+    labels.clear()
+    with mock.patch.object(matplotlib.axes.Axes, "plot", spy):
+        cli_data.quick_look([sim_flight], tmp_path / "b.png", "t")
+    assert not any(label and "not measured" in label for label in labels)

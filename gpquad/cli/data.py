@@ -89,8 +89,24 @@ def describe_flights(flights) -> str:
     return "\n".join(lines)
 
 
+def _status(flight, state: str) -> str:
+    """"" for a measured state, else a short note for the legend: not measured, derived."""
+    from gpquad.data.pipeline import is_measured
+
+    description = flight.meta.get("measured", {}).get(state)
+    if description is None or is_measured(description):
+        return ""
+    return "derived" if description.startswith("derived") else "not measured"
+
+
+def _is_thrust(name: str) -> bool:
+    return name.endswith("_T") or "thrust" in name.lower() or name in ("throttle", "T")
+
+
 def quick_look(flights, path: Path, title: str) -> Path:
-    """PNG of attitude, body velocity, rates and inputs of the flights against log time."""
+    """PNG of attitude, heading, body velocity, rates and inputs of the flights against log
+    time: psi unwrapped on its own axis; unmeasured or derived signals dashed grey and
+    labelled so; thrust-like inputs apart from the others; units on every axis."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -99,21 +115,34 @@ def quick_look(flights, path: Path, title: str) -> Path:
     from gpquad.engine.kernels.quaternion import euler_array
     from gpquad.study.store import atomic_write_bytes
 
-    fig, axes = plt.subplots(4, 1, figsize=(11, 9), sharex=True)
-    names = (("phi", "theta", "psi"), ("u", "v", "w"), ("p", "q", "r"))
-    units = ("deg", "m/s", "rad/s")
+    fig, axes = plt.subplots(6, 1, figsize=(11, 12), sharex=True)
+    panels = ((axes[0], ("phi", "theta"), "roll, pitch [deg]"),
+              (axes[1], ("psi",), "heading psi, unwrapped [deg]"),
+              (axes[2], ("u", "v", "w"), "body velocity [m/s]"),
+              (axes[3], ("p", "q", "r"), "body rates [rad/s]"))
     for k, f in enumerate(flights):
         eul = np.degrees(euler_array(np.ascontiguousarray(f.quat)))
-        blocks = (eul, f.vel, f.rates)
-        for ax, block, labels in zip(axes[:3], blocks, names, strict=False):
-            for j in range(3):
-                ax.plot(f.t, block[:, j], lw=0.7, color=f"C{j}",
-                        label=labels[j] if k == 0 else None)
+        eul[:, 2] = np.degrees(np.unwrap(np.radians(eul[:, 2])))
+        values = {"phi": eul[:, 0], "theta": eul[:, 1], "psi": eul[:, 2],
+                  **{s: f.vel[:, j] for j, s in enumerate("uvw")},
+                  **{s: f.rates[:, j] for j, s in enumerate("pqr")}}
+        for ax, names, _ in panels:
+            for j, name in enumerate(names):
+                note = _status(f, name)
+                style = dict(lw=0.7, color=f"C{j}") if not note else \
+                    dict(lw=0.7, color="0.6", ls="--")
+                label = (f"{name} ({note})" if note else name) if k == 0 else None
+                ax.plot(f.t, values[name], label=label, **style)
         for j, n in enumerate(f.input_names):
-            axes[3].plot(f.t, f.inputs[:, j], lw=0.7, color=f"C{j}", label=n if k == 0 else None)
-    for ax, u, labels in zip(axes, units + ("-",), names + (("inputs",),), strict=False):
-        ax.set_ylabel(f"{', '.join(labels)} [{u}]" if u != "-" else "inputs")
-        ax.legend(loc="upper right", fontsize=7, ncol=4)
+            ax = axes[5] if _is_thrust(n) else axes[4]
+            ax.plot(f.t, f.inputs[:, j], lw=0.7, color=f"C{j}", label=n if k == 0 else None)
+    for ax, _, label in panels:
+        ax.set_ylabel(label, fontsize=8)
+    axes[4].set_ylabel("attitude / rate inputs\n[input units]", fontsize=8)
+    axes[5].set_ylabel("thrust input\n[input units]", fontsize=8)
+    for ax in axes:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper right", fontsize=7, ncol=4)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("log time [s]")
     fig.suptitle(title, fontsize=10)
@@ -153,18 +182,22 @@ def run_check(path, fmt: str | None = None, config=None, plot=None, out=print) -
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
                           field="--format")
     out(describe_flights(flights))
+    png = Path(plot) if plot else \
+        Path(cfg.output.dir) / "checks" / f"{path.stem or path.name}_check.png"
     try:
-        flights, dropped, check = screen_segments(flights, data.check_steps,
-                                                  data.check_max_rse, source=str(path))
-    except GpquadError:  # nothing passes: the pooled table, then the one-line reason
+        kept, dropped, check = screen_segments(flights, data.check_steps,
+                                               data.check_max_rse, source=str(path))
+    except GpquadError:  # nothing passes: the pooled table, the figure, the one-line reason
         out(integration_check(flights, data.check_steps, data.check_max_rse).table())
+        quick_look(flights, png, f"{path.name}: {len(flights)} segment(s), integration "
+                   "check FAILED")
+        out(f"quick-look plot: {png}")
         raise
     out(check.table())
     if dropped:
-        out(f"{len(flights)} segment(s) pass the integration check and are used; "
+        out(f"{len(kept)} segment(s) pass the integration check and are used; "
             f"{len(dropped)} dropped (listed after the verdict)")
-    png = Path(plot) if plot else Path(f"{path.stem or path.name}_check.png")
-    quick_look(flights, png, f"{path.name}: {len(flights)} segment(s), "
+    quick_look(kept, png, f"{path.name}: {len(kept)} segment(s), "
                f"{'PASS' if check.passed else 'FAIL'}")
     out(f"quick-look plot: {png}")
     return 0
@@ -183,7 +216,8 @@ def register(subparsers) -> None:
     check.add_argument("--format", help="px4-csv | ulog | betaflight | table | generic "
                                         "(default: from the path)")
     check.add_argument("--config", help="experiment TOML whose [data] settings to use")
-    check.add_argument("--plot", help="quick-look PNG path (default <name>_check.png)")
+    check.add_argument("--plot", help="quick-look PNG path (default "
+                       "results/checks/<name>_check.png; written also when the check fails)")
     check.set_defaults(func=_cmd_check)
     _register_align(sub)
     from gpquad.cli.score import register_export

@@ -22,24 +22,35 @@ from gpquad.study.store import HistoryWriter
 
 class Progress:
     """One line per iteration: target, iteration, best error on the current test suite (the
-    windows the models compete on, not the training error of model.json) and time left."""
+    windows the models compete on, not the training error of model.json) and time left. The
+    time left is estimated from the iterations after the run's first, which also compiles
+    the kernels (tens of seconds, once per machine with numba's cache)."""
 
     def __init__(self, enabled: bool, total_iterations: int, stream=sys.stdout):
         self.enabled = enabled
         self.total = total_iterations
         self.done = 0
         self.start = time.perf_counter()
+        self.first: float | None = None  # elapsed time at the end of the first iteration
         self.stream = stream
+
+    def time_left(self, elapsed: float) -> str:
+        """'~12.3 s' from the iterations after the first, or 'estimating'."""
+        if self.first is None or self.done < 2:
+            return "estimating"
+        rate = (elapsed - self.first) / (self.done - 1)
+        return f"~{rate * (self.total - self.done):.1f} s"
 
     def iteration(self, target: str, state: RunState, iterations: int) -> None:
         self.done += 1
+        elapsed = time.perf_counter() - self.start
+        if self.first is None:
+            self.first = elapsed
         if not self.enabled:
             return
-        elapsed = time.perf_counter() - self.start
-        left = elapsed / self.done * (self.total - self.done)
         best = float(np.min(state.model_errors))
         print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best suite error "
-              f"{best:.5g}  elapsed {elapsed:6.1f} s  left ~{left:6.1f} s",
+              f"{best:.5g}  elapsed {elapsed:6.1f} s  left {self.time_left(elapsed)}",
               file=self.stream, flush=True)
 
     def say(self, text: str) -> None:
