@@ -17,7 +17,7 @@ import sympy as sp
 from gpquad.data.flight import DT_TOLERANCE, Flight, flight_from_frame
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
-from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.equations import DiscoveredModel
 
 #: States scored by RSE: the ones the six equations integrate into.
 SCORED = ("u", "v", "w", "p", "q", "r")
@@ -114,8 +114,9 @@ class Model:
                 f"dt={self.dt:g} s, {self.discovered.n_parameters} constants{flag}>")
 
     # ------------------------------------------------------------------ data
-    def _dataset(self, data):
-        """The data as a dataset whose every sample is scored, inputs in the model's view."""
+    def _dataset(self, data, trimmed: bool = True):
+        """The data as a dataset whose every sample is scored, inputs in the model's view
+        (trim subtracted) unless `trimmed` is False."""
         from gpquad.data.dataset import build_dataset
         from gpquad.models.scoring import model_view
 
@@ -125,7 +126,7 @@ class Model:
             raise GpquadError(f"the data's sample period is {dataset.dt:.6g} s but the model's "
                               f"delays are samples of {self.dt:.6g} s; resample the data",
                               field="t")
-        return model_view(dataset, self.trim)
+        return model_view(dataset, self.trim) if trimmed else dataset
 
     def _flights(self, data) -> list[Flight]:
         items = list(data) if isinstance(data, (list, tuple)) else [data]
@@ -236,25 +237,33 @@ class Model:
         RSE = sum of squared errors / sum of squared deviations of the data from its mean,
         per state over the windows; 1 is no better than the data's mean; a diverged window
         (non-finite, or beyond 10x the largest |state| of the windows) is left out and
-        counted.
+        counted. On rate set-point inputs the set-point model (each rate follows its
+        set-point) is scored too.
 
         Returns
         -------
         DataFrame
-            Rows ``model`` and ``zero``; columns u, v, w, p, q, r, ``diverged``,
-            ``windows`` and ``horizon_s``.
+            Rows ``model``, ``zero`` (and ``set-point``); columns u, v, w, p, q, r,
+            ``diverged``, ``windows`` and ``horizon_s``.
         """
         from gpquad.models.scoring import DIVERGENCE_FACTOR, SCORED_INDEX, diverged, rse
 
         dataset = self._dataset(data)
+        raw = self._dataset(data, trimmed=False)
         starts, steps = self._windows(dataset, horizon_s)
         truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
         bound = np.full(len(SCORED_INDEX),
                         DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
+        from gpquad.models.reference_models import is_rate_level, setpoint_model, zero_model
+
+        references = [("model", self.discovered, dataset),
+                      ("zero", zero_model(self.input_names, self.dt), raw)]
+        if is_rate_level(raw.flight_info):
+            references.append(("set-point", setpoint_model(self.input_names, self.dt), raw))
         rows = {}
-        for name, model in (("model", self.discovered), ("zero", self._zero())):
+        for name, model, flown in references:
             with np.errstate(all="ignore"):
-                pred = model.simulate(dataset, starts, steps)
+                pred = model.simulate(flown, starts, steps)
             bad = diverged(pred, bound)
             values = (rse(pred[~bad], truth[~bad]) if (~bad).any()
                       else np.full(len(SCORED), np.nan))
@@ -262,14 +271,6 @@ class Model:
                           "diverged": int(bad.sum()), "windows": int(len(starts)),
                           "horizon_s": float(steps * dataset.dt)}
         return pd.DataFrame.from_dict(rows, orient="index")
-
-    def _zero(self) -> DiscoveredModel:
-        from gpquad.engine.tree.encoding import Tree
-        from gpquad.engine.tree.operators import CONST
-
-        zero = Tree.from_lists([CONST], [0.0], np.zeros(len(self.input_names), dtype=np.int64))
-        eqs = {t: Equation(t, zero, self.input_names, np.nan, np.nan) for t in TARGET_NAMES}
-        return DiscoveredModel(eqs, self.input_names, self.trim, self.dt, 0, {})
 
     def fly(self, inputs: pd.DataFrame, x0=None) -> pd.DataFrame:
         """Fly the model from an initial state, driven by raw inputs alone (no data).

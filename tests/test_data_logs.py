@@ -255,10 +255,14 @@ def test_score_command(tmp_path, capsys):
     assert res["part"] == "validation" and res["steps"] == 50 and res["windows"] >= 1
     assert np.isnan(res["rse"]["u"]) and 0 <= res["rse"]["p"] < np.inf and res["diverged"] == 0
     assert res["mirrored"] == {"inputs": ["u_R", "u_Y"], "diverged": 0}
+    # the zero and the set-point model (a rate-level log) flown beside, on the same windows
+    assert set(res["baselines"]) == {"zero", "set-point"}
+    assert np.isnan(res["baselines"]["zero"]["u"]) and res["baselines"]["zero"]["p"] > 0
     assert main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--part", "all",
                  "--horizon-s", "2"]) == 0
     out = capsys.readouterr().out
     assert "RSE of the integrated states over" in out
+    assert "\nzero " in out and "\nset-point " in out and "\nmodel " in out
     assert "mirrored left-right (u_R, u_Y flipped): 0 of" in out
     code = main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--format", "ulog"])
     assert code == 2 and "file not found" in capsys.readouterr().err

@@ -137,7 +137,7 @@ def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: st
 
 #: Flight.meta entries worth recording with a run (the rest are arrays).
 _INFO_KEYS = ("source", "log", "segment", "t_start_s", "t_stop_s", "measured", "pipeline",
-              "equations")
+              "equations", "input_level")
 
 
 def _info(flight: Flight) -> dict:

@@ -273,7 +273,7 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
     meta = {
         "source": log.source, "log": log.name, "segment": index,
         "t_start_s": float(t[0]), "t_stop_s": float(t[-1]), "dt": dt,
-        "measured": dict(log.measured), "pipeline": steps,
+        "measured": dict(log.measured), "pipeline": steps, "input_level": log.input_level,
         "reference_raw": _reference(log.table.iloc[a:b], t, rates),
         "reference": _filtered_reference(filtered_ref[:n], log.velocity_frame, rates, ref_vel),
     }

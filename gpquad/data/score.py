@@ -107,11 +107,34 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     scores = {}
     for s, v in zip(SCORED_STATES, values, strict=True):
         scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
+    baselines = reference_scores(run.model, dataset, starts, steps, bound)
     return {"run": str(run_dir), "data": str(log), "format": fmt, "part": which,
             "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
             "diverged": n_diverged, "rse": scores,
             "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
-            "dropped": dropped, "outside_training": outside, "mirrored": mirrored}
+            "dropped": dropped, "outside_training": outside, "mirrored": mirrored,
+            "baselines": baselines}
+
+
+def reference_scores(model, dataset, starts, steps: int, bound) -> dict:
+    """{name: {state: RSE or NaN (not measured), "diverged": n}} of the zero model and, on
+    rate set-point inputs, the set-point model, flown over the same windows."""
+    from gpquad.models.reference_models import is_rate_level, setpoint_model, zero_model
+    from gpquad.models.scoring import SCORED_STATES, diverged, rse
+
+    models = {"zero": zero_model(model.input_names, model.dt)}
+    if is_rate_level(dataset.flight_info):
+        models["set-point"] = setpoint_model(model.input_names, model.dt)
+    truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
+    out = {}
+    for name, reference in models.items():
+        with np.errstate(all="ignore"):
+            pred = reference.simulate(dataset, starts, steps)
+        values = rse(pred, truth)
+        out[name] = {s: float("nan") if dataset.unmeasured(s) else float(v)
+                     for s, v in zip(SCORED_STATES, values, strict=True)}
+        out[name]["diverged"] = int(diverged(pred, bound).sum())
+    return out
 
 
 def mirrored_diverged(model, dataset, starts, steps: int, bound, flipped) -> int:
@@ -125,15 +148,28 @@ def mirrored_diverged(model, dataset, starts, steps: int, bound, flipped) -> int
     return int(diverged(pred, bound).sum())
 
 
+def _cell(v: float) -> str:
+    """An RSE for the table: '-' where the log does not measure the state, '!' above 1."""
+    if not np.isfinite(v):
+        return f"{'-':>9}"
+    return f"{v:>8.4g}{'!' if v > 1 else ' '}"
+
+
 def format_score(result: dict) -> str:
-    head = " ".join(f"{s:>8}" for s in result["rse"])
-    vals = " ".join(f"{v:>8.4g}" for v in result["rse"].values())
+    head = f"{'':10}" + "".join(f"{s:>9}" for s in result["rse"])
+    rows = [("model", result["rse"])] + [(n, {s: r[s] for s in result["rse"]})
+                                          for n, r in result.get("baselines", {}).items()]
+    table = [f"{name:10}" + "".join(_cell(v) for v in values.values())
+             for name, values in rows]
     lines = [f"score of {result['run']} on {result['data']} ({result['part']} part, "
              f"{len(result['segments'])} segment(s), inputs {', '.join(result['input_names'])})",
              f"RSE of the integrated states over {result['windows']} window(s) of "
              f"{result['steps']} steps ({result['horizon_s']:.2f} s); "
-             f"{result['diverged']} diverged; NaN = not measured by the log",
-             head, vals]
+             f"{result['diverged']} diverged; - = not measured by the log; ! = RSE above 1, "
+             "no better than the data's mean; zero: every acceleration zero"
+             + ("; set-point: each rate follows its set-point" if "set-point" in
+                result.get("baselines", {}) else ""),
+             head, *table]
     lines.extend(f"warning: {d}" for d in result["dropped"])
     mirrored = result.get("mirrored")
     if mirrored:
