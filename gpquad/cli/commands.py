@@ -29,6 +29,11 @@ def _cmd_run(args) -> int:
     if any(model.trim.values()):
         print("\nThe same in the log's raw inputs:")
         print(model.text(raw=True))
+    if not args.no_figures:
+        from gpquad.report.builder import make_run_report
+
+        figures = make_run_report(run_dir, formats=("png",))
+        print(f"\nFigures: {', '.join(str(f) for f in figures)}")
     print(f"\nRun folder: {run_dir}")
     return 0
 
@@ -194,6 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="master seed")
     run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
     run.add_argument("--quiet", action="store_true", help="no progress lines")
+    run.add_argument("--no-figures", action="store_true",
+                     help="skip the report figures (convergence, prediction) in RUN/report/")
     run.set_defaults(func=_cmd_run)
 
     sim = sub.add_parser("simulate", help="write the reference simulator's flight to a file")

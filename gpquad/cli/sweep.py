@@ -65,7 +65,7 @@ def register(subparsers) -> None:
     sw.set_defaults(func=_cmd_sweep)
 
     rep = subparsers.add_parser("report", help="figures and tables of a finished sweep or run")
-    rep.add_argument("folder", help="sweep folder")
+    rep.add_argument("folder", help="a sweep or run folder")
     rep.add_argument("--reassemble", action="store_true",
                      help="rebuild the full models before plotting")
     rep.add_argument("--format", action="append", choices=["png", "pdf"],

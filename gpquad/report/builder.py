@@ -265,7 +265,9 @@ def make_run_report(folder, formats=("png", "pdf"), window_s: float = 7.0) -> li
         buf = io.BytesIO()
         np.savez(buf, t=np.arange(steps + 1) * dataset.dt, data=data, best=pred,
                  full=np.zeros((0, steps + 1, 9)), start=start, dt=dataset.dt,
-                 state_names=np.array(STATE_NAMES), targets=np.array(sorted(model.equations)))
+                 state_names=np.array(STATE_NAMES), targets=np.array(sorted(model.equations)),
+                 unmeasured=np.array([s for s in STATE_NAMES if dataset.unmeasured(s)],
+                                     dtype=str))
         atomic_write_bytes(out / "predictions.npz", buf.getvalue())
         written += plotting.prediction_figure(out / "predictions.npz", out / "prediction",
                                               formats, best_label="discovered equations")

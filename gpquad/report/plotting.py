@@ -60,6 +60,7 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
     n = len(full) if n_models is None else n_models
     targets = d["targets"].tolist() if "targets" in d.files else list(TARGET_NAMES)
     identified = {TARGET_STATE[t] for t in targets}
+    unmeasured = set(d["unmeasured"].tolist()) if "unmeasured" in d.files else set()
     with plt.rc_context(STYLE):
         fig, axes = plt.subplots(3, 2, figsize=(7.0, 6.0), sharex=True)
         for j, name in enumerate(PLOTTED):
@@ -78,16 +79,28 @@ def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | No
             span = max(float(np.ptp(ref)), 1e-3)
             ax.set_ylim(ref.min() - 0.4 * span, ref.max() + 0.4 * span)
             ax.set_ylabel(_label(name))
-            if name not in identified:
+            if name in unmeasured:
+                ax.set_title("not measured by the log: its values are placeholders",
+                             fontsize=8)
+            elif name not in identified:
                 ax.set_title("not identified: flown with the data's acceleration", fontsize=8)
+            else:
+                err = best[1:, k] - data[1:, k]
+                spread = float(((data[1:, k] - data[1:, k].mean()) ** 2).sum())
+                rse = float((err ** 2).sum() / spread) if spread > 0 else float("nan")
+                ax.set_title(f"RSE {rse:.3g}" if np.isfinite(rse) else "RSE -", fontsize=8)
         for ax in axes[-1]:
             ax.set_xlabel("time from window start [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="upper center", ncol=3, frameon=False,
                    bbox_to_anchor=(0.5, 1.02))
         clipped = " (envelope clipped to the axes)" if len(full) else ""
-        fig.suptitle(f"Prediction over a {t[-1]:.3g} s validation window{clipped}", y=1.05,
-                     fontsize=9)
+        where = ""
+        if "start" in d.files and "dt" in d.files:
+            where = (f" from sample {int(np.ravel(d['start'])[0])} "
+                     f"(t = {float(np.ravel(d['start'])[0]) * float(d['dt']):.1f} s of the data)")
+        fig.suptitle(f"Prediction over a {t[-1]:.3g} s validation window{where}{clipped}",
+                     y=1.05, fontsize=9)
         fig.tight_layout()
         return _save(fig, Path(stem), formats)
 
@@ -118,11 +131,15 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
             ax.set_visible(False)
         for ax, target in zip(axes.ravel()[: len(targets)], targets, strict=True):
             frames = [read_history(p, target=target) for p in histories[target]]
+            single = len(frames) == 1
             for h in frames:
-                ax.plot(h["step"], h["best_suite_error"], color="tab:gray", alpha=0.45,
-                        linewidth=0.7)
-            merged = pd.concat([h.set_index("step")["best_suite_error"] for h in frames], axis=1)
-            ax.plot(merged.index, merged.median(axis=1), color="tab:blue", linewidth=1.6)
+                ax.plot(h["step"], h["best_suite_error"], color="tab:blue" if single else
+                        "tab:gray", alpha=1.0 if single else 0.45,
+                        linewidth=1.2 if single else 0.7)
+            if not single:
+                merged = pd.concat([h.set_index("step")["best_suite_error"] for h in frames],
+                                   axis=1)
+                ax.plot(merged.index, merged.median(axis=1), color="tab:blue", linewidth=1.6)
             state = TARGET_STATE[target]
             unit = STATE_UNITS[STATE_NAMES.index(state)]
             if metric == "mse":
@@ -139,11 +156,18 @@ def convergence_figure(histories: dict[str, list[Path]], stem, metric: str = "ma
             ax.set_xlabel("model generation")
             ax.set_ylabel(f"suite {metric.upper()} of ${STATE_LATEX[STATE_NAMES.index(state)]}$"
                           f" [{unit}]")
-        handles = [plt.Line2D([], [], color="tab:gray", alpha=0.6, linewidth=0.8),
-                   plt.Line2D([], [], color="tab:blue", linewidth=1.6)]
-        handles.append(plt.Line2D([], [], color="0.9", linewidth=0.6))
-        fig.legend(handles, ["one run (best climber)", "median over runs",
-                             "iteration boundary (new test suite)"], loc="upper center",
-                   ncol=3, frameon=False, bbox_to_anchor=(0.5, 1.03))
-        fig.tight_layout()
+        several = any(len(histories[t]) > 1 for t in targets)
+        boundary = plt.Line2D([], [], color="0.9", linewidth=0.6)
+        if several:
+            handles = [plt.Line2D([], [], color="tab:gray", alpha=0.6, linewidth=0.8),
+                       plt.Line2D([], [], color="tab:blue", linewidth=1.6), boundary]
+            labels = ["one run (best climber)", "median over runs",
+                      "iteration boundary (new test suite)"]
+        else:
+            handles = [plt.Line2D([], [], color="tab:blue", linewidth=1.2), boundary]
+            labels = ["best climber on the current test suite",
+                      "iteration boundary (new test suite)"]
+        fig.tight_layout(rect=(0, 0, 1, 0.94))
+        fig.legend(handles, labels, loc="upper center", ncol=len(handles), frameon=False,
+                   bbox_to_anchor=(0.5, 1.0))
         return _save(fig, Path(stem), formats)
