@@ -185,3 +185,27 @@ def test_time_left_leaves_out_the_first_iteration():
     assert progress.time_left(60.0) == "estimating"
     progress.done = 2
     assert progress.time_left(62.0) == "~4.0 s"  # 2 s per iteration, 2 to go; not 31 s each
+
+
+def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
+    """A log without horizontal velocity: a_x and a_y are marked in the text, LaTeX,
+    Markdown and model.json (the check can fail: a measured state has no mark)."""
+    import dataclasses
+
+    from gpquad.models.equations import DiscoveredModel
+    from gpquad.study.fit import unmeasured_notes
+
+    dataset = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
+    assert unmeasured_notes(dataset, ["a_x", "p_dot"]) is None
+    info = [dict(f, measured={"u": "not measured (no GPS)", "v": "not measured (no GPS)"})
+            for f in dataset.flight_info]
+    blind = dataclasses.replace(dataset, flight_info=info)
+    notes = unmeasured_notes(blind, ["a_x", "a_y", "p_dot"])
+    assert set(notes) == {"a_x", "a_y"} and "u not measured" in notes["a_x"]
+    model = gpquad.fit(flight, seed=1, iterations=1, input_taps=1, targets=["a_x"])
+    marked = dataclasses.replace(model.discovered, unmeasured=notes)
+    assert "[u not measured" in marked.text() and "u not measured" in marked.markdown()
+    assert r"\text{(u not measured" in marked.latex()
+    assert DiscoveredModel.from_dict(marked.to_dict()).unmeasured == notes
+    assert "not measured" not in model.discovered.text() + model.discovered.markdown()
+    assert "nan" not in marked.markdown().lower()

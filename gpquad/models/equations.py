@@ -188,7 +188,8 @@ class Equation:
 
 
 #: DiscoveredModel's optional reports: each a model.json entry of the same name when not None.
-REPORTS = ("joint_fit", "stability", "envelope", "mirror_parity", "symmetrized", "refined")
+REPORTS = ("joint_fit", "stability", "envelope", "mirror_parity", "symmetrized", "refined",
+           "unmeasured")
 
 
 @dataclass
@@ -214,6 +215,8 @@ class DiscoveredModel:
     symmetrized: dict | None = None
     #: What gpquad.models.refine gave each equation (lag, terms), or None (not asked).
     refined: dict | None = None
+    #: {target: note} of equations whose state the data does not measure, or None.
+    unmeasured: dict | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -267,17 +270,25 @@ class DiscoveredModel:
 
         return sympy_equations(self, raw).equations
 
+    def note(self, target: str) -> str:
+        """Why a target's equation is not to be trusted ('' if nothing is known against it)."""
+        return (self.unmeasured or {}).get(target, "")
+
     def latex(self, raw: bool = False) -> str:
-        rows = [self.equations[t].latex(raw=raw) for t in TARGET_NAMES if t in self.equations]
+        rows = [self.equations[t].latex(raw=raw) + (
+            f" && \\text{{({self.note(t)})}}" if self.note(t) else "")
+            for t in TARGET_NAMES if t in self.equations]
         return "\\begin{align}\n" + " \\\\\n".join(r.replace(" = ", " &= ", 1) for r in rows) + \
             "\n\\end{align}\n"
 
     def markdown(self) -> str:
-        lines = ["| target | equation | train error | validation error |", "|---|---|---|---|"]
+        lines = ["| target | equation | train error | validation error | note |",
+                 "|---|---|---|---|---|"]
         for t in TARGET_NAMES:
             if t in self.equations:
                 e = self.equations[t]
-                lines.append(f"| {t} | ${e.latex()}$ | {e.error:.4g} | {e.validation_error:.4g} |")
+                lines.append(f"| {t} | ${e.latex()}$ | {_shown(e.error)} | "
+                             f"{_shown(e.validation_error)} | {self.note(t)} |")
         return "\n".join(lines) + "\n"
 
     def __str__(self) -> str:
@@ -285,8 +296,9 @@ class DiscoveredModel:
 
     def text(self, raw: bool = False) -> str:
         """The equations, one per line (raw=True: in the untrimmed inputs)."""
-        return "\n".join(self.equations[t].text(raw=raw) for t in TARGET_NAMES
-                         if t in self.equations)
+        return "\n".join(self.equations[t].text(raw=raw)
+                         + (f"   [{self.note(t)}]" if self.note(t) else "")
+                         for t in TARGET_NAMES if t in self.equations)
 
     def fly_states(self, inputs, initial_state=None, raw_inputs: bool = True) -> np.ndarray:
         """The flown states of `fly`: shape (N, 9), [phi, theta, psi, u, v, w, p, q, r]
@@ -387,6 +399,11 @@ def _rotate(quat, body_vector) -> np.ndarray:
     mat = np.empty((3, 3))
     rotation_matrix(*quat, mat)
     return mat @ body_vector
+
+
+def _shown(x: float) -> str:
+    """An error for a table: '-' where there is none (no validation data, diverged)."""
+    return f"{x:.4g}" if np.isfinite(x) else "-"
 
 
 def _json_number(x: float):

@@ -100,10 +100,18 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
     return equations, timings
 
 
+def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
+    """{target: note} for the targets whose integrated state the data does not measure."""
+    notes = {t: f"{TARGET_STATE[t]} not measured by the log: fitted to its placeholder values"
+             for t in targets if dataset.unmeasured(TARGET_STATE[t])}
+    return notes or None
+
+
 def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> DiscoveredModel:
     """The unfinished model of `equations` with what is needed to reproduce and fly it."""
     return DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                           cfg.to_dict(), envelope=training_envelope(dataset))
+                           cfg.to_dict(), envelope=training_envelope(dataset),
+                           unmeasured=unmeasured_notes(dataset, equations))
 
 
 def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
