@@ -245,7 +245,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     for register in _extensions():
         register(sub)
+    _add_examples(parser, [])
     return parser
+
+
+def _add_examples(parser: argparse.ArgumentParser, path: list[str]) -> None:
+    """Every (sub)command's --help ends with its examples (gpquad.cli.examples)."""
+    from gpquad.cli.examples import EXAMPLES
+
+    for action in parser._actions:
+        if not isinstance(action, argparse._SubParsersAction):
+            continue
+        for name, child in action.choices.items():
+            key = " ".join(path + [name])
+            if not child.epilog and key in EXAMPLES:
+                child.epilog = "examples:\n" + "\n".join(f"  {e}" for e in EXAMPLES[key])
+                child.formatter_class = argparse.RawDescriptionHelpFormatter
+            _add_examples(child, path + [name])
 
 
 def _extensions():

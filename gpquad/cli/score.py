@@ -8,7 +8,8 @@ from gpquad.data.score import PARTS, format_score, score_log
 
 
 def _cmd_score(args) -> int:
-    result = score_log(args.run, args.data, args.horizon_s, args.format, args.part)
+    result = score_log(args.run, args.data, args.horizon_s, args.format, args.part,
+                       check=not args.no_check)
     print(json.dumps(result) if args.json else format_score(result))
     return 0
 
@@ -25,6 +26,8 @@ def register(subparsers) -> None:
                    help="all windows, or the held-out part (auto: the held-out part of a log "
                         "the run trained on, else all)")
     p.add_argument("--json", action="store_true", help="one JSON object")
+    p.add_argument("--no-check", action="store_true",
+                   help="score segments that fail the integration check too")
     p.set_defaults(func=_cmd_score)
 
 

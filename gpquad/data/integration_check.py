@@ -226,13 +226,15 @@ def diagnose_rates(flights: list[Flight], failing: list[int]) -> str:
 
 
 def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: float = 0.05,
-                    source: str = "", field: str = "data.check_max_rse"
+                    source: str = "", field: str = "data.check_max_rse",
+                    skip_hint: str = "set data.check_before_run = false"
                     ) -> tuple[list[Flight], list[str], CheckResult]:
     """Check every segment on its own; drop those that fail, keep the rest.
 
     Returns (kept flights, one warning per dropped segment naming its time span and the
     failing states, the pooled check of the kept ones). Raises GpquadError (naming `field`)
-    when no segment passes, with the reason of the longest one.
+    when no segment passes, with the reason of the longest one and `skip_hint` (how the
+    calling command skips the check).
     """
     kept, dropped, results = [], [], []
     for f in flights:
@@ -247,7 +249,7 @@ def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: f
         _, worst, result = max(results, key=lambda r: r[0])
         where = f" (every segment fails; longest {worst.name})" if len(flights) > 1 else ""
         raise GpquadError(f"{result.failure()}{where}; run `gpquad data check` for the table, or "
-                          "set data.check_before_run = false", source=source, field=field)
+                          f"{skip_hint}", source=source, field=field)
     check = integration_check(kept, window_steps, threshold)
     check.notes.extend(dropped)
     return kept, dropped, check

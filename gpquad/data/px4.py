@@ -113,7 +113,10 @@ def read_px4_folder(path) -> Topics:
     """Topic tables from a folder of `<log>_<topic>_<instance>.csv` files (ulog2csv)."""
     path = Path(path)
     if not path.is_dir():
-        raise GpquadError("not a folder of ulog2csv topic CSVs (format px4-csv)", source=str(path))
+        if not path.exists():
+            raise GpquadError("no such file or folder", source=str(path))
+        raise GpquadError("not a folder of ulog2csv topic CSVs (format px4-csv); give the "
+                          "folder ulog2csv wrote, or a .ulg file", source=str(path))
     files = sorted(path.glob("*.csv"))
     if not files:
         raise GpquadError("no topic CSVs in the folder", source=str(path))

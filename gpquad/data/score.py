@@ -41,7 +41,7 @@ def _part(cfg, path: Path, part: str) -> str:
 
 
 def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
-              part: str = "auto") -> dict:
+              part: str = "auto", check: bool = True) -> dict:
     """RSE per state, window counts and what was scored (see the module docstring)."""
     from gpquad.data.dataset import build_dataset
     from gpquad.data.integration_check import screen_segments
@@ -75,9 +75,10 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
     flights = READERS[fmt](path, data)
     dropped: list[str] = []
-    if data.check_before_run:
+    if data.check_before_run and check:
         flights, dropped, _ = screen_segments(flights, data.check_steps, data.check_max_rse,
-                                              source=str(log))
+                                              source=str(log), field="--data",
+                                              skip_hint="give --no-check to score it anyway")
     dataset = build_dataset(flights, validation_fraction=data.validation_fraction,
                             held_out=None if which == "validation" else [True] * len(flights))
     if tuple(run.model.input_names) != tuple(dataset.input_names):
