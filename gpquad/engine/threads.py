@@ -6,7 +6,7 @@ OpenBLAS may sum in another order on another number of threads. joblib's workers
 cpu_count // n_jobs threads, a process with --jobs 1 on all cores: the same seed could give
 other bits with another --jobs. On one thread the result is the same either way, and faster
 here (the pivoted QR of a 5000 x 10 Jacobian: 2.2 ms on one thread, 9.9 ms on two with the
-other core busy; 2-core machine, 2026-11-25).
+other core busy, on a 2-core machine).
 """
 
 from __future__ import annotations
