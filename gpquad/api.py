@@ -129,7 +129,7 @@ def _flights_and_config(data, cfg: Config):
 
 
 def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: bool = False,
-        **overrides) -> Model:
+        jobs: int | None = None, **overrides) -> Model:
     """Discover one equation per body-frame acceleration from flight data.
 
     Parameters
@@ -150,6 +150,10 @@ def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: b
         Write a run folder there (as `gpquad run` does); default: write nothing.
     progress : bool
         Print a progress line per iteration and step.
+    jobs : int, optional
+        Processes for the equations' searches (default: one per core, at most one per
+        target); the equations are the same for any value. A fit into a `run_dir` searches
+        in this process (its history and checkpoints are written as it goes).
     **overrides
         Config fields by name, in [evolution], [data] or [vehicle]: ``targets=["p_dot"]``,
         ``iterations=2``, ``input_taps=1``, ``trim="mean"``, ``inputs=[...]``.
@@ -165,7 +169,7 @@ def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: b
         Bad data or settings, in one line naming the field, before any long work.
     """
     from gpquad.data.io import dataset_of, load_dataset
-    from gpquad.study.fit import fit_dataset, warn_unmeasured
+    from gpquad.study.fit import default_jobs, fit_dataset, warn_unmeasured
     from gpquad.study.runner import run_experiment
     from gpquad.study.search import Progress
 
@@ -177,7 +181,10 @@ def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: b
     else:
         warn_unmeasured(dataset, cfg.evolution.targets)
         ev = cfg.evolution
-        found = fit_dataset(dataset, cfg, Progress(progress, ev.iterations * len(ev.targets)))
+        if jobs is not None and jobs < 1:
+            raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
+        found = fit_dataset(dataset, cfg, Progress(progress, ev.iterations * len(ev.targets)),
+                            jobs=default_jobs(len(ev.targets)) if jobs is None else jobs)
     return Model(found, cfg)
 
 

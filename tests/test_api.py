@@ -209,3 +209,12 @@ def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
     assert DiscoveredModel.from_dict(marked.to_dict()).unmeasured == notes
     assert "not measured" not in model.discovered.text() + model.discovered.markdown()
     assert "nan" not in marked.markdown().lower()
+
+
+def test_parallel_searches_give_the_same_equations(flight):
+    """jobs = 1 and jobs = 2 (two worker processes) give the same bits; jobs = 0 is refused."""
+    one = gpquad.fit(flight, seed=3, jobs=1, **FAST)
+    two = gpquad.fit(flight, seed=3, jobs=2, **FAST)
+    assert one.discovered.to_dict()["targets"] == two.discovered.to_dict()["targets"]
+    with pytest.raises(gpquad.GpquadError, match="jobs"):
+        gpquad.fit(flight, jobs=0, **FAST)

@@ -54,12 +54,13 @@ def recovery_gpquad(model, scenario) -> dict | None:
     return out
 
 
-def _fit(method: str, scenario, seed: int, engine):
+def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
     """(simulate(starts, steps) on the test data, fit time, record) of a fitted method;
     a scenario with groups is fitted per group, and each window flies its group's model."""
     if not scenario.groups:
-        return _fit_one(method, scenario, seed, engine)
-    fitted = {g: _fit_one(method, sub, seed, engine) for g, sub in scenario.groups.items()}
+        return _fit_one(method, scenario, seed, engine, fit_jobs)
+    fitted = {g: _fit_one(method, sub, seed, engine, fit_jobs)
+              for g, sub in scenario.groups.items()}
     offsets = scenario.group_offsets()
 
     def simulate(starts, steps):
@@ -80,14 +81,14 @@ def _fit(method: str, scenario, seed: int, engine):
     return simulate, sum(f[1] for f in fitted.values()), record
 
 
-def _fit_one(method: str, scenario, seed: int, engine):
+def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
     test = scenario.test
     if method == "gpquad":
         from gpquad.benchmark.engine import engine_config, fit_gpquad
 
         cfg = engine_config(seed, engine)
         t0 = time.perf_counter()
-        model = fit_gpquad(scenario.fit, cfg)
+        model = fit_gpquad(scenario.fit, cfg, fit_jobs)
         fit_time = time.perf_counter() - t0
         record = {"equations": {t: e.text() for t, e in model.equations.items()},
                   "equations_raw_inputs": {t: e.text(raw=True)
@@ -105,11 +106,11 @@ def _fit_one(method: str, scenario, seed: int, engine):
 
 
 def run_cell(scenario, method: str, seed: int, out: Path, engine,
-             horizons_s, fingerprint: str | None = None) -> dict:
+             horizons_s, fingerprint: str | None = None, fit_jobs: int = 1) -> dict:
     """Fit, fly and score one cell and save it atomically; returns the cell record."""
     cpu0 = time.process_time()
     with PeakRss() as memory:
-        simulate, fit_time, record = _fit(method, scenario, seed, engine)
+        simulate, fit_time, record = _fit(method, scenario, seed, engine, fit_jobs)
         t0 = time.perf_counter()
         metrics = evaluate.score(simulate, scenario.test, scenario.measured, horizons_s)
         trace = evaluate.figure_trace(simulate, scenario.test)

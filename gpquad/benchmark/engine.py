@@ -31,8 +31,9 @@ def load_engine(path=None) -> tuple[Config, str]:
     return load_config(path, quiet=True), str(path)
 
 
-def fit_gpquad(dataset, cfg: Config):
-    """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel."""
+def fit_gpquad(dataset, cfg: Config, jobs: int = 1):
+    """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel
+    (the searches in `jobs` processes; the same equations for any value)."""
     from gpquad.study.fit import fit_dataset
 
-    return fit_dataset(dataset, cfg)
+    return fit_dataset(dataset, cfg, jobs=jobs)

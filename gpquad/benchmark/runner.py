@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -152,8 +153,10 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         order = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
         missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
+        # the cores a cell's gpquad fit may use for its six searches (same equations)
+        fit_jobs = max(1, (os.cpu_count() or 1) // jobs)
         for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_cfg, horizons_s,
-                                                     fingerprints[sc.name][m])
+                                                     fingerprints[sc.name][m], fit_jobs)
                              for sc, m, s in missing):
             h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")
                       is not None), None)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -107,6 +108,38 @@ def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
     return notes or None
 
 
+def _identify_one(dataset: Dataset, target: str, cfg: Config) -> tuple[str, Equation, float]:
+    t0 = time.perf_counter()
+    equation, _ = identify(dataset, target, cfg)
+    return target, equation, time.perf_counter() - t0
+
+
+def search_in_parallel(dataset: Dataset, cfg: Config, report: Progress, jobs: int
+                       ) -> tuple[dict[str, Equation], dict[str, float]]:
+    """Every target's equation, the targets searched in `jobs` worker processes: each search
+    is seeded by its target alone and runs BLAS on one thread, so the equations are the
+    same bits for any `jobs` (no history or checkpoint is written)."""
+    from joblib import Parallel, delayed
+
+    ev = cfg.evolution
+    found: dict[str, Equation] = {}
+    timings: dict[str, float] = {}
+    report.say(f"gpquad: searching {len(ev.targets)} equations in {jobs} processes ...")
+    with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as parallel:
+        for target, equation, seconds in parallel(
+                delayed(_identify_one)(dataset, t, cfg) for t in ev.targets):
+            found[target], timings[target] = equation, seconds
+            report.done += ev.iterations
+            report.say(f"  -> {equation.text()}  (validation error "
+                       f"{equation.validation_error:.4g}; {seconds:.1f} s)")
+    return {t: found[t] for t in ev.targets}, timings
+
+
+def default_jobs(n_targets: int) -> int:
+    """Processes for the searches: one per core, at most one per target."""
+    return max(1, min(os.cpu_count() or 1, n_targets))
+
+
 def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> DiscoveredModel:
     """The unfinished model of `equations` with what is needed to reproduce and fly it."""
     return DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
@@ -134,8 +167,13 @@ def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
 
 
 def fit_dataset(dataset: Dataset, cfg: Config, report: Progress | None = None,
-                run_dir: Path | None = None, resuming: bool = False) -> DiscoveredModel:
-    """Search every configured target and finish the model (module notes)."""
+                run_dir: Path | None = None, resuming: bool = False,
+                jobs: int = 1) -> DiscoveredModel:
+    """Search every configured target and finish the model (module notes). Without a run
+    folder the searches may run in `jobs` processes (the same equations for any value)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
-    equations, _ = search_equations(dataset, cfg, report, run_dir, resuming)
+    if run_dir is None and jobs > 1 and len(cfg.evolution.targets) > 1:
+        equations, _ = search_in_parallel(dataset, cfg, report, jobs)
+    else:
+        equations, _ = search_equations(dataset, cfg, report, run_dir, resuming)
     return finish(new_model(equations, dataset, cfg), dataset, cfg, report)
