@@ -115,3 +115,14 @@ def window_error(tree, target, arrays, start, n_steps, squared=False, att_weight
             d = att_weight * (np.mod(d + np.pi, 2 * np.pi) - np.pi)
             total += d * d if squared else abs(d)
     return total / n_steps
+
+
+def evaluate_on_table(tree, table: np.ndarray) -> np.ndarray:
+    """The kernel's value of `tree` on the rows 5.. of a (N, 9 + inputs) table of states
+    and inputs (the kernel under test, fed from a plain table)."""
+    from gpquad.engine.kernels.tree_eval import eval_on_samples
+
+    samples = np.arange(5, len(table), dtype=np.int64)
+    return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
+                           np.ascontiguousarray(table[:, :9]),
+                           np.ascontiguousarray(table[:, 9:]), samples)

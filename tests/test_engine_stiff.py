@@ -20,13 +20,12 @@ from gpquad.engine.evolve.gradient_fit import continued_constants, gauss_newton_
 from gpquad.engine.evolve.linear_seed import coefficients_of, linear_tree
 from gpquad.engine.evolve.term_search import term_candidates, with_term_coefficients
 from gpquad.engine.evolve.windows import spread, tile
-from gpquad.engine.kernels.tree_eval import eval_on_samples
-from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import random_tree
 from gpquad.errors import GpquadError
 from gpquad.study.config import Config, preset_evolution, validate
+from naive import evaluate_on_table
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 STIFF = "544.0*(u_R - phi) - 46.6*p"
@@ -115,17 +114,6 @@ def test_linear_tree_round_trips_its_coefficients():
     assert tree.depth == 3  # 4 summands need two levels of + (root depth 0)
 
 
-def _evaluate(tree: Tree, table: np.ndarray) -> np.ndarray:
-    samples = np.arange(5, len(table), dtype=np.int64)
-    return eval_on_samples(
-        tree.codes,
-        tree.values,
-        tree.size,
-        tree.delays,
-        np.ascontiguousarray(table[:, :9]),
-        np.ascontiguousarray(table[:, 9:]),
-        samples,
-    )
 
 
 @settings(max_examples=60, deadline=None)
@@ -139,7 +127,7 @@ def test_one_gain_per_term_is_the_same_function(seed):
     tree = random_tree(RandomStream(rng), variation_params(co_cfg, 4))
     table = rng.normal(size=(40, 13))
     regrouped = with_term_coefficients(tree)
-    a, b = _evaluate(tree, table), _evaluate(regrouped, table)
+    a, b = evaluate_on_table(tree, table), evaluate_on_table(regrouped, table)
     finite = np.isfinite(a) & (np.abs(a) < 1e8)
     assert np.allclose(a[finite], b[finite], rtol=1e-9, atol=1e-9)
 

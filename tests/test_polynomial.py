@@ -8,7 +8,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gpquad.engine.evolve.coevolution import variation_params
-from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.export import from_sympy, parse_equation, to_sympy
 from gpquad.engine.tree.operators import DIV, VAR_BASE
@@ -17,6 +16,7 @@ from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import random_tree
 from gpquad.engine.variables import terminal_names
 from gpquad.study.config import preset_evolution
+from naive import evaluate_on_table
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
@@ -31,17 +31,6 @@ def _as_tree(poly, delays):
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
 
 
-def _evaluate(tree, table):
-    samples = np.arange(5, len(table), dtype=np.int64)
-    return eval_on_samples(
-        tree.codes,
-        tree.values,
-        tree.size,
-        tree.delays,
-        np.ascontiguousarray(table[:, :9]),
-        np.ascontiguousarray(table[:, 9:]),
-        samples,
-    )
 
 
 def test_a_product_of_sums_becomes_its_monomials():
@@ -100,6 +89,6 @@ def test_the_expansion_is_the_same_function(seed):
         assert DIV in tree.codes.tolist() or len(sp.Add.make_args(expr)) > MAX_MONOMIALS
         return
     table = rng.normal(size=(40, 13))
-    a, b = _evaluate(tree, table), _evaluate(_as_tree(poly, tree.delays), table)
+    a, b = evaluate_on_table(tree, table), evaluate_on_table(_as_tree(poly, tree.delays), table)
     scale = np.maximum(np.abs(a), 1.0)
     assert np.all(np.abs(a - b) <= 1e-9 * scale * max(1.0, max(map(abs, poly.values()))))
