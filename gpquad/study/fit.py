@@ -147,13 +147,38 @@ def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> 
                            unmeasured=unmeasured_notes(dataset, equations))
 
 
+class StepClock:
+    """Wall time of each finishing step (the time between one step's start and the next)."""
+
+    def __init__(self, say):
+        self.say = say
+        self.seconds: dict[str, float] = {}
+        self._current: tuple[str, float] | None = None
+
+    def start(self, name: str) -> None:
+        self.stop()
+        self.say(f"gpquad: {FINISH_WORDS[name]} ...")
+        self._current = (name, time.perf_counter())
+
+    def stop(self) -> None:
+        if self._current is not None:
+            name, t0 = self._current
+            self.seconds[name] = time.perf_counter() - t0
+            self._current = None
+
+
 def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
-           report: Progress | None = None) -> DiscoveredModel:
+           report: Progress | None = None,
+           seconds: dict[str, float] | None = None) -> DiscoveredModel:
     """The finished model (cfg.evolution.finish), each step's summary line reported, and
-    its terms of the wrong left-right parity when the vehicle is symmetric."""
+    its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
+    given, receives each step's wall time."""
     say = (lambda text: None) if report is None else report.say
-    model = finish_model(model, dataset, cfg.evolution, cfg.vehicle,
-                         on_step=lambda name: say(f"gpquad: {FINISH_WORDS[name]} ..."))
+    clock = StepClock(say)
+    model = finish_model(model, dataset, cfg.evolution, cfg.vehicle, on_step=clock.start)
+    clock.stop()
+    if seconds is not None:
+        seconds.update(clock.seconds)
     for name, summary in (("symmetrized", symmetrized_summary), ("refined", refined_summary),
                           ("stability", stability_summary), ("joint_fit", joint_fit_summary)):
         if getattr(model, name) is not None:

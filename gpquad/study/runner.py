@@ -58,9 +58,11 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
     show = cfg.output.progress if progress is None else progress
     started = time.time()
     report = Progress(show, cfg.evolution.iterations * len(cfg.evolution.targets))
+    t_load = time.perf_counter()
     if dataset is None:
         report.say("gpquad: loading the flight data ...")
         dataset = load_dataset(cfg)
+    load_seconds = time.perf_counter() - t_load
     resuming = _same_config(run_dir, cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     info = {"seed": cfg.seed, "config": cfg.to_dict(), "dataset": dataset.summary(),
@@ -80,9 +82,20 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
         print(f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
               "command with the same --out resumes", file=sys.stderr)
         raise
-    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report)
+    finish_seconds: dict[str, float] = {}
+    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds)
     write_model(run_dir, model)
-    info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=time.time() - started,
-                target_time_s=timings)
+    wall = time.time() - started
+    info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=wall,
+                load_time_s=load_seconds, target_time_s=timings, finish_time_s=finish_seconds)
     write_json(run_dir / "run.json", info)
+    report.say(time_profile(wall, load_seconds, timings, finish_seconds))
     return model
+
+
+def time_profile(wall: float, load: float, searches: dict[str, float],
+                 finishing: dict[str, float]) -> str:
+    """One line: where a run's wall time went (run.json keeps the numbers)."""
+    parts = [f"loading {load:.1f}"] + [f"{t} {s:.1f}" for t, s in searches.items()] + \
+        [f"{name} {s:.1f}" for name, s in finishing.items()]
+    return f"time: {wall:.1f} s in all; " + ", ".join(parts) + " (s)"
