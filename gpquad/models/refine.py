@@ -235,6 +235,10 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     def gain(err: float) -> float:  # the least improvement that counts
         return min_gain * max(err, NEGLIGIBLE * zero_error)
 
+    if found_error < gain(found_error):  # no error below 0 would count: nothing to try
+        return equation, {"lag": 0.0, "added": [], "error_before": found_error,
+                          "error_after": found_error, "validation_before": path[0].validation,
+                          "validation_after": path[0].validation, "tried": 0}
     tau, expr, error = choose_lag(problem, found, found_error, gain(found_error))
     if tau > 0:
         path.append(Step(tau, expr, error,
