@@ -78,7 +78,8 @@ class RefineProblem:
         tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
         self.ev = Evaluator(tapped, equation.target, cfg.window_steps, cfg.metric,
-                            cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
+                            cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents,
+                            integrator=cfg.integrator, substeps=cfg.substeps)
         self.starts, self.steps = tile(dataset.train, cfg.window_steps, cfg.max_delay)
         self.short = [(spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h),
                        h) for h in SEED_HORIZONS]

@@ -47,7 +47,8 @@ def refit(equation, tree, dataset, evolution):
     taps = taps_of(len(tree.delays), len(equation.input_names))
     cfg = evolution.for_target(equation.target)  # the search's evaluator for this target
     ev = Evaluator(with_taps(dataset, taps), equation.target, cfg.window_steps, cfg.metric,
-                   cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents)
+                   cfg.max_depth, cfg.attitude_weight, cfg.angle_tangents,
+                   integrator=cfg.integrator, substeps=cfg.substeps)
     starts, steps = tile(dataset.train, evolution.window_steps, evolution.max_delay)
 
     def error_of(t) -> float:

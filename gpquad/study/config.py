@@ -210,6 +210,9 @@ class EvolutionConfig:
     # one only if it flies the validation windows better (gpquad.models.refine). One
     # number, or a table per target, e.g. {r_dot = 16}; 0 = off (sixteenth round, README).
     refine_terms: int | dict[str, int] = 0
+    # the scheme that flies the windows (gpquad.engine.kernels.step): euler (eq. 2) | rk4
+    integrator: str = "euler"
+    substeps: int = 1  # rk4 steps per sample (euler: 1)
 
     def taps_for(self, target: str) -> int:
         """Taps per input of `target`'s equation."""

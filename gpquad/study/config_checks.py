@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from gpquad.engine.kernels.step import SCHEMES
 from gpquad.engine.taps import MAX_TAPS
 from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
@@ -99,6 +100,12 @@ def validate(cfg: Config, source: str = "config") -> Config:
         raise GpquadError('the refined equations are fitted by Levenberg-Marquardt: set '
                           'constant_fit = "gauss-newton"', source=source,
                           field="evolution.refine_terms")
+    if ev.integrator not in SCHEMES:
+        raise GpquadError(f"choose one of {sorted(SCHEMES)}", source=source,
+                          field="evolution.integrator")
+    if not 1 <= ev.substeps <= (1 if ev.integrator == "euler" else 64):
+        raise GpquadError("must be 1 for euler, 1 to 64 for rk4", source=source,
+                          field="evolution.substeps")
     if any(not 1 <= h < ev.window_steps for h in ev.fit_horizons) or \
             list(ev.fit_horizons) != sorted(set(ev.fit_horizons)):
         raise GpquadError(f"give ascending step counts between 1 and window_steps - 1 "

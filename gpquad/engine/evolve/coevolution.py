@@ -104,7 +104,8 @@ class Coevolution:
                                        measured_variables(dataset, cfg.exclude_leaves,
                                                           cfg.keep_tracked))
         self.evaluator = Evaluator(dataset, target, cfg.window_steps, cfg.metric, cfg.max_depth,
-                                   cfg.attitude_weight, cfg.angle_tangents)
+                                   cfg.attitude_weight, cfg.angle_tangents,
+                                   integrator=cfg.integrator, substeps=cfg.substeps)
         self.space = WindowSpace(dataset.train, cfg.window_steps, cfg.max_delay)
         self.short_windows = self.windows_for(cfg.fit_horizons)
         # the growing horizon of the seed and of the gain refits (fit_horizons' if set)
@@ -347,7 +348,8 @@ class Coevolution:
         (gpquad.engine.evolve.selection)."""
         cfg = self.cfg
         ev_mse = Evaluator(self.dataset, self.target, cfg.window_steps, "mse", cfg.max_depth,
-                           cfg.attitude_weight, cfg.angle_tangents)
+                           cfg.attitude_weight, cfg.angle_tangents,
+                           integrator=cfg.integrator, substeps=cfg.substeps)
         starts, steps = tile(self.dataset.train, cfg.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
         fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
