@@ -44,7 +44,7 @@ from gpquad.engine.tree.operators import VAR_BASE
 LAG = BODY_ROWS
 
 
-@njit
+@njit(inline="always")
 def stage_features(ys, lane, used, features):
     """The state leaves the tree reads (used (9 + n_in,) bool) at stage state ys[:, lane]."""
     q0, q1, q2, q3 = ys[Q, lane], ys[Q + 1, lane], ys[Q + 2, lane], ys[Q + 3, lane]

@@ -59,6 +59,7 @@ NODES = np.array([0.0, 0.5, 0.5, 1.0])
 WEIGHTS = np.array([1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0])
 
 #: Rows of the stage arrays: attitude, body velocity, body rates, world position.
+#: The step functions are inline="always": a call per lane and stage costs more than its work.
 Q, V, W, X = 0, 4, 7, 10
 BODY_ROWS = 10  # q, V, omega
 PLANT_ROWS = 13  # q, V, omega, x
@@ -203,7 +204,7 @@ def euler_kinematics(axis, phi, theta, q, r, column, jang):
 # rk4: classical Runge-Kutta on the continuous-time ODE
 
 
-@njit
+@njit(inline="always")
 def stage_state(y, k, node, h, out, lane, n_rows):
     """out[:n_rows, lane] = y + node h k (the stage's state; node 0 copies y)."""
     if node == 0.0:
@@ -215,7 +216,7 @@ def stage_state(y, k, node, h, out, lane, n_rows):
             out[i, lane] = y[i, lane] + step * k[i, lane]
 
 
-@njit
+@njit(inline="always")
 def body_stage_state(y, k, node, h, out, lane, n_rows):
     """stage_state of a body state, its attitude rows normalised: the ODE keeps |q| = 1, and
     the Euler angles and R(q) that the stage's equations read assume it (a stage state
@@ -228,7 +229,7 @@ def body_stage_state(y, k, node, h, out, lane, n_rows):
             out[Q + i, lane] *= scale
 
 
-@njit
+@njit(inline="always")
 def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
     """k[:, lane] = d/dt of the rigid body at state y[:, lane] (rows Q, V, W and X when
     with_pos) under body accelerations (a0, a1, a2) and angular ones (a3, a4, a5)."""
@@ -254,7 +255,7 @@ def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
                           + (1.0 - 2.0 * (q1 * q1 + q2 * q2)) * w)
 
 
-@njit
+@njit(inline="always")
 def accumulate(total, k, weight, stage, lane, n_rows):
     """total += weight k over the first n_rows rows (stage 0 overwrites)."""
     if stage == 0:
@@ -265,14 +266,14 @@ def accumulate(total, k, weight, stage, lane, n_rows):
             total[i, lane] += weight * k[i, lane]
 
 
-@njit
+@njit(inline="always")
 def advance(y, total, h, lane, n_rows):
     """y[:n_rows, lane] += h total (a step of rows without an attitude, e.g. tangents)."""
     for i in range(n_rows):
         y[i, lane] += h * total[i, lane]
 
 
-@njit
+@njit(inline="always")
 def finish_step(y, total, h, lane, n_rows):
     """y += h total, then renormalise the attitude rows."""
     advance(y, total, h, lane, n_rows)
