@@ -99,6 +99,15 @@ def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, 
         if codes[i] >= VAR_BASE:
             used[codes[i] - VAR_BASE] = True
     uses_state = uses_leaves(codes, size, 0, 8)
+    # rows flown: the attitude only where the tree reads an angle or the angle is scored,
+    # the velocity only for linear targets or a tree that reads it (the rates always)
+    if uses_leaves(codes, size, 0, 2) or att_err:
+        first = Q
+    elif linear or uses_leaves(codes, size, 3, 5):
+        first = V
+    else:
+        first = W
+    ys[:, :] = y
 
     for k in range(n_steps):
         for lane in range(n):  # inputs held over the sample
@@ -110,7 +119,7 @@ def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, 
             for stage in range(N_STAGES):
                 for lane in range(n):
                     if alive[lane]:
-                        body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows)
+                        body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows, first)
                         if uses_state:
                             stage_features(ys, lane, used, features)
                 eval_lanes(codes, values, size, features, stack, pred, n)
@@ -135,10 +144,10 @@ def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, 
                         a5 = f
                     body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
                     slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
-                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows)
+                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows, first)
             for lane in range(n):
                 if alive[lane]:
-                    finish_step(y, total, h, lane, n_rows)
+                    finish_step(y, total, h, lane, n_rows, first)
 
         step_total = 0.0
         for lane in range(n):

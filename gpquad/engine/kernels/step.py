@@ -32,7 +32,9 @@ then X (3) where a kernel flies the position and lag rows after that. Stage s of
 y + NODES[s] h k_{s-1} with its quaternion normalised (body_stage_state; tangent rows use
 stage_state), its derivative k_s is accumulated with WEIGHTS[s] (accumulate) and the step
 ends with y + h sum (finish_step). A kernel loops `for s in range(N_STAGES)`, evaluating its
-equations at the stage state between body_stage_state and accumulate.
+equations at the stage state between body_stage_state and accumulate. `first` (default Q):
+rows before it are neither stepped nor read (a kernel whose equations never read the attitude,
+or the velocity either, starts at V or W and saves their cost).
 """
 
 import math
@@ -205,24 +207,24 @@ def euler_kinematics(axis, phi, theta, q, r, column, jang):
 
 
 @njit(inline="always")
-def stage_state(y, k, node, h, out, lane, n_rows):
+def stage_state(y, k, node, h, out, lane, n_rows, first=0):
     """out[:n_rows, lane] = y + node h k (the stage's state; node 0 copies y)."""
     if node == 0.0:
-        for i in range(n_rows):
+        for i in range(first, n_rows):
             out[i, lane] = y[i, lane]
     else:
         step = node * h
-        for i in range(n_rows):
+        for i in range(first, n_rows):
             out[i, lane] = y[i, lane] + step * k[i, lane]
 
 
 @njit(inline="always")
-def body_stage_state(y, k, node, h, out, lane, n_rows):
+def body_stage_state(y, k, node, h, out, lane, n_rows, first=0):
     """stage_state of a body state, its attitude rows normalised: the ODE keeps |q| = 1, and
     the Euler angles and R(q) that the stage's equations read assume it (a stage state
     y + c h k is off by O(h^2), which would cost the scheme two orders)."""
-    stage_state(y, k, node, h, out, lane, n_rows)
-    if node != 0.0:
+    stage_state(y, k, node, h, out, lane, n_rows, first)
+    if node != 0.0 and first == Q:
         q0, q1, q2, q3 = out[Q, lane], out[Q + 1, lane], out[Q + 2, lane], out[Q + 3, lane]
         scale = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
         for i in range(4):
@@ -256,26 +258,28 @@ def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
 
 
 @njit(inline="always")
-def accumulate(total, k, weight, stage, lane, n_rows):
+def accumulate(total, k, weight, stage, lane, n_rows, first=0):
     """total += weight k over the first n_rows rows (stage 0 overwrites)."""
     if stage == 0:
-        for i in range(n_rows):
+        for i in range(first, n_rows):
             total[i, lane] = weight * k[i, lane]
     else:
-        for i in range(n_rows):
+        for i in range(first, n_rows):
             total[i, lane] += weight * k[i, lane]
 
 
 @njit(inline="always")
-def advance(y, total, h, lane, n_rows):
+def advance(y, total, h, lane, n_rows, first=0):
     """y[:n_rows, lane] += h total (a step of rows without an attitude, e.g. tangents)."""
-    for i in range(n_rows):
+    for i in range(first, n_rows):
         y[i, lane] += h * total[i, lane]
 
 
 @njit(inline="always")
-def finish_step(y, total, h, lane, n_rows):
+def finish_step(y, total, h, lane, n_rows, first=0):
     """y += h total, then renormalise the attitude rows."""
-    advance(y, total, h, lane, n_rows)
+    advance(y, total, h, lane, n_rows, first)
+    if first != Q:
+        return
     y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane] = renormalize(
         y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane])
