@@ -185,25 +185,29 @@ def euler_tree_window_errors(codes, values, size, delays, target, flight, starts
                 vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
                     rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt)
                 x = vel[target, lane]
-            elif need_vel or need_att:
-                a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
-                if target == 3:
-                    a3 = pred[lane]
-                elif target == 4:
-                    a4 = pred[lane]
-                else:
-                    a5 = pred[lane]
-                (quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
-                 vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
-                 rates[2, lane]) = euler_step(
-                    quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
-                    vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane], rates[2, lane],
-                    acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt, need_vel, need_att)
-            else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
-                for i in range(3):
-                    ang = pred[lane] if i == target - 3 else acc[idx, 3 + i]
-                    rates[i, lane] = euler_rate_step(rates[i, lane], ang, dt)
-            if not linear:
+            else:
+                if need_vel or need_att:
+                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
+                    if target == 3:
+                        a3 = pred[lane]
+                    elif target == 4:
+                        a4 = pred[lane]
+                    else:
+                        a5 = pred[lane]
+                    (quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
+                     vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
+                     rates[2, lane]) = euler_step(
+                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
+                        vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
+                        rates[2, lane], acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt,
+                        need_vel, need_att)
+                else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
+                    for i in range(3):
+                        if i == target - 3:
+                            rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
+                        else:
+                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i],
+                                                             dt)
                 x = rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
