@@ -126,3 +126,62 @@ def evaluate_on_table(tree, table: np.ndarray) -> np.ndarray:
     return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
                            np.ascontiguousarray(table[:, :9]),
                            np.ascontiguousarray(table[:, 9:]), samples)
+
+
+def rigid_body_derivative(y, acc):
+    """d/dt of y = [q (4), V (3), omega (3), x (3)] under body accelerations acc (6,):
+    q_dot = q * (0, omega) / 2, V_dot = a - omega x V, omega_dot = alpha, x_dot = R(q) V,
+    at the state with its quaternion normalised (the ODE keeps |q| = 1)."""
+    q, v, w = y[:4] / np.linalg.norm(y[:4]), y[4:7], y[7:10]
+    dq = 0.5 * np.concatenate([[-q[1:] @ w], q[0] * w + np.cross(q[1:], w)])
+    out = [dq, acc[:3] - np.cross(w, v), acc[3:6]]
+    if len(y) >= 13:
+        out.append(rotation(q).apply(v))
+    return np.concatenate(out)
+
+
+def rk4_step(f, y, h):
+    """One classical Runge-Kutta step of y_dot = f(y); the quaternion y[:4] normalised."""
+    k1 = f(y)
+    k2 = f(y + 0.5 * h * k1)
+    k3 = f(y + 0.5 * h * k2)
+    k4 = f(y + h * k3)
+    out = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    out[:4] /= np.linalg.norm(out[:4])
+    return out
+
+
+def rk4_window_error(tree, target, arrays, start, n_steps, substeps, squared=False,
+                     att_weight=0.0, alpha=1.0):
+    """window_error flown by RK4 on the continuous-time ODE: `substeps` steps per sample, the
+    tree at every stage, inputs and the data's other accelerations held over the sample, a
+    lag as the state l with tau l_dot = tree - l (1 / tau = -log(1 - alpha) / dt)."""
+    dt = arrays.dt
+    rate = -np.log1p(-alpha) / dt if alpha < 1.0 else 0.0
+    y = np.concatenate([arrays.quat[start], arrays.states[start, 3:6],
+                        arrays.states[start, 6:9], [arrays.acc[start - 1, target]]])
+    total = 0.0
+    for k in range(n_steps):
+        idx = start + k
+        held = [arrays.inputs[idx - d, j] for j, d in enumerate(tree.delays)]
+
+        def f(state, idx=idx, held=held):
+            leaves = list(euler(state[:4])) + list(state[4:10])
+            value = eval_tree(tree.codes, tree.values, leaves + held)
+            acc = arrays.acc[idx].copy()
+            acc[target] = state[10] if alpha < 1.0 else value
+            lag = rate * (value - state[10]) if alpha < 1.0 else 0.0
+            return np.concatenate([rigid_body_derivative(state[:10], acc), [lag]])
+
+        for _ in range(substeps):
+            y = rk4_step(f, y, dt / substeps)
+        x = y[4 + target]
+        if not abs(x) < 1e6:
+            return np.inf
+        e = x - arrays.states[idx + 1, 3 + target]
+        total += e * e if squared else abs(e)
+        if target >= 3 and att_weight > 0:
+            d = euler(y[:4])[target - 3] - arrays.states[idx + 1, target - 3]
+            d = att_weight * (np.mod(d + np.pi, 2 * np.pi) - np.pi)
+            total += d * d if squared else abs(d)
+    return total / n_steps

@@ -15,6 +15,7 @@ from gpquad.engine.kernels.integrator import (
     rates_from_quaternions,
     world_to_body,
 )
+from gpquad.engine.kernels.step import EULER
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, VAR_BASE
@@ -155,7 +156,7 @@ def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, d
     starts = np.array([10, 400, 900], dtype=np.int64)
     out = np.empty(3)
     tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                       60, squared, att_weight, alpha, np.inf, out)
+                       60, squared, att_weight, alpha, np.inf, out, EULER, 1)
     ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared, att_weight, alpha)
                     for s in starts])
     both_inf = np.isinf(out) & np.isinf(ref)
@@ -227,7 +228,7 @@ def test_rollout_equals_fast_path(short_dataset):
         tree = random_tree(rng, params)
         out = np.empty(2)
         tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                           50, False, 0.0, alpha, np.inf, out)
+                           50, False, 0.0, alpha, np.inf, out, EULER, 1)
         codes = np.full((6, tree.size), CONST, dtype=np.int64)
         values = np.zeros((6, tree.size))
         codes[target], values[target] = tree.codes, tree.values
@@ -237,7 +238,7 @@ def test_rollout_equals_fast_path(short_dataset):
         sizes = np.full(6, tree.size, dtype=np.int64)
         alphas = np.where(modelled, alpha, 1.0)
         states = rollout(codes, values, sizes, delays, modelled, alphas, arrays, starts, 50,
-                         np.zeros((0, 0, 0)))
+                         np.zeros((0, 0, 0)), EULER, 1)
         truth = np.stack([arrays.states[s:s + 51] for s in starts])
         ref = np.abs(states[:, 1:, 3 + target] - truth[:, 1:, 3 + target]).mean(axis=1)
         ok = np.isfinite(out)

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import json
 
-from gpquad.data.score import PARTS, format_score, score_log
+from gpquad.data.score import INTEGRATORS, PARTS, format_score, score_log
 
 
 def _cmd_score(args) -> int:
     result = score_log(args.run, args.data, args.horizon_s, args.format, args.part,
-                       check=not args.no_check)
+                       check=not args.no_check, integrator=args.integrator)
     print(json.dumps(result) if args.json else format_score(result))
     return 0
 
@@ -25,6 +25,9 @@ def register(subparsers) -> None:
     p.add_argument("--part", default="auto", choices=PARTS,
                    help="all windows, or the held-out part (auto: the held-out part of a log "
                         "the run trained on, else all)")
+    p.add_argument("--integrator", default="own", choices=INTEGRATORS,
+                   help="own: the run's scheme; rk4: also the equations flown by RK4 with 8 "
+                        "steps per sample, the continuous-time RSE beside the run's own")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.add_argument("--no-check", action="store_true",
                    help="score segments that fail the integration check too")

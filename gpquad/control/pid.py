@@ -10,6 +10,7 @@ from gpquad.control.config import GAIN_NAMES, PidConfig
 from gpquad.control.courses import PathScore, allotted_steps, score_path
 from gpquad.control.pid_kernel import fly_course
 from gpquad.control.plant import DesignPoint, Plant
+from gpquad.engine.kernels.step import scheme_code
 
 
 @dataclass
@@ -65,7 +66,8 @@ def fly(plant: Plant, controller: Controller, waypoints: np.ndarray, noise: np.n
             plant.codes, plant.values, plant.sizes, plant.delays, plant.alphas, plant.trim,
             plant.dt,
             controller.gains, controller.ctrl(), d.chan, d.scale, d.hover, controller.lo,
-            controller.hi, np.ascontiguousarray(waypoints, float), np.ascontiguousarray(noise), n)
+            controller.hi, np.ascontiguousarray(waypoints, float), np.ascontiguousarray(noise), n,
+            scheme_code(plant.integrator), plant.substeps)
     return Flight(pos, states, inputs, target, int(flown),
                   score_path(pos, target, waypoints, int(flown), n))
 

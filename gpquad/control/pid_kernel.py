@@ -24,6 +24,9 @@ the heading frame (world rotated by -psi) and [u, v, w] the body velocity:
 ctrl (9,) = [g_x, g_y, max_angle, level, waypoint_radius, integral_limit, command_limit, 0, 0].
 alphas (6,): each equation's lag factor (gpquad.engine.lag; 1 = none), from zero acceleration
 at the start (the craft at rest).
+scheme, substeps: the plant's integrator (gpquad.engine.kernels.step): EULER, one eq. 2 step
+per control step, or RK4 with `substeps` steps per control step, the plant's equations at
+every stage, the controller's inputs held over the step and the lags as their ODE.
 """
 
 import math
@@ -33,6 +36,22 @@ import numpy as np
 from gpquad.engine.kernels.fitness import STATE_LIMIT
 from gpquad.engine.kernels.integrator import integrate_step
 from gpquad.engine.kernels.quaternion import euler_from_quat, quat_from_euler
+from gpquad.engine.kernels.step import (
+    N_STAGES,
+    NODES,
+    PLANT_ROWS,
+    RK4,
+    WEIGHTS,
+    Q,
+    V,
+    W,
+    X,
+    accumulate,
+    body_derivative,
+    body_stage_state,
+    finish_step,
+    lag_rate_kernel,
+)
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.numba_config import njit
 
@@ -55,6 +74,39 @@ def plant_accelerations(codes, values, sizes, delays, trim, state, history, row,
             features[9 + s, 0] = history[row - delays[t, s], j] - trim[j]
         eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
         acc[t] = pred[0]
+
+
+@njit
+def plant_rk4_sample(codes, values, sizes, delays, trim, alphas, history, row, y, work, dt,
+                     substeps, acc, features, stack, pred):
+    """Advance the plant over one control step by RK4 with the inputs history[row] held.
+
+    y (PLANT_ROWS + 6, 1): q, V, omega, x (gpquad.engine.kernels.step rows) and the six lag
+    states; work (3, PLANT_ROWS + 6, 1) holds the stage state, slope and weighted sum.
+    """
+    n_rows = PLANT_ROWS + 6
+    ys, slope, total = work[0], work[1], work[2]
+    state = np.empty(9)
+    h = dt / substeps
+    for _ in range(substeps):
+        for stage in range(N_STAGES):
+            body_stage_state(y, slope, NODES[stage], h, ys, 0, n_rows)
+            state[0], state[1], state[2] = euler_from_quat(ys[Q, 0], ys[Q + 1, 0], ys[Q + 2, 0],
+                                                           ys[Q + 3, 0])
+            for i in range(3):
+                state[3 + i] = ys[V + i, 0]
+                state[6 + i] = ys[W + i, 0]
+            plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc,
+                                features, stack, pred)
+            for t in range(6):
+                slope[PLANT_ROWS + t, 0] = 0.0
+                if alphas[t] < 1.0:
+                    lagged = ys[PLANT_ROWS + t, 0]
+                    slope[PLANT_ROWS + t, 0] = lag_rate_kernel(alphas[t], dt) * (acc[t] - lagged)
+                    acc[t] = lagged
+            body_derivative(ys, 0, acc[0], acc[1], acc[2], acc[3], acc[4], acc[5], True, slope)
+            accumulate(total, slope, WEIGHTS[stage], stage, 0, n_rows)
+        finish_step(y, total, h, 0, n_rows)
 
 
 @njit
@@ -95,7 +147,7 @@ def pid_command(gains, ctrl, err, vel, angles, rates, integral, cmd):
 
 @njit
 def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan, scale, hover,
-               lo, hi, waypoints, noise, n_steps):
+               lo, hi, waypoints, noise, n_steps, scheme, substeps):
     """Fly the plant through waypoints (n_wp, 3) NED from rest at the origin, level.
 
     noise (n_steps, n_in) is added to the clipped inputs. Returns pos (n_steps + 1, 3),
@@ -121,6 +173,8 @@ def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan
     mat = np.empty((3, 3))
     acc = np.empty(6)
     applied = np.zeros(6)  # the lagged accelerations
+    y = np.zeros((PLANT_ROWS + 6, 1))  # RK4: q, V, omega, x and the lag states
+    work = np.zeros((3, PLANT_ROWS + 6, 1))
     err = np.empty(3)
     angles = np.empty(3)
     cmd = np.empty(4)
@@ -184,6 +238,18 @@ def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan
             u = min(max(history[row, j], lo[j]), hi[j])
             inputs[k, j] = u
             history[row, j] = u + noise[k, j]
+        if scheme == RK4:
+            for i in range(4):
+                y[Q + i, 0] = quat[i]
+            for i in range(3):
+                y[V + i, 0], y[W + i, 0], y[X + i, 0] = vel[i], rates[i], pos[i]
+            plant_rk4_sample(codes, values, sizes, delays, trim, alphas, history, row, y, work,
+                             dt, substeps, acc, features, stack, pred)
+            for i in range(4):
+                quat[i] = y[Q + i, 0]
+            for i in range(3):
+                vel[i], rates[i], pos[i] = y[V + i, 0], y[W + i, 0], y[X + i, 0]
+            continue
         plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc,
                             features, stack, pred)
         for t in range(6):

@@ -31,7 +31,8 @@ AXIS_TARGET = {"roll": "p_dot", "pitch": "q_dot", "yaw": "r_dot", "thrust": "a_z
 class Plant:
     """codes (6, M), values (6, M), sizes (6,), delays (6, K n_in) for K taps per input,
     trim (n_in,), dt (s); alphas (6,) the equations' lag factors (gpquad.engine.lag; the
-    hover design point does not depend on them: a lag's static gain is 1)."""
+    hover design point does not depend on them: a lag's static gain is 1); integrator and
+    substeps: the scheme that flies it (gpquad.engine.kernels.step)."""
 
     name: str
     input_names: tuple[str, ...]
@@ -42,6 +43,8 @@ class Plant:
     trim: np.ndarray
     dt: float
     alphas: np.ndarray = field(default_factory=lambda: np.ones(6))
+    integrator: str = "euler"
+    substeps: int = 1
 
     def arrays(self) -> tuple:
         return self.codes, self.values, self.sizes, self.delays, self.trim, self.dt
@@ -81,6 +84,7 @@ def model_plant(model, form: str = "simplified") -> Plant:
     plant = plant_from_trees("model", trees, model.input_names, trim, model.dt)
     for t, e in model.equations.items():
         plant.alphas[target_index(t)] = lag_alpha(e.lag, model.dt)
+    plant.integrator, plant.substeps = model.integrator, model.substeps
     return plant
 
 

@@ -9,6 +9,11 @@ run's training range on more than 1 % of the scored samples are listed
 (gpquad.models.envelope). When the run's vehicle is left-right symmetric (`vehicle`), the
 windows are also flown mirrored left-right (gpquad.data.mirror) and their diverged count is
 reported: an equation that holds only on the side of the flights the training log flew.
+
+With integrator "rk4" the same windows are also flown in continuous time, the equations
+integrated by RK4 with FIDELITY_SUBSTEPS steps per sample (gpquad.engine.kernels.step), as a
+reader flies printed ODEs in their own simulator; its RSE is printed beside the run's own
+(the scheme the run was fitted with, model.json's integrator; eq. 2 by default).
 """
 
 from __future__ import annotations
@@ -21,6 +26,10 @@ import numpy as np
 from gpquad.errors import GpquadError
 
 PARTS = ("auto", "all", "validation")
+#: `--integrator`: the run's own scheme only, or also RK4 (continuous-time fidelity).
+INTEGRATORS = ("own", "rk4")
+#: RK4 steps per sample of the continuous-time score.
+FIDELITY_SUBSTEPS = 8
 
 
 def _part(cfg, path: Path, part: str) -> str:
@@ -41,7 +50,7 @@ def _part(cfg, path: Path, part: str) -> str:
 
 
 def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
-              part: str = "auto", check: bool = True) -> dict:
+              part: str = "auto", check: bool = True, integrator: str = "own") -> dict:
     """RSE per state, window counts and what was scored (see the module docstring)."""
     from gpquad.data.dataset import build_dataset
     from gpquad.data.integration_check import screen_segments
@@ -62,6 +71,8 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         raise GpquadError(f"choose one of {list(PARTS)}", field="--part")
     if not horizon_s > 0:
         raise GpquadError("must be > 0", field="--horizon-s")
+    if integrator not in INTEGRATORS:
+        raise GpquadError(f"choose one of {list(INTEGRATORS)}", field="--integrator")
     run = load_run(run_dir)
     cfg = load_folder_config(run_dir)
     path = Path(log).resolve()
@@ -105,13 +116,22 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
 
         rows = np.unique(starts[:, None] + np.arange(steps + 1)[None, :])
         outside = outside_envelope(run.model.envelope, view, rows)
-    scores = {}
-    for s, v in zip(SCORED_STATES, values, strict=True):
-        scores[s] = float("nan") if dataset.unmeasured(s) else float(v)
+    def measured(values):
+        return {s: float("nan") if dataset.unmeasured(s) else float(v)
+                for s, v in zip(SCORED_STATES, values, strict=True)}
+
+    continuous = None
+    if integrator == "rk4":
+        rk4 = dataclasses.replace(run.model, integrator="rk4", substeps=FIDELITY_SUBSTEPS)
+        pred_rk4 = rk4.simulate(view, starts, steps)
+        continuous = {"substeps": FIDELITY_SUBSTEPS, "rse": measured(rse(pred_rk4, truth)),
+                      "diverged": int(diverged(pred_rk4, bound).sum())}
     baselines = reference_scores(run.model, dataset, starts, steps, bound)
     return {"run": str(run_dir), "data": str(log), "format": fmt, "part": which,
             "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
-            "diverged": n_diverged, "rse": scores,
+            "diverged": n_diverged, "rse": measured(values),
+            "integrator": {"scheme": run.model.integrator, "substeps": run.model.substeps},
+            "rk4": continuous,
             "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
             "dropped": dropped, "outside_training": outside, "mirrored": mirrored,
             "baselines": baselines}
@@ -158,8 +178,11 @@ def _cell(v: float) -> str:
 
 def format_score(result: dict) -> str:
     head = f"{'':10}" + "".join(f"{s:>9}" for s in result["rse"])
-    rows = [("model", result["rse"])] + [(n, {s: r[s] for s in result["rse"]})
-                                          for n, r in result.get("baselines", {}).items()]
+    rows = [("model", result["rse"])]
+    if result.get("rk4"):
+        rows.append((f"rk4 x{result['rk4']['substeps']}", result["rk4"]["rse"]))
+    rows += [(n, {s: r[s] for s in result["rse"]})
+             for n, r in result.get("baselines", {}).items()]
     table = [f"{name:10}" + "".join(_cell(v) for v in values.values())
              for name, values in rows]
     lines = [f"score of {result['run']} on {result['data']} ({result['part']} part, "
@@ -169,7 +192,10 @@ def format_score(result: dict) -> str:
              f"{result['diverged']} diverged; - = not measured by the log; ! = RSE above 1, "
              "no better than the data's mean; zero: every acceleration zero"
              + ("; set-point: each rate follows its set-point" if "set-point" in
-                result.get("baselines", {}) else ""),
+                result.get("baselines", {}) else "")
+             + (f"; rk4 x{result['rk4']['substeps']}: the printed equations flown in "
+                f"continuous time ({result['rk4']['diverged']} diverged)"
+                if result.get("rk4") else ""),
              head, *table]
     lines.extend(f"warning: {d}" for d in result["dropped"])
     mirrored = result.get("mirrored")

@@ -7,6 +7,8 @@
 - paths: the same for three fixed 15-node trees, one per kernel path (an angular
   target reading rates and inputs only; one reading an Euler angle and a velocity,
   which integrates attitude and velocity; a linear target);
+- paths_rk4: the same three trees flown by RK4 (gpquad.engine.kernels.step), one step per
+  sample and (rk4x4) four, in window-steps (samples) per second;
 - generation_window_steps_per_s: the real pattern, 14 different random trees x 6 windows;
 - constant_fit_ms: one Levenberg-Marquardt fit of the rates-and-inputs tree's two
   constants through the integrator (gpquad.engine.evolve.gradient_fit, 20 evaluations at
@@ -124,6 +126,11 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     paths = {name: _rate(lambda t=target, tr=tree: evaluators[t].window_errors([tr], starts84),
                          steps84)
              for name, (target, tree) in path_trees(dataset.input_names).items()}
+    rk4 = {(t, m): Evaluator(dataset, t, window, integrator="rk4", substeps=m)
+           for t in TARGET_NAMES for m in (1, 4)}
+    paths_rk4 = {f"{name} rk4x{m}": _rate(
+        lambda t=target, tr=tree, m=m: rk4[t, m].window_errors([tr], starts84), steps84)
+        for name, (target, tree) in path_trees(dataset.input_names).items() for m in (1, 4)}
     mix = random_trees_of_size(rng, co.params, 15, len(TARGET_NAMES))
 
     def all_targets():
@@ -150,6 +157,7 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     return {
         "window_steps_per_s": one_tree,
         "paths": paths,
+        "paths_rk4": paths_rk4,
         "generation_window_steps_per_s": generation,
         "constant_fit_ms": fit_ms,
         "constant_fit_window_steps_per_s": fit_steps_per_s,
@@ -168,6 +176,10 @@ def format_report(result: dict) -> str:
     ]
     for name, rate in result["paths"].items():
         lines.append(f"    path {name:24s} {rate / 1e6:8.1f} M window-steps/s")
+    for name, rate in result.get("paths_rk4", {}).items():
+        base = result["paths"][name.split()[0]]
+        lines.append(f"    path {name:30s} {rate / 1e6:8.2f} M window-steps/s "
+                     f"({base / rate:.1f}x euler's cost per window-step)")
     lines += [
         f"one generation, 14 random trees x 6 windows: "
         f"{result['generation_window_steps_per_s'] / 1e6:8.1f} M window-steps/s per core",

@@ -9,6 +9,8 @@ the same equation in the log's raw inputs (u = u' + trim). `digits`: significant
 every printed form (text, LaTeX), enough for it to stay the model (gpquad.models.precision);
 `prefix` holds the full constants. `lag` (s, only when > 0): the equation's first-order lag,
 tau d(target)/dt + target = expr (gpquad.engine.lag); `expr` is then the commanded value.
+`integrator` and `substeps` (only when the scheme is not "euler"): the scheme the equations
+were fitted with, which simulate and fly use (gpquad.engine.kernels.step).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import sympy as sp
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.flight_arrays import FlightArrays
 from gpquad.engine.kernels.quaternion import quat_from_euler, rotation_matrix
+from gpquad.engine.kernels.step import SCHEMES
 from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.taps import (
     base_input,
@@ -217,6 +220,20 @@ class DiscoveredModel:
     refined: dict | None = None
     #: {target: note} of equations whose state the data does not measure, or None.
     unmeasured: dict | None = None
+    #: The scheme the equations were fitted with and fly with (gpquad.engine.kernels.step);
+    #: None: the config's evolution.integrator / substeps, else "euler" / 1.
+    integrator: str | None = None
+    substeps: int | None = None
+
+    def __post_init__(self):
+        evolution = self.config.get("evolution", {}) if isinstance(self.config, dict) else {}
+        if self.integrator is None:
+            self.integrator = str(evolution.get("integrator", "euler"))
+        if self.substeps is None:
+            self.substeps = int(evolution.get("substeps", 1))
+        if self.integrator not in SCHEMES or self.substeps < 1:  # load() names the file
+            raise ValueError(f"integrator {self.integrator!r} with {self.substeps} substeps: "
+                             f"use one of {sorted(SCHEMES)} and substeps >= 1")
 
     @property
     def n_parameters(self) -> int:
@@ -235,6 +252,9 @@ class DiscoveredModel:
         }
         if self.interrupted:
             out["interrupted"] = True
+        if self.integrator != "euler":
+            out["integrator"] = self.integrator
+            out["substeps"] = self.substeps
         out.update({name: getattr(self, name) for name in REPORTS
                     if getattr(self, name) is not None})
         return out
@@ -246,7 +266,9 @@ class DiscoveredModel:
                for t, e in d["targets"].items()}
         return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
                    d.get("config", {}), bool(d.get("interrupted", False)),
-                   **{name: d.get(name) for name in REPORTS})
+                   **{name: d.get(name) for name in REPORTS},
+                   integrator=str(d.get("integrator", "euler")),
+                   substeps=int(d.get("substeps", 1)))
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:
@@ -391,7 +413,8 @@ class DiscoveredModel:
             alphas[target_index(t)] = lag_alpha(e.lag, arrays.dt)
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
         return rollout(codes, values, sizes, delays, modelled, alphas, arrays,
-                       np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise)
+                       np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise,
+                       SCHEMES[self.integrator], int(self.substeps))
 
 
 def _rotate(quat, body_vector) -> np.ndarray:

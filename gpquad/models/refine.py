@@ -78,7 +78,8 @@ class RefineProblem:
         tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
         window_steps = cfg.window_steps(dataset.dt)
-        self.ev = Evaluator(tapped, equation.target, window_steps, cfg.metric, cfg.max_depth)
+        self.ev = Evaluator(tapped, equation.target, window_steps, cfg.metric, cfg.max_depth,
+                            integrator=cfg.integrator, substeps=cfg.substeps)
         self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
         self.short = [(spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h),
                        h) for h in SEED_HORIZONS]

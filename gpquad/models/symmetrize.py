@@ -48,7 +48,7 @@ def refit(equation, tree, dataset, evolution):
     cfg = evolution.for_target(equation.target)  # the search's evaluator for this target
     window_steps = cfg.window_steps(dataset.dt)
     ev = Evaluator(with_taps(dataset, taps), equation.target, window_steps, cfg.metric,
-                   cfg.max_depth)
+                   cfg.max_depth, integrator=cfg.integrator, substeps=cfg.substeps)
     starts, steps = tile(dataset.train, window_steps, evolution.max_delay)
 
     def error_of(t) -> float:

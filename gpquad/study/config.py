@@ -191,6 +191,11 @@ class EvolutionConfig:
     finish: tuple[str, ...] = FINISH_STEPS
     # Terms the refinement may add: one number, or a table per target (left out: 0).
     refine_terms: int | dict[str, int] = field(default_factory=lambda: _per_rate_target(20))
+    # How the equations are flown in every fit and score: "euler" (eq. 2, one step per
+    # sample, the paper) or "rk4" (the printed ODEs in continuous time, inputs held over a
+    # sample; gpquad.engine.kernels.step), with `substeps` RK4 steps per sample.
+    integrator: str = "euler"
+    substeps: int = 1  # rk4 steps per sample (euler: 1)
     gp: GPConfig = field(default_factory=GPConfig)
 
     def window_steps(self, dt: float) -> int:

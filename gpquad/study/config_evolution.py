@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from gpquad.engine.kernels.step import SCHEMES
 from gpquad.engine.taps import MAX_TAPS
 from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
@@ -68,6 +69,10 @@ def validate_evolution(cfg: Config, source: str) -> None:
     _choice(ev.metric, METRICS, source, "evolution.metric")
     _choice(ev.constant_fit, CONSTANT_FITS, source, "evolution.constant_fit")
     _choice(ev.selection, SELECTIONS, source, "evolution.selection")
+    _choice(ev.integrator, SCHEMES, source, "evolution.integrator")
+    if not 1 <= ev.substeps <= (1 if ev.integrator == "euler" else 64):
+        raise GpquadError("must be 1 for euler and 1..64 for rk4", source=source,
+                          field="evolution.substeps")
     for i, step in enumerate(ev.finish):
         _choice(step, FINISH_STEPS, source, f"evolution.finish[{i}]")
     if len(set(ev.finish)) != len(ev.finish):

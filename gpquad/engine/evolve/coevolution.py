@@ -107,7 +107,8 @@ class Coevolution:
         #: samples in a test window, and how far a test mutation moves it (half a window)
         self.window_steps = cfg.window_steps(dataset.dt)
         self.test_offset_max = self.window_steps // 2
-        self.evaluator = Evaluator(dataset, target, self.window_steps, cfg.metric, cfg.max_depth)
+        self.evaluator = Evaluator(dataset, target, self.window_steps, cfg.metric, cfg.max_depth,
+                                   integrator=cfg.integrator, substeps=cfg.substeps)
         self.space = WindowSpace(dataset.train, self.window_steps, cfg.max_delay)
         # the growing horizon of the linear seed and of the gain refits
         self.regain_windows = self.windows_for(SEED_HORIZONS)
@@ -345,7 +346,8 @@ class Coevolution:
         the training and validation windows among it and the front's climbers
         (gpquad.engine.evolve.selection)."""
         cfg = self.cfg
-        ev_mse = Evaluator(self.dataset, self.target, self.window_steps, "mse", cfg.max_depth)
+        ev_mse = Evaluator(self.dataset, self.target, self.window_steps, "mse", cfg.max_depth,
+                           integrator=cfg.integrator, substeps=cfg.substeps)
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
         fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)

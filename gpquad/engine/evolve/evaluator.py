@@ -6,6 +6,7 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.kernels.fitness import population_window_errors
+from gpquad.engine.kernels.step import scheme_code
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, check_stack
 from gpquad.engine.lag import lag_alpha
 from gpquad.engine.tree.encoding import Tree, max_nodes
@@ -40,12 +41,17 @@ class Evaluator:
     angle_tangents: the constants' Jacobian follows them through the Euler angles the tree
     reads (gpquad.engine.kernels.sensitivity; used by the gradient fit only).
     lag: the equation's time constant, s (gpquad.engine.lag; 0 = none); `set_lag` changes it.
+    integrator, substeps: the scheme that flies the windows (gpquad.engine.kernels.step:
+    "euler", one eq. 2 step per sample, or "rk4" with `substeps` steps per sample).
     """
 
     def __init__(self, dataset: Dataset, target: str, n_steps: int, metric: str = "mae",
                  max_depth: int = 5, attitude: float = 0.0, angle_tangents: bool = False,
-                 lag: float = 0.0):
+                 lag: float = 0.0, integrator: str = "euler", substeps: int = 1):
         self.arrays = dataset.arrays
+        self.integrator = integrator
+        self.scheme = scheme_code(integrator)
+        self.substeps = int(substeps)
         self.set_lag(lag)
         self.target = target_index(target)
         self.att_weight = attitude_weight(dataset, target, attitude)
@@ -87,7 +93,8 @@ class Evaluator:
         codes, values, sizes, delays = self.pack(trees)
         population_window_errors(codes, values, sizes, delays, self.target, self.arrays, starts,
                                  n_steps, self.squared, self.att_weight, self.alpha,
-                                 np.asarray(bounds, dtype=float), out)
+                                 np.asarray(bounds, dtype=float), out, self.scheme,
+                                 self.substeps)
         self.evaluations += len(trees) * len(starts)
         return out
 

@@ -43,7 +43,7 @@ def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
     jac = np.empty((rows, n_c))
     diverged = window_residuals(tree.codes, tree.values, tree.size, tree.delays, ev.target,
                                 ev.arrays, starts, int(n_steps), ev.att_weight,
-                                ev.angle_tangents, ev.alpha, res, jac)
+                                ev.angle_tangents, ev.alpha, res, jac, ev.scheme, ev.substeps)
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
 

@@ -29,47 +29,38 @@ alpha = 1 is no lag and leaves every result bit-identical to the kernels without
 
 import numpy as np
 
+from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.fitness_rk4 import rk4_rollout, rk4_tree_window_errors
 from gpquad.engine.kernels.quaternion import (
     euler_angle,
     euler_from_quat,
     euler_phi,
     euler_psi,
     euler_theta,
-    quat_mul,
-    rate_increment,
-    renormalize,
-    rotate_back,
+)
+from gpquad.engine.kernels.step import (
+    RK4,
+    euler_rate_step,
+    euler_step,
+    euler_velocity_step,
+    wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import VAR_BASE
 
-DIVERGED = np.inf
-#: A state whose magnitude exceeds this (or is NaN) marks the window as diverged.
-STATE_LIMIT = 1e6
-
-
-@njit
-def wrap_angle(a):
-    """a wrapped to [-pi, pi]."""
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
-
-
-@njit
-def _uses(codes, size, first, last):
-    for i in range(size):
-        c = codes[i] - VAR_BASE
-        if first <= c <= last:
-            return True
-    return False
+__all__ = ["DIVERGED", "STATE_LIMIT", "wrap_angle", "tree_window_errors",
+           "population_window_errors", "rollout"]
 
 
 @njit
 def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
-                       att_weight, alpha, bound, out):
+                       att_weight, alpha, bound, out, scheme, substeps):
     """Mean per-step error of one tree on each window; fills out (n_windows,).
 
     alpha: the equation's lag factor in (0, 1] (module notes; 1 = no lag).
+    scheme, substeps: the integrator (gpquad.engine.kernels.step: EULER, one step per
+    sample, or RK4 with `substeps` steps per sample, gpquad.engine.kernels.fitness_rk4).
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
@@ -77,15 +68,26 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     A window whose state diverges (NaN or beyond STATE_LIMIT) scores inf and stops.
     Returns True when the evaluation stopped early.
     """
+    if scheme == RK4:
+        return rk4_tree_window_errors(codes, values, size, delays, target, flight, starts,
+                                      n_steps, squared, att_weight, alpha, bound, out, substeps)
+    return euler_tree_window_errors(codes, values, size, delays, target, flight, starts,
+                                    n_steps, squared, att_weight, alpha, bound, out)
+
+
+@njit
+def euler_tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps,
+                             squared, att_weight, alpha, bound, out):
+    """tree_window_errors flown by eq. 2, one step per sample (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
     linear = target < 3
-    uses_phi = _uses(codes, size, 0, 0)
-    uses_theta = _uses(codes, size, 1, 1)
-    uses_psi = _uses(codes, size, 2, 2)
+    uses_phi = uses_leaves(codes, size, 0, 0)
+    uses_theta = uses_leaves(codes, size, 1, 1)
+    uses_psi = uses_leaves(codes, size, 2, 2)
     uses_euler = uses_phi or uses_theta or uses_psi
-    uses_vel = _uses(codes, size, 3, 5)
+    uses_vel = uses_leaves(codes, size, 3, 5)
     need_vel = linear or uses_vel
     att_err = (not linear) and att_weight > 0.0
     need_att = (not linear) and (uses_euler or att_err)
@@ -173,37 +175,39 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
                 continue
             idx = starts[lane] + k
             if linear:
-                b0 = vel[0, lane] + acc[idx, 0] * dt
-                b1 = vel[1, lane] + acc[idx, 1] * dt
-                b2 = vel[2, lane] + acc[idx, 2] * dt
+                a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
                 if target == 0:
-                    b0 = vel[0, lane] + pred[lane] * dt
+                    a0 = pred[lane]
                 elif target == 1:
-                    b1 = vel[1, lane] + pred[lane] * dt
+                    a1 = pred[lane]
                 else:
-                    b2 = vel[2, lane] + pred[lane] * dt
-                vel[0, lane] = rot[idx, 0] * b0 + rot[idx, 1] * b1 + rot[idx, 2] * b2
-                vel[1, lane] = rot[idx, 3] * b0 + rot[idx, 4] * b1 + rot[idx, 5] * b2
-                vel[2, lane] = rot[idx, 6] * b0 + rot[idx, 7] * b1 + rot[idx, 8] * b2
+                    a2 = pred[lane]
+                vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
+                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt)
                 x = vel[target, lane]
             else:
                 if need_vel or need_att:
-                    d0, d1, d2, d3 = rate_increment(rates[0, lane], rates[1, lane],
-                                                    rates[2, lane], dt)
-                    if need_vel:
-                        vel[0, lane], vel[1, lane], vel[2, lane] = rotate_back(
-                            d0, d1, d2, d3, vel[0, lane] + acc[idx, 0] * dt,
-                            vel[1, lane] + acc[idx, 1] * dt, vel[2, lane] + acc[idx, 2] * dt)
-                    if need_att:
-                        n0, n1, n2, n3 = quat_mul(quat[0, lane], quat[1, lane], quat[2, lane],
-                                                  quat[3, lane], d0, d1, d2, d3)
-                        n0, n1, n2, n3 = renormalize(n0, n1, n2, n3)
-                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane] = n0, n1, n2, n3
-                for i in range(3):
-                    if i == target - 3:
-                        rates[i, lane] += pred[lane] * dt
+                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
+                    if target == 3:
+                        a3 = pred[lane]
+                    elif target == 4:
+                        a4 = pred[lane]
                     else:
-                        rates[i, lane] += acc[idx, 3 + i] * dt
+                        a5 = pred[lane]
+                    (quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
+                     vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
+                     rates[2, lane]) = euler_step(
+                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
+                        vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
+                        rates[2, lane], acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt,
+                        need_vel, need_att)
+                else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
+                    for i in range(3):
+                        if i == target - 3:
+                            rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
+                        else:
+                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i],
+                                                             dt)
                 x = rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
@@ -232,15 +236,17 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
 
 @njit
 def population_window_errors(codes, values, sizes, delays, target, flight, starts, n_steps, squared,
-                             att_weight, alpha, bounds, out):
+                             att_weight, alpha, bounds, out, scheme, substeps):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
     for i in range(codes.shape[0]):
         tree_window_errors(codes[i], values[i], sizes[i], delays[i], target, flight, starts,
-                           n_steps, squared, att_weight, alpha, bounds[i], out[i])
+                           n_steps, squared, att_weight, alpha, bounds[i], out[i], scheme,
+                           substeps)
 
 
 @njit
-def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise):
+def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise,
+            scheme, substeps):
     """Fly a full model: integrate every state from each window start, all six accelerations.
 
     codes (6, M), values (6, M), sizes (6,), delays (6, K n_inputs): one tree per target,
@@ -248,8 +254,12 @@ def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_st
     modelled (6,) bool: use the tree for this target, else the data's acceleration;
     alphas (6,): each equation's lag factor (module notes; 1 = no lag).
     input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
+    scheme, substeps: the integrator (gpquad.engine.kernels.step).
     Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
     """
+    if scheme == RK4:
+        return rk4_rollout(codes, values, sizes, delays, modelled, alphas, flight, starts,
+                           n_steps, input_noise, substeps)
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
@@ -293,11 +303,8 @@ def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_st
                     if alphas[t] < 1.0:
                         applied[t] += alphas[t] * (pred[0] - applied[t])
                         a[t] = applied[t]
-            d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
-            vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + a[0] * dt,
-                                                 vel[1] + a[1] * dt, vel[2] + a[2] * dt)
-            n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
-            q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
-            for i in range(3):
-                rates[i] += a[3 + i] * dt
+            (q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1],
+             rates[2]) = euler_step(q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1],
+                                    rates[2], a[0], a[1], a[2], a[3], a[4], a[5], dt, True,
+                                    True)
     return out

@@ -19,30 +19,24 @@ from gpquad.engine.kernels.quaternion import (
     quat_mul,
     rate_from_increment,
     rate_increment,
-    renormalize,
-    rotate_back,
     rotation_matrix,
 )
+from gpquad.engine.kernels.step import euler_position_step, euler_step
 from gpquad.engine.numba_config import njit
 
 
 @njit
 def integrate_step(quat, vel, rates, pos, acc, dt, mat):
-    """Advance one step in place.
+    """Advance one eq. 2 step in place (gpquad.engine.kernels.step.euler_step).
 
     quat (4,), vel (3,) m/s body, rates (3,) rad/s, pos (3,) m world,
     acc (6,) = [a_x, a_y, a_z, p_dot, q_dot, r_dot]; mat is a (3, 3) work buffer.
     """
-    rotation_matrix(quat[0], quat[1], quat[2], quat[3], mat)
-    for i in range(3):
-        pos[i] += (mat[i, 0] * vel[0] + mat[i, 1] * vel[1] + mat[i, 2] * vel[2]) * dt
-    d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
-    vel[0], vel[1], vel[2] = rotate_back(d0, d1, d2, d3, vel[0] + acc[0] * dt,
-                                         vel[1] + acc[1] * dt, vel[2] + acc[2] * dt)
-    n0, n1, n2, n3 = quat_mul(quat[0], quat[1], quat[2], quat[3], d0, d1, d2, d3)
-    quat[0], quat[1], quat[2], quat[3] = renormalize(n0, n1, n2, n3)
-    for i in range(3):
-        rates[i] += acc[3 + i] * dt
+    euler_position_step(quat, vel, pos, dt, mat)
+    (quat[0], quat[1], quat[2], quat[3], vel[0], vel[1], vel[2], rates[0], rates[1],
+     rates[2]) = euler_step(quat[0], quat[1], quat[2], quat[3], vel[0], vel[1], vel[2],
+                            rates[0], rates[1], rates[2], acc[0], acc[1], acc[2], acc[3],
+                            acc[4], acc[5], dt, True, True)
 
 
 @njit

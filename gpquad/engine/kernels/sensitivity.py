@@ -43,81 +43,25 @@ Flat arrays only: codes, values, size, delays as the fitness kernel; flight is F
 
 import numpy as np
 
-from gpquad.engine.kernels.fitness import STATE_LIMIT, wrap_angle
-from gpquad.engine.kernels.quaternion import (
-    euler_angle,
-    euler_phi,
-    euler_psi,
-    euler_theta,
-    quat_mul,
-    rate_increment,
-    renormalize,
-    rotate_back,
+from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT
+from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
+from gpquad.engine.kernels.sensitivity_rk4 import rk4_window_residuals
+from gpquad.engine.kernels.step import (
+    RK4,
+    euler_kinematics,
+    euler_rate_tangent,
+    euler_step,
+    euler_velocity_step,
+    euler_velocity_tangent,
+    wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS
+from gpquad.engine.kernels.tree_tangent import eval_with_tangent
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
+from gpquad.engine.tree.operators import CONST
 
-#: Residual given to every remaining step of a window whose state diverged.
-DIVERGED_RESIDUAL = STATE_LIMIT
-
-
-@njit
-def eval_with_tangent(codes, values, size, slot_of, features, tangents, stack, dstack, grad):
-    """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)).
-
-    slot_of (size,): column of each CONST node (-1 otherwise); features (n_terminals,);
-    tangents (n_terminals, n_c): d(leaf)/d(constants); stack (STACK_ROWS,), dstack
-    (STACK_ROWS, n_c) are work buffers. Returns the value.
-    """
-    n_c = grad.shape[0]
-    sp = 0
-    for i in range(size - 1, -1, -1):
-        c = codes[i]
-        if c >= VAR_BASE:
-            k = c - VAR_BASE
-            stack[sp] = features[k]
-            for j in range(n_c):
-                dstack[sp, j] = tangents[k, j]
-            sp += 1
-        elif c == CONST:
-            stack[sp] = values[i]
-            for j in range(n_c):
-                dstack[sp, j] = 0.0
-            if slot_of[i] >= 0:
-                dstack[sp, slot_of[i]] = 1.0
-            sp += 1
-        else:
-            top = sp - 1  # left operand
-            res = sp - 2  # right operand, overwritten by the result
-            a = stack[top]
-            b = stack[res]
-            if c == ADD:
-                stack[res] = a + b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] + dstack[res, j]
-            elif c == SUB:
-                stack[res] = a - b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] - dstack[res, j]
-            elif c == MUL:
-                stack[res] = a * b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] * b + a * dstack[res, j]
-            elif c == DIV:
-                if abs(b) < DIV_EPS:
-                    stack[res] = 1.0
-                    for j in range(n_c):
-                        dstack[res, j] = 0.0
-                else:
-                    q = a / b
-                    stack[res] = q
-                    for j in range(n_c):
-                        dstack[res, j] = (dstack[top, j] - q * dstack[res, j]) / b
-            sp -= 1
-    for j in range(n_c):
-        grad[j] = dstack[0, j]
-    return stack[0]
+__all__ = ["DIVERGED_RESIDUAL", "eval_with_tangent", "euler_kinematics", "residual_rows",
+           "window_residuals"]
 
 
 @njit
@@ -128,7 +72,7 @@ def residual_rows(target, att_weight):
 
 @njit
 def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, att_weight,
-                     angle_tangents, alpha, res, jac):
+                     angle_tangents, alpha, res, jac, scheme, substeps):
     """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
     residual_rows(target, att_weight); angle_tangents: the Euler leaves read their
     sensitivities (module notes); alpha: the equation's lag factor (1 = no lag).
@@ -136,7 +80,13 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     Row (w * n_steps + k) * rows is window w after k + 1 steps. n_c = number of CONST
     nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
     and zero Jacobian rows from that step on. Returns the number of diverged windows.
+    scheme, substeps: the integrator (gpquad.engine.kernels.step; RK4 in
+    gpquad.engine.kernels.sensitivity_rk4).
     """
+    if scheme == RK4:
+        return rk4_window_residuals(codes, values, size, delays, target, flight, starts,
+                                    n_steps, att_weight, angle_tangents, alpha, res, jac,
+                                    substeps)
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
@@ -162,7 +112,6 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     tmp = np.empty((3, n_c))
     vel = np.empty(3)
     rates = np.empty(3)
-    b = np.empty(3)
     lagged = alpha < 1.0
     dapplied = np.zeros(n_c)  # gradient of the lagged acceleration
     n_diverged = 0
@@ -218,48 +167,36 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                     dapplied[c] += alpha * (grad[c] - dapplied[c])
                     grad[c] = dapplied[c]
             if linear:
-                for i in range(3):
-                    b[i] = vel[i] + acc[idx, i] * dt
-                b[target] = vel[target] + pred * dt
-                for i in range(3):
-                    for c in range(n_c):
-                        tmp[i, c] = sens[i, c]
-                for c in range(n_c):
-                    tmp[target, c] += grad[c] * dt
-                for i in range(3):
-                    vel[i] = rot[idx, 3 * i] * b[0] + rot[idx, 3 * i + 1] * b[1] \
-                        + rot[idx, 3 * i + 2] * b[2]
-                    for c in range(n_c):
-                        sens[i, c] = rot[idx, 3 * i] * tmp[0, c] + rot[idx, 3 * i + 1] * tmp[1, c] \
-                            + rot[idx, 3 * i + 2] * tmp[2, c]
+                a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
+                if target == 0:
+                    a0 = pred
+                elif target == 1:
+                    a1 = pred
+                else:
+                    a2 = pred
+                vel[0], vel[1], vel[2] = euler_velocity_step(rot, idx, vel[0], vel[1], vel[2],
+                                                             a0, a1, a2, dt)
+                euler_velocity_tangent(rot, idx, sens, target, grad, dt, tmp)
                 x = vel[target]
                 for c in range(n_c):
                     jac[row, c] = sens[target, c]
             else:
-                d0, d1, d2, d3 = rate_increment(rates[0], rates[1], rates[2], dt)
-                vel[0], vel[1], vel[2] = rotate_back(
-                    d0, d1, d2, d3, vel[0] + acc[idx, 0] * dt, vel[1] + acc[idx, 1] * dt,
-                    vel[2] + acc[idx, 2] * dt)
-                n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
-                q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
-                for i in range(3):
-                    if i == target - 3:
-                        rates[i] += pred * dt
-                    else:
-                        rates[i] += acc[idx, 3 + i] * dt
-                if track_angles:  # the kinematics at the step's mid-attitude (2nd order)
-                    phi_mid = features[0] + 0.5 * wrap_angle(euler_phi(q0, q1, q2, q3)
-                                                             - features[0])
-                    theta_mid = 0.5 * (features[1] + euler_theta(q0, q1, q2, q3))
-                    euler_kinematics(target - 3, phi_mid, theta_mid, features[7], features[8],
-                                     kin, jang)
-                    for c in range(n_c):
-                        a0, a1 = asens[0, c], asens[1, c]
-                        for i in range(3):
-                            asens[i, c] += dt * (jang[i, 0] * a0 + jang[i, 1] * a1
-                                                 + kin[i] * sens[0, c])
+                a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
+                if target == 3:
+                    a3 = pred
+                elif target == 4:
+                    a4 = pred
+                else:
+                    a5 = pred
+                q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1], rates[2] = euler_step(
+                    q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1], rates[2],
+                    acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt, True, True)
+                phi1 = euler_phi(q0, q1, q2, q3) if track_angles else 0.0
+                theta1 = euler_theta(q0, q1, q2, q3) if track_angles else 0.0
+                euler_rate_tangent(target - 3, features[0], features[1], phi1, theta1,
+                                   features[7], features[8], sens[0], asens, grad, dt,
+                                   track_angles, kin, jang)
                 for c in range(n_c):
-                    sens[0, c] += grad[c] * dt
                     jac[row, c] = sens[0, c]
                 x = rates[target - 3]
             if not abs(x) < STATE_LIMIT:
@@ -277,26 +214,3 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                 for c in range(n_c):
                     jac[row + 1, c] = att_weight * asens[a, c]
     return n_diverged
-
-
-@njit
-def euler_kinematics(axis, phi, theta, q, r, column, jang):
-    """Partials of the Euler-angle rates (phi, theta, psi)_dot (ZYX) at the current state:
-    column (3,) w.r.t. body rate `axis` (0 p, 1 q, 2 r), jang (3, 2) w.r.t. phi and theta.
-
-    phi_dot = p + tan(theta) (q sin(phi) + r cos(phi)), theta_dot = q cos(phi) - r sin(phi),
-    psi_dot = (q sin(phi) + r cos(phi)) / cos(theta)."""
-    sp, cp = np.sin(phi), np.cos(phi)
-    ct = np.cos(theta)
-    tt = np.sin(theta) / ct
-    if axis == 0:
-        column[0], column[1], column[2] = 1.0, 0.0, 0.0
-    elif axis == 1:
-        column[0], column[1], column[2] = sp * tt, cp, sp / ct
-    else:
-        column[0], column[1], column[2] = cp * tt, -sp, cp / ct
-    lead = q * sp + r * cp  # the yaw-plane rate
-    cross = q * cp - r * sp
-    jang[0, 0], jang[0, 1] = tt * cross, lead / (ct * ct)
-    jang[1, 0], jang[1, 1] = -lead, 0.0
-    jang[2, 0], jang[2, 1] = cross / ct, lead * tt / ct

@@ -1,0 +1,22 @@
+"""What every window kernel counts as a diverged state, and which leaves a tree reads."""
+
+import numpy as np
+
+from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import VAR_BASE
+
+DIVERGED = np.inf
+#: A state whose magnitude exceeds this (or is NaN) marks the window as diverged.
+STATE_LIMIT = 1e6
+#: Residual given to every remaining step of a window whose state diverged (sensitivity).
+DIVERGED_RESIDUAL = STATE_LIMIT
+
+
+@njit
+def uses_leaves(codes, size, first, last):
+    """True if the tree reads a variable leaf first .. last (terminal indices)."""
+    for i in range(size):
+        c = codes[i] - VAR_BASE
+        if first <= c <= last:
+            return True
+    return False

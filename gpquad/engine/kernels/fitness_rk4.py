@@ -1,0 +1,250 @@
+"""The fitness and rollout kernels of gpquad.engine.kernels.fitness flown by RK4.
+
+The same windows, errors, bound and divergence rules as the eq. 2 kernels; the state is
+advanced by classical RK4 on the continuous-time rigid body with `substeps` steps per sample
+(gpquad.engine.kernels.step) and the tree is evaluated at every stage's state.
+
+Held over each sample: the inputs (delays are whole samples), and for the targets that a
+tree does not model the data's accelerations of that sample. The data's accelerations are
+eq. 2's discrete inverse (gpquad.engine.kernels.integrator.body_accelerations): held, they
+reproduce the data's rates at every sample exactly (alpha is constant over the sample and
+RK4 integrates a linear rate exactly), and the data's velocity and attitude to O(dt^2) per
+sample (eq. 2 rotates V + a dt by the sample's increment, the ODE rotates V as it goes).
+Unlike the eq. 2 kernels, which read the data's angles and rates for linear targets (where
+they coincide with the integrated ones), every state a tree reads is the integrated one.
+
+A lag (alpha < 1) is one more state, tau a_dot = f - a from the data's acceleration of the
+sample before the window, with 1 / tau from alpha (gpquad.engine.kernels.step.lag_rate).
+"""
+
+import numpy as np
+
+from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
+from gpquad.engine.kernels.step import (
+    BODY_ROWS,
+    N_STAGES,
+    NODES,
+    WEIGHTS,
+    Q,
+    V,
+    W,
+    accumulate,
+    body_derivative,
+    body_stage_state,
+    finish_step,
+    lag_rate_kernel,
+    wrap_angle,
+)
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import VAR_BASE
+
+#: Row of the lag state after the body's rows.
+LAG = BODY_ROWS
+
+
+@njit(inline="always")
+def stage_features(ys, lane, used, features):
+    """The state leaves the tree reads (used (9 + n_in,) bool) at stage state ys[:, lane]."""
+    q0, q1, q2, q3 = ys[Q, lane], ys[Q + 1, lane], ys[Q + 2, lane], ys[Q + 3, lane]
+    if used[0]:
+        features[0, lane] = euler_phi(q0, q1, q2, q3)
+    if used[1]:
+        features[1, lane] = euler_theta(q0, q1, q2, q3)
+    if used[2]:
+        features[2, lane] = euler_psi(q0, q1, q2, q3)
+    for i in range(3):
+        if used[3 + i]:
+            features[3 + i, lane] = ys[V + i, lane]
+        if used[6 + i]:
+            features[6 + i, lane] = ys[W + i, lane]
+
+
+@njit
+def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps,
+                           squared, att_weight, alpha, bound, out, substeps):
+    """gpquad.engine.kernels.fitness.tree_window_errors flown by RK4 (module notes)."""
+    quat_d, states, acc, inputs, rot, dt = flight
+    n = starts.shape[0]
+    n_in = inputs.shape[1]
+    linear = target < 3
+    att_err = (not linear) and att_weight > 0.0
+    budget = bound * n * n_steps
+    lagged = alpha < 1.0
+    rate = lag_rate_kernel(alpha, dt)
+    n_rows = BODY_ROWS + 1
+    h = dt / substeps
+
+    features = np.zeros((9 + n_in, n))
+    stack = np.empty((STACK_ROWS, n))
+    pred = np.empty(n)
+    y = np.empty((n_rows, n))
+    ys = np.empty((n_rows, n))
+    slope = np.zeros((n_rows, n))
+    total = np.empty((n_rows, n))
+    err = np.zeros(n)
+    alive = np.ones(n, dtype=np.bool_)
+    n_alive = n
+    for lane in range(n):
+        s = starts[lane]
+        y[LAG, lane] = acc[s - 1, target] if s > 0 else 0.0
+        for i in range(4):
+            y[Q + i, lane] = quat_d[s, i]
+        for i in range(3):
+            y[V + i, lane] = states[s, 3 + i]
+            y[W + i, lane] = states[s, 6 + i]
+    used = np.zeros(9 + n_in, dtype=np.bool_)
+    for i in range(size):
+        if codes[i] >= VAR_BASE:
+            used[codes[i] - VAR_BASE] = True
+    uses_state = uses_leaves(codes, size, 0, 8)
+    # rows flown: the attitude only where the tree reads an angle or the angle is scored,
+    # the velocity only for linear targets or a tree that reads it (the rates always)
+    if uses_leaves(codes, size, 0, 2) or att_err:
+        first = Q
+    elif linear or uses_leaves(codes, size, 3, 5):
+        first = V
+    else:
+        first = W
+    ys[:, :] = y
+
+    for k in range(n_steps):
+        for lane in range(n):  # inputs held over the sample
+            idx = starts[lane] + k
+            for j in range(n_in):
+                if used[9 + j]:
+                    features[9 + j, lane] = inputs[idx - delays[j], j]
+        for _ in range(substeps):
+            for stage in range(N_STAGES):
+                for lane in range(n):
+                    if alive[lane]:
+                        body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows, first)
+                        if uses_state:
+                            stage_features(ys, lane, used, features)
+                eval_lanes(codes, values, size, features, stack, pred, n)
+                for lane in range(n):
+                    if not alive[lane]:
+                        continue
+                    idx = starts[lane] + k
+                    a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
+                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
+                    f = ys[LAG, lane] if lagged else pred[lane]
+                    if target == 0:
+                        a0 = f
+                    elif target == 1:
+                        a1 = f
+                    elif target == 2:
+                        a2 = f
+                    elif target == 3:
+                        a3 = f
+                    elif target == 4:
+                        a4 = f
+                    else:
+                        a5 = f
+                    body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
+                    slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
+                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows, first)
+            for lane in range(n):
+                if alive[lane]:
+                    finish_step(y, total, h, lane, n_rows, first)
+
+        step_total = 0.0
+        for lane in range(n):
+            if not alive[lane]:
+                step_total += err[lane]
+                continue
+            idx = starts[lane] + k
+            x = y[V + target, lane] if linear else y[W + target - 3, lane]
+            e = x - states[idx + 1, 3 + target]
+            e = e * e if squared else abs(e)
+            if att_err:
+                a = target - 3
+                da = euler_angle(a, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane])
+                da = wrap_angle(da - states[idx + 1, a]) * att_weight
+                e += da * da if squared else abs(da)
+            if not abs(x) < STATE_LIMIT:  # also catches NaN
+                e = DIVERGED
+                alive[lane] = False
+                n_alive -= 1
+            err[lane] += e
+            step_total += err[lane]
+        if step_total > budget or n_alive == 0:
+            for lane in range(n):
+                out[lane] = DIVERGED
+            return True
+    for lane in range(n):
+        out[lane] = err[lane] / n_steps
+    return False
+
+
+@njit
+def rk4_rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps,
+                input_noise, substeps):
+    """gpquad.engine.kernels.fitness.rollout flown by RK4 (module notes): states
+    (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state."""
+    quat_d, states, acc, inputs, rot, dt = flight
+    n = starts.shape[0]
+    n_in = inputs.shape[1]
+    n_slots = delays.shape[1]
+    noisy = input_noise.shape[0] > 0
+    n_rows = BODY_ROWS + 6
+    h = dt / substeps
+    out = np.empty((n, n_steps + 1, 9))
+    features = np.empty((9 + n_slots, 1))
+    held = np.empty((6, n_slots))  # each equation's inputs over the sample
+    stack = np.empty((STACK_ROWS, 1))
+    pred = np.empty(1)
+    a = np.empty(6)
+    rates = np.empty(6)
+    for t in range(6):
+        rates[t] = lag_rate_kernel(alphas[t], dt)
+    y = np.empty((n_rows, 1))
+    ys = np.empty((n_rows, 1))
+    slope = np.zeros((n_rows, 1))
+    total = np.empty((n_rows, 1))
+    every_state = np.ones(9, dtype=np.bool_)
+    for lane in range(n):
+        s = starts[lane]
+        for t in range(6):
+            y[LAG + t, 0] = acc[s - 1, t] if s > 0 else 0.0
+        for i in range(4):
+            y[Q + i, 0] = quat_d[s, i]
+        for i in range(3):
+            y[V + i, 0] = states[s, 3 + i]
+            y[W + i, 0] = states[s, 6 + i]
+        for k in range(n_steps + 1):
+            idx = s + k
+            stage_features(y, 0, every_state, features)
+            for i in range(9):
+                out[lane, k, i] = features[i, 0]
+            if k == n_steps:
+                break
+            for t in range(6):
+                if modelled[t]:
+                    for j in range(n_slots):
+                        c = j % n_in
+                        u = inputs[idx - delays[t, j], c]
+                        if noisy and k - delays[t, j] >= 0:
+                            u += input_noise[lane, k - delays[t, j], c]
+                        held[t, j] = u
+            for _ in range(substeps):
+                for stage in range(N_STAGES):
+                    body_stage_state(y, slope, NODES[stage], h, ys, 0, n_rows)
+                    stage_features(ys, 0, every_state, features)
+                    for t in range(6):
+                        a[t] = acc[idx, t]
+                        slope[LAG + t, 0] = 0.0
+                        if modelled[t]:
+                            for j in range(n_slots):
+                                features[9 + j, 0] = held[t, j]
+                            eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
+                            if alphas[t] < 1.0:
+                                a[t] = ys[LAG + t, 0]
+                                slope[LAG + t, 0] = rates[t] * (pred[0] - a[t])
+                            else:
+                                a[t] = pred[0]
+                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
+                    accumulate(total, slope, WEIGHTS[stage], stage, 0, n_rows)
+                finish_step(y, total, h, 0, n_rows)
+    return out

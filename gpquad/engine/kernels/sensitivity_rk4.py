@@ -1,0 +1,183 @@
+"""gpquad.engine.kernels.sensitivity's residuals and Jacobian, flown by RK4.
+
+The windows, residual rows and divergence rule are the eq. 2 kernel's; the state is flown
+as in gpquad.engine.kernels.fitness_rk4 (RK4, `substeps` steps per sample, the tree at every
+stage, inputs and the data's other accelerations held over the sample). The sensitivities
+w.r.t. the tree's constants are the same ones, propagated through the same RK4 stages as
+the derivative of the continuous-time ODE (forward mode, one tangent row per state):
+
+- linear targets: the body velocity's sensitivity S (3, n_c), S_dot = e_k da - omega x S
+  (omega follows the data's angular accelerations and does not depend on the constants);
+  the u, v, w leaves read S. Exact for the discrete RK4 map.
+- angular targets: the target rate's sensitivity s, s_dot = da; with angle tangents (or an
+  angle row) the Euler angles' sensitivities A (3, n_c), A_dot = J A + e s, the ZYX Euler
+  kinematics linearised at the stage's state (gpquad.engine.kernels.step.euler_kinematics);
+  the rate leaf reads s, the Euler leaves A when angle_tangents. As in the eq. 2 kernel the
+  velocity leaves get zero tangent; the attitude is flown as a quaternion, so A is the
+  kinematics' tangent, not the discrete map's (they agree to the scheme's order).
+- a lag: its state's sensitivity dl, dl_dot = (df - dl) / tau, and da = dl.
+"""
+
+import numpy as np
+
+from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT
+from gpquad.engine.kernels.fitness_rk4 import LAG, stage_features
+from gpquad.engine.kernels.quaternion import euler_angle
+from gpquad.engine.kernels.step import (
+    BODY_ROWS,
+    N_STAGES,
+    NODES,
+    WEIGHTS,
+    Q,
+    V,
+    W,
+    accumulate,
+    advance,
+    body_derivative,
+    body_stage_state,
+    euler_kinematics,
+    finish_step,
+    lag_rate_kernel,
+    stage_state,
+    wrap_angle,
+)
+from gpquad.engine.kernels.tree_eval import STACK_ROWS
+from gpquad.engine.kernels.tree_tangent import eval_with_tangent
+from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import CONST
+
+#: Tangent rows: body velocity (linear targets), the target rate, the Euler angles, the lag.
+TV, TR, TA, TL = 0, 3, 4, 7
+TANGENT_ROWS = 8
+
+
+@njit
+def rk4_window_residuals(codes, values, size, delays, target, flight, starts, n_steps,
+                         att_weight, angle_tangents, alpha, res, jac, substeps):
+    """gpquad.engine.kernels.sensitivity.window_residuals flown by RK4 (module notes)."""
+    quat_d, states, acc, inputs, rot, dt = flight
+    n_in = inputs.shape[1]
+    n_c = jac.shape[1]
+    linear = target < 3
+    axis = target - 3
+    n_rows = 2 if (not linear) and att_weight > 0.0 else 1
+    track_angles = (not linear) and (angle_tangents or n_rows == 2)
+    lagged = alpha < 1.0
+    rate = lag_rate_kernel(alpha, dt)
+    h = dt / substeps
+    slot_of = np.full(size, -1, dtype=np.int64)
+    j = 0
+    for i in range(size):
+        if codes[i] == CONST:
+            slot_of[i] = j
+            j += 1
+    n_y = BODY_ROWS + 1
+    features = np.zeros((9 + n_in, 1))
+    leaf = np.zeros(9 + n_in)
+    tangents = np.zeros((9 + n_in, n_c))
+    stack = np.empty(STACK_ROWS)
+    dstack = np.empty((STACK_ROWS, n_c))
+    grad = np.empty(n_c)
+    y = np.empty((n_y, 1))
+    ys = np.empty((n_y, 1))
+    slope = np.zeros((n_y, 1))
+    total = np.empty((n_y, 1))
+    tan = np.zeros((TANGENT_ROWS, n_c))
+    tan_s = np.zeros((TANGENT_ROWS, n_c))
+    tan_slope = np.zeros((TANGENT_ROWS, n_c))
+    tan_total = np.zeros((TANGENT_ROWS, n_c))
+    every_state = np.ones(9, dtype=np.bool_)
+    a = np.empty(6)
+    kin = np.zeros(3)
+    jang = np.zeros((3, 2))
+    n_diverged = 0
+    for w in range(starts.shape[0]):
+        s = starts[w]
+        y[LAG, 0] = acc[s - 1, target] if s > 0 else 0.0
+        for i in range(4):
+            y[Q + i, 0] = quat_d[s, i]
+        for i in range(3):
+            y[V + i, 0] = states[s, 3 + i]
+            y[W + i, 0] = states[s, 6 + i]
+        tan[:, :] = 0.0
+        tan_slope[:, :] = 0.0
+        alive = True
+        for k in range(n_steps):
+            row = (w * n_steps + k) * n_rows
+            if not alive:
+                for extra in range(n_rows):
+                    res[row + extra] = DIVERGED_RESIDUAL
+                    jac[row + extra, :] = 0.0
+                continue
+            idx = s + k
+            for jj in range(n_in):
+                leaf[9 + jj] = inputs[idx - delays[jj], jj]
+            for _ in range(substeps):
+                for stage in range(N_STAGES):
+                    node = NODES[stage]
+                    body_stage_state(y, slope, node, h, ys, 0, n_y)
+                    for c in range(n_c):
+                        stage_state(tan, tan_slope, node, h, tan_s, c, TANGENT_ROWS)
+                    stage_features(ys, 0, every_state, features)
+                    for i in range(9):
+                        leaf[i] = features[i, 0]
+                    tangents[:, :] = 0.0
+                    for c in range(n_c):
+                        if linear:
+                            for i in range(3):
+                                tangents[3 + i, c] = tan_s[TV + i, c]
+                        else:
+                            tangents[6 + axis, c] = tan_s[TR, c]
+                            if angle_tangents:
+                                for i in range(3):
+                                    tangents[i, c] = tan_s[TA + i, c]
+                    pred = eval_with_tangent(codes, values, size, slot_of, leaf, tangents, stack,
+                                             dstack, grad)
+                    f = ys[LAG, 0] if lagged else pred
+                    for i in range(6):
+                        a[i] = acc[idx, i]
+                    a[target] = f
+                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
+                    slope[LAG, 0] = rate * (pred - ys[LAG, 0]) if lagged else 0.0
+                    accumulate(total, slope, WEIGHTS[stage], stage, 0, n_y)
+                    p_s, q_s, r_s = ys[W, 0], ys[W + 1, 0], ys[W + 2, 0]
+                    if track_angles:
+                        euler_kinematics(axis, leaf[0], leaf[1], q_s, r_s, kin, jang)
+                    for c in range(n_c):
+                        df = tan_s[TL, c] if lagged else grad[c]
+                        tan_slope[TL, c] = rate * (grad[c] - tan_s[TL, c]) if lagged else 0.0
+                        if linear:
+                            s0, s1, s2 = tan_s[TV, c], tan_s[TV + 1, c], tan_s[TV + 2, c]
+                            tan_slope[TV, c] = -(q_s * s2 - r_s * s1)
+                            tan_slope[TV + 1, c] = -(r_s * s0 - p_s * s2)
+                            tan_slope[TV + 2, c] = -(p_s * s1 - q_s * s0)
+                            tan_slope[TV + target, c] += df
+                        else:
+                            tan_slope[TR, c] = df
+                            if track_angles:
+                                a0, a1 = tan_s[TA, c], tan_s[TA + 1, c]
+                                for i in range(3):
+                                    tan_slope[TA + i, c] = (jang[i, 0] * a0 + jang[i, 1] * a1
+                                                            + kin[i] * tan_s[TR, c])
+                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c,
+                                   TANGENT_ROWS)
+                finish_step(y, total, h, 0, n_y)
+                for c in range(n_c):
+                    advance(tan, tan_total, h, c, TANGENT_ROWS)
+            x = y[V + target, 0] if linear else y[W + axis, 0]
+            if not abs(x) < STATE_LIMIT:
+                alive = False
+                n_diverged += 1
+                for extra in range(n_rows):
+                    res[row + extra] = DIVERGED_RESIDUAL
+                    jac[row + extra, :] = 0.0
+                continue
+            res[row] = x - states[idx + 1, 3 + target]
+            for c in range(n_c):
+                jac[row, c] = tan[TV + target, c] if linear else tan[TR, c]
+            if n_rows == 2:
+                angle = euler_angle(axis, y[Q, 0], y[Q + 1, 0], y[Q + 2, 0], y[Q + 3, 0])
+                res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, axis])
+                for c in range(n_c):
+                    jac[row + 1, c] = att_weight * tan[TA + axis, c]
+    return n_diverged
