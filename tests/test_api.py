@@ -218,3 +218,24 @@ def test_parallel_searches_give_the_same_equations(flight):
     assert one.discovered.to_dict()["targets"] == two.discovered.to_dict()["targets"]
     with pytest.raises(gpquad.GpquadError, match="jobs"):
         gpquad.fit(flight, jobs=0, **FAST)
+
+
+def test_model_json_has_a_schema_and_old_files_load(model, tmp_path):
+    """model.json says its layout; a file without one (gpquad 0.1) loads, a newer one is
+    refused in one line."""
+    import json
+
+    from gpquad.models.equations import SCHEMA
+
+    path = model.save(tmp_path)
+    saved = json.loads(path.read_text())
+    assert saved["schema"] == SCHEMA
+    old = {k: v for k, v in saved.items() if k != "schema"}
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "model.json").write_text(json.dumps(old))
+    assert str(gpquad.load(tmp_path / "old")) == str(model)
+    (tmp_path / "new").mkdir()
+    (tmp_path / "new" / "model.json").write_text(json.dumps({**saved, "schema": SCHEMA + 1}))
+    with pytest.raises(gpquad.GpquadError, match="newer gpquad") as info:
+        gpquad.load(tmp_path / "new")
+    assert "\n" not in str(info.value)

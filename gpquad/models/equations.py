@@ -190,6 +190,10 @@ class Equation:
                    int(d.get("digits", 3)), float(d.get("lag", 0.0)))
 
 
+#: model.json's layout: 1 = gpquad 0.1 (no "schema" key), 2 = 0.2 (unmeasured, integrator).
+#: Older files are read; a newer one is refused in one line.
+SCHEMA = 2
+
 #: DiscoveredModel's optional reports: each a model.json entry of the same name when not None.
 REPORTS = ("joint_fit", "stability", "envelope", "mirror_parity", "symmetrized", "refined",
            "unmeasured")
@@ -242,6 +246,7 @@ class DiscoveredModel:
 
     def to_dict(self) -> dict:
         out = {
+            "schema": SCHEMA,
             "targets": {t: self.equations[t].to_dict() for t in TARGET_NAMES
                         if t in self.equations},
             "seed": self.seed,
@@ -261,6 +266,9 @@ class DiscoveredModel:
 
     @classmethod
     def from_dict(cls, d: dict) -> DiscoveredModel:
+        if int(d.get("schema", 1)) > SCHEMA:
+            raise ValueError(f"schema {d['schema']}: written by a newer gpquad (this one reads "
+                             f"up to {SCHEMA}); upgrade gpquad")
         names = tuple(d["input_names"])
         eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
                for t, e in d["targets"].items()}

@@ -16,6 +16,9 @@ from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasure
 from gpquad.study.search import Progress
 from gpquad.study.store import atomic_write_text, provenance, read_json, write_json
 
+#: run.json's layout: 1 = gpquad 0.1 (no "schema" key), 2 = 0.2 (time profile).
+RUN_SCHEMA = 2
+
 
 def default_run_dir(cfg: Config) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -65,7 +68,8 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
     load_seconds = time.perf_counter() - t_load
     resuming = _same_config(run_dir, cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
-    info = {"seed": cfg.seed, "config": cfg.to_dict(), "dataset": dataset.summary(),
+    info = {"schema": RUN_SCHEMA, "seed": cfg.seed, "config": cfg.to_dict(),
+            "dataset": dataset.summary(),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}
     if not resuming:
         write_json(run_dir / "config.json", folder_config_dict(cfg))
