@@ -28,12 +28,19 @@ from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.loop import evolve, final_equation
 from gpquad.study.seeding import target_seed
-from gpquad.study.store import HistoryWriter, atomic_write_text, provenance, read_json, write_json
+from gpquad.study.store import (
+    HistoryWriter,
+    atomic_write_text,
+    checked_name,
+    provenance,
+    read_json,
+    write_json,
+)
 
 
 def default_run_dir(cfg: Config) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path(cfg.output.dir) / f"{cfg.name}-seed{cfg.seed}-{stamp}"
+    return Path(cfg.output.dir) / f"{checked_name(cfg.name)}-seed{cfg.seed}-{stamp}"
 
 
 class Progress:
@@ -80,14 +87,7 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
     ev = cfg.evolution
     co = Coevolution(dataset, target, ev)
     if state is None and checkpoint_path is not None and checkpoint_path.exists():
-        try:
-            state, meta = checkpoint.load(checkpoint_path)
-            if history is not None:
-                history.truncate(int(meta["history_bytes"]))
-        except (checkpoint.CorruptCheckpoint, KeyError) as exc:
-            print(f"gpquad: warning: {checkpoint_path}: {exc}; restarting {target}",
-                  file=sys.stderr)
-            state = None
+        state = _resumed_state(co, checkpoint_path, history, history_start)
     if state is None:
         state = co.init_state(target_seed(cfg.seed, target))
         if history is not None and history_start is not None:
@@ -101,6 +101,22 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
         raise
     return final_equation(co, state, dataset, target), state
+
+
+def _resumed_state(co: Coevolution, path: Path, history: HistoryWriter | None,
+                   history_start: int | None) -> RunState | None:
+    """The state of a checkpoint that fits this run, with the history cut back to the length
+    it recorded (checked first); None, with one warning line, when the checkpoint is
+    damaged, foreign or an older pickled one (never unpickled)."""
+    try:
+        state, meta = checkpoint.load(path)
+        checkpoint.check_fits(state, co)
+        if history is not None:
+            history.truncate(checkpoint.history_bytes(meta, history_start or 0, history.size()))
+        return state
+    except checkpoint.CorruptCheckpoint as exc:
+        print(f"gpquad: warning: {path}: {exc}; restarting {co.target}", file=sys.stderr)
+        return None
 
 
 def _same_config(run_dir: Path, cfg: Config) -> bool:
@@ -126,8 +142,12 @@ def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
         record = json.loads(path.read_text())
         equation = Equation.from_dict(path.stem, record["equation"], dataset.input_names,
                                       dataset.trim)
-        return equation, int(record["history_bytes"])
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError) as exc:
+        end = record["history_bytes"]
+        if type(end) is not int or not 0 < end <= (path.parents[1] / "history.csv").stat().st_size:
+            raise ValueError(f"history_bytes {end!r} is not within history.csv")
+        return equation, end
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError,
+            GpquadError) as exc:
         print(f"gpquad: warning: {path}: damaged record of a finished equation "
               f"({type(exc).__name__}); identifying {path.stem} again", file=sys.stderr)
         return None
