@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import re
+from contextlib import contextmanager
 
 import numpy as np
 import sympy as sp
@@ -173,5 +174,20 @@ def check_expr_agrees(target: str, text, tree: Tree, leaf_names, delays: dict) -
                  f"against {b:.6g} at a test point); the prefix is what flies", field)
 
 
-__all__ = ["checked_input_names", "checked_targets", "checked_trim", "checked_number",
+@contextmanager
+def naming(path):
+    """Errors of reading the record in `path` (a GpquadError of a checked field, or a
+    malformed record's KeyError, TypeError, ValueError) as one GpquadError naming the file."""
+    try:
+        yield
+    except GpquadError as exc:
+        if exc.source:
+            raise
+        raise GpquadError(str(exc), source=str(path)) from None
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise GpquadError(f"damaged record (bad or missing entry {exc}); {FIX}",
+                          source=str(path)) from None
+
+
+__all__ = ["naming", "checked_input_names", "checked_targets", "checked_trim", "checked_number",
            "checked_tree", "parse_candidate", "check_expr_agrees"]

@@ -202,9 +202,9 @@ def check_fits(state: RunState, co) -> RunState:
                 or len(tree.delays) != params.n_inputs or tree.delays.max(initial=0) > \
                 cfg.max_delay:
             raise CorruptCheckpoint(f"model {i} uses leaves or delays this config has not")
-    if state.tests.min(initial=0) < 0 or state.tests.max(initial=0) >= co.space.size \
-            or state.suite.min(initial=0) < cfg.max_delay \
-            or state.suite.max(initial=0) + cfg.window_steps >= n_rows:
+    tests, suite = state.tests, state.suite
+    if (len(tests) and (tests.min() < 0 or tests.max() >= co.space.size)) \
+            or (len(suite) and (suite.min() < 0 or suite.max() + cfg.window_steps >= n_rows)):
         raise CorruptCheckpoint("its windows lie outside the training data")
     return state
 
