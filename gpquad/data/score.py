@@ -50,6 +50,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         DIVERGENCE_FACTOR,
         SCORED_INDEX,
         SCORED_STATES,
+        check_same_rate,
         diverged,
         load_run,
         model_view,
@@ -60,8 +61,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
 
     if part not in PARTS:
         raise GpquadError(f"choose one of {list(PARTS)}", field="--part")
-    if not horizon_s > 0:
-        raise GpquadError("must be > 0", field="--horizon-s")
+    if not (np.isfinite(horizon_s) and horizon_s > 0):
+        raise GpquadError(f"must be a finite number of seconds > 0, not {horizon_s}",
+                          field="--horizon-s")
     run = load_run(run_dir)
     cfg = load_folder_config(run_dir)
     path = Path(log).resolve()
@@ -84,6 +86,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         raise GpquadError(f"the run's equations read inputs {list(run.model.input_names)} but "
                           f"the log gives {list(dataset.input_names)}; score with the run's "
                           "input level", source=str(log), field="data.inputs")
+    check_same_rate(run.model, dataset.dt, str(log))
     steps = max(1, int(round(horizon_s / dataset.dt)))
     starts, steps = validation_windows(dataset, steps, run.max_delay)
     view = model_view(dataset, run.trim)

@@ -202,6 +202,21 @@ def _scoring_data(sd, run_dir: Path, info_path: Path) -> dict:
     return sd
 
 
+def check_same_rate(model, dt: float, source: str) -> None:
+    """A model whose delays count samples of another rate would read the wrong samples:
+    refuse a log sampled at another rate than the model's dt (one line)."""
+    model_dt = getattr(model, "dt", None)
+    if model_dt is not None and abs(dt - model_dt) > 1e-6 * model_dt:
+        raise GpquadError(f"the log is sampled at {1 / dt:.6g} Hz after the pipeline, the run's "
+                          f"equations at {1 / model_dt:.6g} Hz (their delays count samples); "
+                          "set data.resample_hz or data.downsample to give the run's rate",
+                          source=source, field="dt")
+
+
+#: Longest compare window (samples).
+MAX_HORIZON_STEPS = 1_000_000
+
+
 def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
     """One row per run: RSE per state, mean RSE, parameter count and fit time.
 
@@ -210,6 +225,10 @@ def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
     """
     if not run_dirs:
         raise GpquadError("give at least one run folder", field="compare")
+    if isinstance(horizon_steps, bool) or not isinstance(horizon_steps, (int, np.integer)) \
+            or not 1 <= horizon_steps <= MAX_HORIZON_STEPS:
+        raise GpquadError(f"the window length is a whole number of samples from 1 to "
+                          f"{MAX_HORIZON_STEPS}, not {horizon_steps}", field="--horizon")
     dataset = run_dataset(data_from or run_dirs[0])
     rows = []
     for run_dir in run_dirs:
@@ -217,6 +236,7 @@ def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
         row = {"run": str(run.path), "kind": run.kind, "n_parameters": run.n_parameters,
                "fit_time_s": run.fit_time_s}
         try:
+            check_same_rate(run.model, dataset.dt, str(run.path))
             score = score_model(run.model, dataset, horizon_steps, run.trim, run.max_delay)
         except GpquadError as exc:
             row.update({f"rse_{s}": np.nan for s in SCORED_STATES}, mean_rse=np.nan,
