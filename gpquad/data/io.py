@@ -164,6 +164,9 @@ def resolve_log(path, fmt: str | None, config=None):
     path = Path(path)
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(path))
+    if not (path.is_file() or path.is_dir()):
+        raise GpquadError("not a regular file or folder (a pipe or a device); give the log "
+                          "file", source=str(path))
     cfg = load_config(config) if config else Config()
     fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
         or guess_format(path)

@@ -69,6 +69,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     path = Path(log).resolve()
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(log), field="--data")
+    if not (path.is_file() or path.is_dir()):
+        raise GpquadError("not a regular file or folder (a pipe or a device)", source=str(log),
+                          field="--data")
     fmt = fmt or guess_format(path)
     if fmt not in READERS:
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(log),

@@ -210,6 +210,8 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
     cfg = load_sweep_config(folder)
     with naming(folder / "assembly.json"):
         assembly = json.loads((folder / "assembly.json").read_text())
+        if not isinstance(assembly, dict):
+            raise ValueError("not an object")
     median = DiscoveredModel.load(folder / "models" / "median")
     out = folder / "report"
     written: list[Path] = []
