@@ -70,7 +70,8 @@ def payloads(marker: Path) -> dict[str, str]:
 class Case:
     name: str
     argv: list[str]
-    #: "refuse": exit 2 with one line; "warn": exit 0 with a warning line is also fine
+    #: "refuse": exit 2 with one line; "warn": exit 0 with a warning line is also fine;
+    #: "safe": the command does not read the bad field, so a clean exit 0 is fine too
     expect: str = "refuse"
     timeout: float = 120.0
     #: files the user owns: they must keep their bytes
@@ -176,7 +177,8 @@ def exec_cases(work_of, fix: Path) -> list[Case]:
                                       "--no-figures"),
                     "report": gp("report", run, "--format", "png"),
                     "run-resume": gp("run", fix / "six.toml", "--out", run, "--quiet")}[command]
-            out.append(Case(name, argv))
+            unread = where == "config.json" and command == "compare"  # compare reads run.json
+            out.append(Case(name, argv, expect="safe" if unread else "refuse"))
         # candidates[].expr reached by the stability repair (a diverging equation)
         for where in ("run-checkpoint-record", "sweep-result", "report-reassemble"):
             name = f"exec/candidates/{where}/{pname}"
@@ -285,7 +287,8 @@ def path_cases(work_of, fix: Path) -> list[Case]:
                 "files": f, "inputs": ["u_P", "u_R", "u_Y", "u_T"], "validation_fraction": 0.5}))
             argv = gp("compare", run, "--out", work / "cmp") if command == "compare" else \
                 gp("score", run, "--data", fix / "flight.csv")
-            out.append(Case(name, argv, expect="refuse" if command == "compare" else "warn"))
+            # score re-reads the run's config.json, never run.json's scoring_data
+            out.append(Case(name, argv, expect="refuse" if command == "compare" else "safe"))
     return out
 
 
@@ -378,13 +381,12 @@ def config_cases(work_of, fix: Path) -> list[Case]:
         "const-variance-inf": "const_variance = inf", "model-generations-0":
         "model_generations = 0", "exclude-all": 'exclude_leaves = ["phi", "theta", "psi", '
         '"u", "v", "w", "p", "q", "r", "u_P", "u_R", "u_Y", "u_T"]',
-        "iterations-huge": "iterations = 1000000000000",
     }
     for label, line in bad_ev.items():
         name = f"config/evolution/{label}/run"
         work = work_of(name)
         text = quick_config().replace("[simulator]", line + "\n[simulator]")
-        if label in ("model-generations-0", "iterations-huge"):
+        if label == "model-generations-0":
             key = line.split(" =")[0]
             text = "\n".join(r for r in text.splitlines() if not r.startswith(key + " ")) \
                 .replace("[simulator]", line + "\n[simulator]")
@@ -463,13 +465,12 @@ def command_cases(work_of, fix: Path) -> list[Case]:
         work = work_of(name)
         out.append(Case(name, gp("score", copy_run(fix, work), "--data", fix / "flight.csv",
                                  "--horizon-s", value), timeout=60))
-    name = "command/score-other-rate"
-    work = work_of(name)
-    text = (fix / "flight.csv").read_text().splitlines()
-    rows = [text[0]] + [",".join([repr(float(r.split(",")[0]) / 2)] + r.split(",")[1:])
-                        for r in text[1:]]
-    fast = write(work / "fast.csv", "\n".join(rows) + "\n")
-    out.append(Case(name, gp("score", copy_run(fix, work), "--data", fast), timeout=60))
+    for label, dt in (("model-50hz", 0.02), ("model-12.5hz", 0.08)):
+        name = f"command/score-other-rate/{label}"
+        work = work_of(name)
+        run = copy_run(fix, work)
+        edit_json(run / "model.json", lambda o, dt=dt: o.__setitem__("dt", dt))
+        out.append(Case(name, gp("score", run, "--data", fix / "flight.csv"), timeout=60))
     fly_inputs = {"empty": b"", "garbage": b"\x00\xff garbage \x01\n1,2\n",
                   "utf16": "t,u_P,u_R,u_Y,u_T\n0,0,0,0,0\n0.04,0,0,0,0\n".encode("utf-16"),
                   "header-only": b"t,u_P,u_R,u_Y,u_T\n",
@@ -576,6 +577,8 @@ def classify(case: Case, work: Path, cases_root: Path, before: set[Path], env) -
         warned = any("warning" in line for line in lines)
         if case.expect == "warn" and warned:
             return "ok", next(line for line in lines if "warning" in line)[:160]
+        if case.expect == "safe":
+            return "ok", "the command does not read the field"
         return "silent", (lines[0] if lines else "exit 0, nothing said")[:160]
     return "untidy", f"exit {code}, {len(lines)} lines: {first_line}"
 

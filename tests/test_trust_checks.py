@@ -241,3 +241,30 @@ def test_report_of_a_damaged_sweep(tmp_path, capsys, sweep_folder, target, blob)
     (folder / target).write_bytes(blob)
     line = one_error_line(capsys, ["report", folder, "--format", "png"])
     assert os.path.basename(target) in line, line
+
+
+def test_a_log_whose_inputs_never_change_is_refused(tmp_path):
+    """Every log reader gets the generic reader's excitation check (constant set-points)."""
+    import dataclasses
+
+    from gpquad.data.io import _read_file
+    from gpquad.errors import GpquadError
+    from gpquad.study.config import Config
+
+    flight = simulate(SimulatorConfig(duration_s=10.0), INPUTS)
+    still = dataclasses.replace(flight, inputs=np.ones_like(flight.inputs))
+    assert _read_file(Config(), lambda path, data: [flight], tmp_path / "log.ulg") == [flight]
+    with pytest.raises(GpquadError, match="never change") as info:
+        _read_file(Config(), lambda path, data: [still, still], tmp_path / "log.ulg")
+    assert "log.ulg" in str(info.value) and "data.inputs" in str(info.value)
+
+
+def test_score_of_an_interrupted_run_warns(tmp_path, capsys, flight_csv):
+    run = gp_folder(tmp_path)
+    model = json.loads((run / "model.json").read_text())
+    model["interrupted"] = True
+    (run / "model.json").write_text(json.dumps(model))
+    capsys.readouterr()
+    assert main(["score", str(run), "--data", str(flight_csv)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "interrupted" in err[0]
