@@ -268,3 +268,15 @@ def test_score_of_an_interrupted_run_warns(tmp_path, capsys, flight_csv):
     assert main(["score", str(run), "--data", str(flight_csv)]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "interrupted" in err[0]
+
+
+def test_older_dataflash_timestamps_in_milliseconds():
+    """2015-era DataFlash logs stamp messages TimeMS; neither stamp is one line naming it."""
+    from gpquad.data.ardupilot import seconds
+    from gpquad.errors import GpquadError
+
+    assert np.allclose(seconds({"TimeMS": [1000, 1040]}, "ATT", "x.bin"), [1.0, 1.04])
+    assert np.allclose(seconds({"TimeUS": [1_000_000]}, "ATT", "x.bin"), [1.0])
+    with pytest.raises(GpquadError, match="neither TimeUS nor TimeMS") as info:
+        seconds({"Roll": [0.0]}, "ATT", "x.bin")
+    assert "x.bin" in str(info.value) and "ATT" in str(info.value)
