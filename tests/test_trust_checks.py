@@ -280,3 +280,14 @@ def test_older_dataflash_timestamps_in_milliseconds():
     with pytest.raises(GpquadError, match="neither TimeUS nor TimeMS") as info:
         seconds({"Roll": [0.0]}, "ATT", "x.bin")
     assert "x.bin" in str(info.value) and "ATT" in str(info.value)
+
+
+def test_sweep_with_an_unreachable_dask_scheduler(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("dask.distributed")
+    from gpquad.study import sweep
+
+    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1)
+    (tmp_path / "c.toml").write_text(QUICK)
+    line = one_error_line(capsys, ["sweep", tmp_path / "c.toml", "--backend", "dask",
+                                   "--address", "tcp://127.0.0.1:1", "--out", tmp_path / "s"])
+    assert "--address" in line and "no Dask scheduler" in line

@@ -34,6 +34,8 @@ from gpquad.study.store import HistoryWriter, checked_name, provenance, write_js
 from gpquad.study.sweep_folders import RunKey, fingerprint, grid, run_dir
 
 BACKENDS = ("loky", "dask")
+#: Seconds to wait for a Dask scheduler given by --address.
+SCHEDULER_TIMEOUT_S = 10
 
 
 # --------------------------------------------------------------------------- one run
@@ -211,7 +213,13 @@ def _parallel(jobs: int, backend: str, address: str | None):
 
         cluster = None
         if address:
-            client = Client(address)
+            try:
+                client = Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise GpquadError(f"no Dask scheduler answers at {address} within "
+                                  f"{SCHEDULER_TIMEOUT_S} s ({type(exc).__name__}); start one "
+                                  "(`dask scheduler`) or give its address", field="--address"
+                                  ) from None
         else:
             cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=None,
