@@ -289,5 +289,6 @@ def test_sweep_with_an_unreachable_dask_scheduler(tmp_path, capsys, monkeypatch)
     monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1)
     (tmp_path / "c.toml").write_text(QUICK)
     line = one_error_line(capsys, ["sweep", tmp_path / "c.toml", "--backend", "dask",
-                                   "--address", "tcp://127.0.0.1:1", "--out", tmp_path / "s"])
+                                   "--address", "tcp://127.0.0.1:1", "--out", tmp_path / "s",
+                                   "--quiet"])
     assert "--address" in line and "no Dask scheduler" in line
