@@ -55,7 +55,7 @@ def _label(name: str) -> str:
 def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | None = None,
                       best_label: str = "best model") -> list[Path]:
     """Six panels (u, v, w, p, q, r) against time: data, best model, envelope (if any)."""
-    d = np.load(npz_path)
+    d = np.load(npz_path, allow_pickle=False)
     t, data, best, full = d["t"], d["data"], d["best"], d["full"]
     n = len(full) if n_models is None else n_models
     targets = d["targets"].tolist() if "targets" in d.files else list(TARGET_NAMES)
