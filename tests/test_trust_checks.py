@@ -292,3 +292,22 @@ def test_sweep_with_an_unreachable_dask_scheduler(tmp_path, capsys, monkeypatch)
                                    "--address", "tcp://127.0.0.1:1", "--out", tmp_path / "s",
                                    "--quiet"])
     assert "--address" in line and "no Dask scheduler" in line
+
+
+def test_a_full_disk_is_one_line(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from gpquad.models import equations
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(equations.DiscoveredModel, "load", full)
+    line = one_error_line(capsys, ["export", gp_folder(tmp_path)])
+    assert "no space left" in line
+
+
+def test_an_error_quoting_a_line_break_stays_one_line(tmp_path, capsys):
+    (tmp_path / "c.toml").write_text(QUICK + '[simulator.equations]\np_dot = "p\\n+ q$"\n')
+    line = one_error_line(capsys, ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"])
+    assert "simulator.equations.p_dot" in line
