@@ -186,7 +186,7 @@ def exec_cases(work_of, fix: Path) -> list[Case]:
             payload = payloads(work.parent / "PWNED")[pname]
 
             def poison(eq, payload=payload):
-                eq["prefix"] = {"codes": [2, 4, 11], "values": [60.0, 0.0, 0.0]}  # 60*p
+                eq["prefix"] = {"codes": [2, 4, 11], "values": [0.0, 60.0, 0.0]}  # 60*p
                 eq["candidates"] = [{"expr": payload, "delays": {}, "error": 0.1, "size": 3}]
 
             if where == "run-checkpoint-record":
