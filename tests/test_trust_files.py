@@ -180,3 +180,48 @@ def test_a_valid_checkpoint_resumes_without_a_word(finished_run, tmp_path, capsy
     assert main(["run", str(finished_run / "c.toml"), "--out", str(run), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     assert (run / "model.json").read_bytes() == (finished_run / "run" / "model.json").read_bytes()
+
+
+def _forge(state_dict: dict, change) -> bytes:
+    import copy
+    import hashlib
+    import struct
+
+    fields = copy.deepcopy(state_dict)
+    change(fields)
+    payload = json.dumps({"state": fields, "meta": {"history_bytes": 0}}).encode()
+    return struct.pack("<8sQ32s", checkpoint.MAGIC, len(payload),
+                       hashlib.sha256(payload).digest()) + payload
+
+
+FORGERIES = {
+    "object-dtype": lambda f: f["model_errors"].update(dtype="object"),
+    "string-values": lambda f: f["suite"].update(data=["x"] * len(f["suite"]["data"])),
+    "bad-shape": lambda f: f["tests"].update(shape=[999]),
+    "incomplete-tree": lambda f: f["models"][0].update(codes=[0]),
+    "negative-code": lambda f: f["models"][0].update(codes=[-1], values=[0.0]),
+    "bit-generator-not-a-class": lambda f: f["rng_state"].update(bit_generator="default_rng"),
+    "bit-generator-unknown": lambda f: f["rng_state"].update(bit_generator="os"),
+    "rng-state-nested-deep": lambda f: f["rng_state"].update(state={"a": {"b": {"c": {}}}}),
+    "extra-field": lambda f: f.update(payload="__import__('os')"),
+    "missing-field": lambda f: f.pop("suite"),
+    "population-mismatch": lambda f: f["model_errors"].update(shape=[1], data=[0.0]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FORGERIES))
+def test_a_forged_data_checkpoint_is_refused(finished_run, tmp_path, case):
+    """A checkpoint is data: anything but the numbers, names and trees of a RunState is
+    refused as damaged (and the run restarts that target)."""
+    state, _ = checkpoint.load(finished_run / "run" / "checkpoints" / "p_dot.ckpt")
+    (tmp_path / "c.ckpt").write_bytes(_forge(checkpoint.state_to_dict(state), FORGERIES[case]))
+    with pytest.raises(checkpoint.CorruptCheckpoint):
+        checkpoint.load(tmp_path / "c.ckpt")
+
+
+def test_the_forger_unchanged_writes_a_readable_checkpoint(finished_run, tmp_path):
+    """The forgeries above differ from a good checkpoint only by their change."""
+    state, _ = checkpoint.load(finished_run / "run" / "checkpoints" / "p_dot.ckpt")
+    (tmp_path / "c.ckpt").write_bytes(_forge(checkpoint.state_to_dict(state), lambda f: None))
+    loaded, meta = checkpoint.load(tmp_path / "c.ckpt")
+    assert meta == {"history_bytes": 0} and loaded.iteration == state.iteration
