@@ -57,6 +57,8 @@ SIMULATOR = {
     "time-constant-zero": ("stick_time_constant_s = 0.0", "simulator.stick_time_constant_s"),
     "motionless": ("stick_sd = {u_P = 0.0, u_R = 0.0, u_Y = 0.0, u_T = 0.0}\n"
                    "pilot_gains = {}", "simulator.stick_sd"),
+    "delay-huge": ('equations = {p_dot = "u_R(t-100000000) - p"}', "simulator.equations.p_dot"),
+    "power-huge": ('equations = {p_dot = "p**100000"}', "simulator.equations.p_dot"),
     "one-input-still": ("stick_sd = {u_Y = 0.0}\npilot_gains = {u_R = {phi = -0.6}}",
                         "simulator.stick_sd.u_Y"),
 }
@@ -72,7 +74,7 @@ def test_simulator_settings(tmp_path, capsys, case, command):
     argv = ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"] if command == \
         "simulate" else ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"]
     line = one_error_line(capsys, argv)
-    assert f"field '{field}'" in line, line
+    assert field in line, line
     assert not (tmp_path / "f.csv").exists() and not (tmp_path / "r" / "model.json").exists()
 
 
@@ -87,6 +89,15 @@ def test_a_partial_equations_table_changes_one_equation():
 def test_a_partial_stick_table_moves_every_input():
     flight = simulate(SimulatorConfig(duration_s=20.0, stick_sd={"u_P": 0.2}), INPUTS)
     assert all(np.ptp(flight.inputs[:, j]) > 0.01 for j in range(4))
+
+
+@pytest.mark.parametrize("line,field", [("const_variance = inf", "evolution.const_variance"),
+                                        ("const_low = -inf", "evolution.const_low")])
+def test_constant_settings_must_be_finite(tmp_path, capsys, line, field):
+    (tmp_path / "c.toml").write_text(QUICK.replace("[simulator]", f"{line}\n[simulator]"))
+    out = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r",
+                                  "--quiet"])
+    assert f"'{field}'" in out
 
 
 def test_exclude_leaves_of_every_variable(tmp_path, capsys):

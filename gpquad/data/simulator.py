@@ -20,6 +20,9 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, terminal_names
 from gpquad.errors import GpquadError
 from gpquad.study.config import SimulatorConfig
 
+#: Longest input delay (samples) of a truth equation.
+MAX_TRUTH_DELAY = 10_000
+
 
 class TruthModel:
     """Known accelerations as sympy equations with per-input delays (samples)."""
@@ -33,6 +36,10 @@ class TruthModel:
                 raise GpquadError(f"unknown target '{target}'", field="simulator.equations")
             expr, delays = parse_equation(text, self.input_names,
                                           source=f"simulator.equations.{target}")
+            if max(delays.values(), default=0) > MAX_TRUTH_DELAY:
+                raise GpquadError(f"a delay of {max(delays.values())} samples; the simulator's "
+                                  f"delays are at most {MAX_TRUTH_DELAY}",
+                                  field=f"simulator.equations.{target}")
             self.exprs[target] = expr
             self.delays[target] = delays
         # an input written at several delays is one leaf per delay (gpquad.engine.taps)
