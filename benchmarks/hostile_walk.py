@@ -78,6 +78,9 @@ class Case:
     protected: dict[Path, bytes] = field(default_factory=dict)
     #: a second command started at the same time (concurrent runs)
     concurrent: list[str] | None = None
+    #: "moves": on exit 0, every state and input of the flight written (simulate's f.csv,
+    #: or run's model.json envelope) must vary; a still signal is a silent wrong result
+    verify: str = ""
 
 
 def write(path: Path, text, mode: str = "w") -> Path:
@@ -376,9 +379,11 @@ def config_cases(work_of, fix: Path) -> list[Case]:
             cfg = write(work / "c.toml", text + line + "\n")
             argv = gp("simulate", cfg, "--out", work / "f.csv") if command == "simulate" else \
                 gp("run", cfg, "--out", work / "r", "--quiet")
-            # a table that names one entry changes that one (merged over the defaults)
+            # a table that names one entry changes that one (merged over the defaults): the
+            # flight must still move every state and input
             merged = label in ("stick-partial", "equations-partial")
-            out.append(Case(name, argv, expect="safe" if merged else "refuse", timeout=90))
+            out.append(Case(name, argv, expect="safe" if merged else "refuse", timeout=90,
+                            verify="moves" if merged else ""))
     bad_ev = {
         "const-variance-inf": "const_variance = inf", "model-generations-0":
         "model_generations = 0", "exclude-all": 'exclude_leaves = ["phi", "theta", "psi", '
@@ -512,6 +517,25 @@ def snapshot(folder: Path, skip: Path) -> set[Path]:
     return found
 
 
+SIGNALS = ("u", "v", "w", "p", "q", "r", "u_P", "u_R", "u_Y", "u_T")
+
+
+def still_signals(work: Path) -> list[str]:
+    """The states and inputs that never change in the flight a command wrote: simulate's
+    f.csv, or the training envelope of run's model.json."""
+    if (work / "f.csv").exists():
+        import pandas as pd
+
+        table = pd.read_csv(work / "f.csv")
+        return [n for n in SIGNALS if n in table and float(table[n].max() - table[n].min())
+                < 1e-3]
+    model = work / "r" / "model.json"
+    if model.exists():
+        envelope = json.loads(model.read_text()).get("envelope") or {}
+        return [n for n in SIGNALS if n in envelope and envelope[n][1] - envelope[n][0] < 1e-3]
+    return ["(no flight written)"]
+
+
 def limit_memory():
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
@@ -579,8 +603,12 @@ def classify(case: Case, work: Path, cases_root: Path, before: set[Path], env) -
         warned = any("warning" in line for line in lines)
         if case.expect == "warn" and warned:
             return "ok", next(line for line in lines if "warning" in line)[:160]
+        still = still_signals(work) if case.verify == "moves" else []
+        if still:
+            return "silent", f"exit 0 but {', '.join(still)} never change"
         if case.expect == "safe":
-            return "ok", "the command does not read the field"
+            return "ok", ("every signal moves" if case.verify else
+                          "the command does not read the field")
         return "silent", (lines[0] if lines else "exit 0, nothing said")[:160]
     return "untidy", f"exit {code}, {len(lines)} lines: {first_line}"
 
