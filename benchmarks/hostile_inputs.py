@@ -179,7 +179,8 @@ def command_cases(work_of, fix: Path) -> list[Case]:
     os.mkfifo(work / "pipe.csv")
     out.append(Case(name, gp("data", "check", work / "pipe.csv", "--plot", work / "p.png"),
                     timeout=30))
-    for label, target in (("history", "history.csv"), ("sweep-json", "sweep.json"),
+    for label, target in (("history", "runs/p_dot/rep000/history.csv"),
+                          ("sweep-json", "sweep.json"),
                           ("result-json", "runs/p_dot/rep000/result.json")):
         for blob_label, blob in (("garbage", b"\x00\xffnot it"), ("empty", b"")):
             name = f"command/report-damaged/{label}/{blob_label}"
