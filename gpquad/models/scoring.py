@@ -103,6 +103,7 @@ def score_model(model, dataset: Dataset, horizon_steps: int, trim: dict | None =
     if missing or tuple(model.input_names) != tuple(dataset.input_names):
         raise GpquadError(f"the model reads inputs {list(model.input_names)} but the scoring data "
                           f"has {list(dataset.input_names)}", field="compare")
+    check_same_rate(model, dataset.dt, None)
     starts, steps = validation_windows(dataset, horizon_steps, max_delay)
     view = model_view(dataset, trim or {})
     pred = model.simulate(view, starts, steps)
@@ -202,7 +203,7 @@ def _scoring_data(sd, run_dir: Path, info_path: Path) -> dict:
     return sd
 
 
-def check_same_rate(model, dt: float, source: str) -> None:
+def check_same_rate(model, dt: float, source: str | None) -> None:
     """A model whose delays count samples of another rate would read the wrong samples:
     refuse a log sampled at another rate than the model's dt (one line)."""
     model_dt = getattr(model, "dt", None)
@@ -236,7 +237,6 @@ def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
         row = {"run": str(run.path), "kind": run.kind, "n_parameters": run.n_parameters,
                "fit_time_s": run.fit_time_s}
         try:
-            check_same_rate(run.model, dataset.dt, str(run.path))
             score = score_model(run.model, dataset, horizon_steps, run.trim, run.max_delay)
         except GpquadError as exc:
             row.update({f"rse_{s}": np.nan for s in SCORED_STATES}, mean_rse=np.nan,
