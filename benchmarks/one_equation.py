@@ -32,6 +32,7 @@ import sympy as sp
 
 from gpquad.benchmark.scenarios import build_scenario
 from gpquad.engine.taps import base_input
+from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, TARGET_STATE
 from gpquad.models.equations import DiscoveredModel
 
@@ -103,7 +104,7 @@ def sindy_rhs(path: Path, group: str, target: str):
     cell = json.loads(path.read_text())
     text = cell["equations"][group][target] if group in cell["equations"] else \
         cell["equations"][target]
-    return sympy_rhs(sp.sympify(text.replace("^", "**")), {})
+    return sympy_rhs(parse_in_symbols(text, None, caret_power=True), {})
 
 
 def library_rhs(ds_fit, target: str, library: str):

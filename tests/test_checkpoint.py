@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import pickle
 import shutil
 
 import numpy as np
@@ -54,7 +53,7 @@ def test_round_trip_then_continue_equals_uninterrupted(engine, tmp_path):
 def test_every_runstate_field_but_history_is_stored(engine):
     state = engine.init_state(np.random.SeedSequence(4))
     blob = checkpoint.encode(state, {})
-    payload = pickle.loads(blob[checkpoint._HEADER.size:])
+    payload = json.loads(blob[checkpoint._HEADER.size:])
     names = {f.name for f in dataclasses.fields(RunState)} - {"history"}
     assert set(payload["state"]) == names
 

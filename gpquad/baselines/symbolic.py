@@ -68,7 +68,7 @@ class ParametricModel:
         xs = [sp.Symbol(n, real=True) for n in state_names]
         us = [sp.Symbol(n, real=True) for n in input_names]
         ps = [sp.Symbol(n, real=True) for n in param_names]
-        out = [sp.sympify(e) for e in func(xs, us, ps)]
+        out = [sp.sympify(e, strict=True) for e in func(xs, us, ps)]  # no strings
         if len(out) != len(state_names):
             raise GpquadError(f"f returned {len(out)} rates for {len(state_names)} states",
                               field="model")

@@ -14,8 +14,10 @@ import sympy as sp
 
 from gpquad.benchmark.rollout import MAX_LAG, lagged_inputs, lagged_names
 from gpquad.engine.taps import base_input
+from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.tree.export import parse_equation
 from gpquad.engine.variables import STATE_NAMES, target_index
+from gpquad.errors import GpquadError
 
 SHARE = 0.02
 REL_TOL = 0.05
@@ -46,7 +48,7 @@ def dominant_terms(text: str, target: str, dataset) -> dict[str, float]:
     """{term: coefficient} of the terms of an equation (features, trim-subtracted inputs)
     whose RMS share on the training samples is >= SHARE, in raw inputs."""
     syms = _symbols(dataset.input_names)
-    expr = sp.sympify(text.replace("^", "**"), locals=syms)
+    expr = parse_in_symbols(text, syms, caret_power=True)
     raw = {syms[f"{n}_l{lag}"]: syms[f"{n}_l{lag}"] - dataset.trim.get(n, 0.0)
            for n in dataset.input_names for lag in range(MAX_LAG + 1)
            if dataset.trim.get(n, 0.0)}
@@ -77,7 +79,7 @@ def recovered(text: str, truth: str, target: str, dataset) -> bool:
     expected = truth_terms(truth, dataset.input_names)
     try:
         found = dominant_terms(text, target, dataset)
-    except (sp.SympifyError, TypeError, KeyError, ZeroDivisionError):
+    except (GpquadError, TypeError, KeyError, ZeroDivisionError):
         return False
     if set(found) != set(expected):
         return False

@@ -149,9 +149,9 @@ def time_split(flights: list[Flight], fraction: float) -> tuple[list[Flight], li
 
 
 def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
-    from gpquad.data.simulator import simulate
+    from gpquad.data.simulator import completed, simulate
 
-    sim = cfg.simulator
+    sim = completed(cfg.simulator)
     if noisy:
         sim = dataclasses.replace(sim, measurement_noise=dict(NOISE))
     train = [simulate(sim, cfg.data.inputs)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import os
 import sys
@@ -59,6 +60,7 @@ def _cmd_export(args) -> int:
     from gpquad.models.exports import export, write_export
 
     model = DiscoveredModel.load(args.run)
+    _warn_interrupted(model, args.run)
     if args.out:
         for path in write_export(model, args.format, args.out, raw=args.raw_inputs):
             print(f"wrote {path}")
@@ -69,6 +71,13 @@ def _cmd_export(args) -> int:
                          for name, text in sorted(result.items(), key=lambda kv: kv[0][-1]))
     print(result, end="" if result.endswith("\n") else "\n")
     return 0
+
+
+def _warn_interrupted(model, run) -> None:
+    """One warning line when the model is that of an interrupted run."""
+    if model.interrupted:
+        print(f"gpquad: warning: {run}: the run was interrupted; these are the equations found "
+              "so far (the same `gpquad run` command resumes it)", file=sys.stderr)
 
 
 def _cmd_fly(args) -> int:
@@ -83,13 +92,18 @@ def _cmd_fly(args) -> int:
     path = Path(args.inputs)
     if not path.is_file():
         raise GpquadError("file not found", source=str(path))
+    _warn_interrupted(model, args.run)
     if path.suffix.lower() in (".parquet", ".pq"):
         from gpquad.extras import require
 
         require("pyarrow", "reading Parquet files")
-        table = pd.read_parquet(path)
-    else:
-        table = pd.read_csv(path)
+    try:
+        table = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else \
+            pd.read_csv(path)
+    except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError,
+            pd.errors.EmptyDataError) as exc:
+        raise GpquadError(f"not a readable table ({type(exc).__name__}); give a UTF-8 CSV or a "
+                          "Parquet file with a column per input", source=str(path)) from None
     missing = [n for n in model.input_names if n not in table.columns]
     if missing:
         raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
@@ -98,9 +112,17 @@ def _cmd_fly(args) -> int:
         raise GpquadError(f"the run has no equation for {absent}; identify all six targets, or "
                           "give --zero-missing to fly them as zero acceleration",
                           source=str(args.run), field="targets")
-    if "t" in table.columns:
-        _check_input_clock(table["t"].to_numpy(dtype=float), model.dt, str(path))
-    inputs = table[list(model.input_names)].to_numpy(dtype=float)
+    try:
+        clock = table["t"].to_numpy(dtype=float) if "t" in table.columns else None
+        inputs = table[list(model.input_names)].to_numpy(dtype=float)
+    except (ValueError, TypeError):
+        raise GpquadError("the time and input columns must hold numbers", source=str(path),
+                          field=model.input_names[0]) from None
+    if len(inputs) < 2:
+        raise GpquadError(f"{len(inputs)} rows; give at least 2 samples of the inputs",
+                          source=str(path), field=model.input_names[0])
+    if clock is not None:
+        _check_input_clock(clock, model.dt, str(path))
     if not np.all(np.isfinite(inputs)):
         raise GpquadError("inputs contain NaN", source=str(path), field=model.input_names[0])
     initial = None
@@ -339,6 +361,9 @@ def _run(args) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except OSError as exc:
+        if exc.errno == errno.ENOSPC:
+            return _fail(f"{exc.filename or 'a file'}: no space left on the device; free some "
+                         "and run the same command again")
         if exc.filename is None:
             raise
         return _fail(f"{exc.filename}: {exc.strerror or exc}; check the path and that it is a "
@@ -348,7 +373,8 @@ def _run(args) -> int:
 def _fail(message: str) -> int:
     """The one top-level error path: one line on stderr, exit code 2."""
     try:
-        print(f"gpquad: error: {message}", file=sys.stderr)
+        one_line = " ".join(message.split("\n"))  # a message quoting a file stays one line
+        print(f"gpquad: error: {one_line}", file=sys.stderr)
     except BrokenPipeError:
         pass
     return 2

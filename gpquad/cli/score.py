@@ -8,8 +8,14 @@ from gpquad.data.score import INTEGRATORS, PARTS, format_score, score_log
 
 
 def _cmd_score(args) -> int:
+    import sys
+    from pathlib import Path
+
     result = score_log(args.run, args.data, args.horizon_s, args.format, args.part,
                        check=not args.no_check, integrator=args.integrator)
+    if json.loads((Path(args.run) / "model.json").read_text()).get("interrupted") is True:
+        print(f"gpquad: warning: {args.run}: the run was interrupted; these are the equations "
+              "found so far (the same `gpquad run` command resumes it)", file=sys.stderr)
     print(json.dumps(result) if args.json else format_score(result))
     return 0
 

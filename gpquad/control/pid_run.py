@@ -72,7 +72,10 @@ def run_pid(run_dir, cfg: ControlConfig, out_dir, courses: int = 1, seed: int | 
     design = design_point(plant, span, source=str(run_dir / "model.json"))
     truth = None
     if not run_cfg.data.files:
-        truth = truth_plant(run_cfg.simulator.equations, run_cfg.data.inputs, model.dt)
+        from gpquad.data.simulator import completed
+
+        truth = truth_plant(completed(run_cfg.simulator).equations, run_cfg.data.inputs,
+                            model.dt)
     say(f"gpquad control pid: model {run_dir} ({len(model.input_names)} inputs, "
         f"{p.input_level}-level), channels {design.to_dict(model.input_names)['channels']}; "
         f"truth plant: {'reference simulator' if truth else 'none (real data)'}; seed {seed}")

@@ -49,14 +49,27 @@ def _first(log: DataFlashLog, names) -> tuple[str, dict] | tuple[None, dict]:
     return None, {}
 
 
+def seconds(d: dict, name: str, source: str) -> np.ndarray:
+    """A message's timestamps in seconds: TimeUS (microseconds), or TimeMS (milliseconds) of
+    the older DataFlash logs (about 2015 and before); one line naming the message when it
+    has neither."""
+    if "TimeUS" in d:
+        return np.asarray(d["TimeUS"], dtype=float) * 1e-6
+    if "TimeMS" in d:
+        return np.asarray(d["TimeMS"], dtype=float) * 1e-3
+    raise GpquadError(f"message {name} has no timestamp (neither TimeUS nor TimeMS)",
+                      source=source, field=f"{name}.TimeUS")
+
+
 def _stream(log, name, d, fields, columns, kind, scale=1.0, offset=0.0, required=True):
-    missing = [f for f in ("TimeUS", *fields) if f not in d]
+    t = seconds(d, name, str(log.path))
+    missing = [f for f in fields if f not in d]
     if missing:
         raise GpquadError(f"message {name} has no field '{missing[0]}'", source=str(log.path),
                           field=f"{name}.{missing[0]}")
     values = (np.column_stack([np.asarray(d[f], dtype=float) for f in fields]) - offset) * scale
-    return Stream(name, np.asarray(d["TimeUS"], dtype=float) * 1e-6, values, tuple(columns),
-                  kind, str(log.path), f"{name}.TimeUS", required)
+    return Stream(name, t, values, tuple(columns), kind, str(log.path), f"{name}.TimeUS",
+                  required)
 
 
 def _armed_stream(log, ev) -> Stream | None:
@@ -67,7 +80,7 @@ def _armed_stream(log, ev) -> Stream | None:
     keep = np.isin(ids, (ARMED, DISARMED))
     if not keep.any():
         return None
-    t = np.asarray(ev["TimeUS"], dtype=float)[keep] * 1e-6
+    t = seconds(ev, "EV", str(log.path))[keep]
     state = (ids[keep] == ARMED).astype(float)
     t = np.concatenate([[0.0], t])
     state = np.concatenate([[1.0 - state[0]], state])
@@ -92,8 +105,8 @@ def ardupilot_log_table(path, data) -> LogTable:
                               field="ATT")
         eul = np.radians(np.column_stack([att["Roll"], att["Pitch"], att["Yaw"]]))
         quat = np.array([quat_from_euler(*e) for e in eul])
-        streams = [Stream("ATT", att["TimeUS"] * 1e-6, quat, ("qw", "qx", "qy", "qz"), "quat",
-                          src, "ATT.TimeUS")]
+        streams = [Stream("ATT", seconds(att, "ATT", src), quat, ("qw", "qx", "qy", "qz"),
+                          "quat", src, "ATT.TimeUS")]
         measured.update({a: "measured (ATT Euler angles)" for a in ("phi", "theta", "psi")})
     g_name, gyro = _first(log, ("IMU",))
     if g_name and "GyrX" in gyro:
@@ -152,7 +165,7 @@ def _input_streams(log) -> list[Stream]:
     if rate and all(f in rate for f in ("RDes", "PDes", "YDes", "ROut", "POut", "YOut")):
         out.append(_stream(log, "RATE", rate, ("RDes", "PDes", "YDes"), ("p_sp", "q_sp", "r_sp"),
                            "hold", np.pi / 180, required=False))
-        out.append(Stream("RATE.Out", rate["TimeUS"] * 1e-6,
+        out.append(Stream("RATE.Out", seconds(rate, "RATE", str(log.path)),
                           np.column_stack([rate["ROut"], rate["POut"], rate["YOut"]]),
                           ("roll_out", "pitch_out", "yaw_out"), "hold", str(log.path),
                           "RATE.TimeUS", False))

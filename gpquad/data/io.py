@@ -92,9 +92,20 @@ def guess_format(path: Path, allow_generic: bool = True) -> str:
 
 
 def _read_file(cfg: Config, reader, path: Path) -> list[Flight]:
+    """The flights of one file, refused (one line) when its inputs never change: every
+    reader gets the excitation check the generic reader has (a log flown with constant
+    set-points identifies nothing about them)."""
+    import numpy as np
+
     flights = reader(path, cfg.data)
     for f in flights:
         f.meta["file"] = str(path)
+    inputs = np.vstack([f.inputs for f in flights]) if flights else np.zeros((0, 0))
+    if inputs.size and float(np.max(np.ptp(inputs, axis=0))) == 0.0:
+        names = list(flights[0].input_names)
+        raise GpquadError(f"the inputs {names} never change in any in-flight segment: nothing "
+                          "to identify their effect from; check data.inputs or give a log "
+                          "flown with stick inputs", source=str(path), field="data.inputs")
     return flights
 
 
@@ -171,6 +182,9 @@ def resolve_log(path, fmt: str | None, config=None):
     path = Path(path)
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(path))
+    if not (path.is_file() or path.is_dir()):
+        raise GpquadError("not a regular file or folder (a pipe or a device); give the log "
+                          "file", source=str(path))
     cfg = load_config(config) if config else Config()
     fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
         or guess_format(path)

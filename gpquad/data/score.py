@@ -59,6 +59,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         DIVERGENCE_FACTOR,
         SCORED_INDEX,
         SCORED_STATES,
+        check_same_rate,
         diverged,
         load_run,
         model_view,
@@ -69,8 +70,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
 
     if part not in PARTS:
         raise GpquadError(f"choose one of {list(PARTS)}", field="--part")
-    if not horizon_s > 0:
-        raise GpquadError("must be > 0", field="--horizon-s")
+    if not (np.isfinite(horizon_s) and horizon_s > 0):
+        raise GpquadError(f"must be a finite number of seconds > 0, not {horizon_s}",
+                          field="--horizon-s")
     if integrator not in INTEGRATORS:
         raise GpquadError(f"choose one of {list(INTEGRATORS)}", field="--integrator")
     run = load_run(run_dir)
@@ -78,6 +80,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     path = Path(log).resolve()
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(log), field="--data")
+    if not (path.is_file() or path.is_dir()):
+        raise GpquadError("not a regular file or folder (a pipe or a device)", source=str(log),
+                          field="--data")
     fmt = fmt or guess_format(path)
     if fmt not in READERS:
         raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(log),
@@ -96,6 +101,7 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
         raise GpquadError(f"the run's equations read inputs {list(run.model.input_names)} but "
                           f"the log gives {list(dataset.input_names)}; score with the run's "
                           "input level", source=str(log), field="data.inputs")
+    check_same_rate(run.model, dataset.dt, str(log))
     steps = max(1, int(round(horizon_s / dataset.dt)))
     starts, steps = validation_windows(dataset, steps, run.max_delay)
     view = model_view(dataset, run.trim)

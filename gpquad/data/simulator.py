@@ -20,6 +20,9 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, terminal_names
 from gpquad.errors import GpquadError
 from gpquad.study.config import SimulatorConfig
 
+#: Longest input delay (samples) of a truth equation.
+MAX_TRUTH_DELAY = 10_000
+
 
 class TruthModel:
     """Known accelerations as sympy equations with per-input delays (samples)."""
@@ -33,6 +36,10 @@ class TruthModel:
                 raise GpquadError(f"unknown target '{target}'", field="simulator.equations")
             expr, delays = parse_equation(text, self.input_names,
                                           source=f"simulator.equations.{target}")
+            if max(delays.values(), default=0) > MAX_TRUTH_DELAY:
+                raise GpquadError(f"a delay of {max(delays.values())} samples; the simulator's "
+                                  f"delays are at most {MAX_TRUTH_DELAY}",
+                                  field=f"simulator.equations.{target}")
             self.exprs[target] = expr
             self.delays[target] = delays
         # an input written at several delays is one leaf per delay (gpquad.engine.taps)
@@ -70,8 +77,77 @@ def pilot_sticks(cfg: SimulatorConfig, input_names, n: int, dt: float,
     return sticks
 
 
+#: Most samples the simulator flies (its loop is plain Python: about a minute per 10^6).
+MAX_SAMPLES = 2_000_000
+#: Largest measurement noise SD per signal (rad, m/s, rad/s): above it the "measurement"
+#: is not of the flight.
+MAX_NOISE = {"attitude": 0.5, "velocity": 10.0, "rates": 10.0}
+
+
+def completed(cfg: SimulatorConfig) -> SimulatorConfig:
+    """The config with its `equations`, `stick_sd` and `trim` tables merged over the
+    defaults (a table that names one target or input changes that one, the others keep
+    the reference model's), every number checked (GpquadError naming the field)."""
+    import dataclasses
+    import math
+
+    base = SimulatorConfig()
+    cfg = dataclasses.replace(cfg, equations={**base.equations, **cfg.equations},
+                              stick_sd={**base.stick_sd, **cfg.stick_sd},
+                              trim={**base.trim, **cfg.trim})
+
+    def finite(value, field: str, low: float | None = None, high: float | None = None,
+               low_open: bool = False):
+        ok = isinstance(value, (int, float)) and math.isfinite(value) \
+            and (low is None or (value > low if low_open else value >= low)) \
+            and (high is None or value <= high)
+        if not ok:
+            bounds = (f" {'>' if low_open else '>='} {low:g}" if low is not None else "") + \
+                (f" and <= {high:g}" if high is not None else "")
+            raise GpquadError(f"{value!r} is not a finite number{bounds}",
+                              field=f"simulator.{field}")
+
+    finite(cfg.rate_hz, "rate_hz", 0.0, 10_000.0, low_open=True)
+    finite(cfg.duration_s, "duration_s", 0.0, None, low_open=True)
+    if cfg.duration_s * cfg.rate_hz > MAX_SAMPLES:
+        raise GpquadError(f"{cfg.duration_s:g} s at {cfg.rate_hz:g} Hz is "
+                          f"{cfg.duration_s * cfg.rate_hz:.3g} samples, more than the "
+                          f"{MAX_SAMPLES:,} the simulator flies; shorten duration_s",
+                          field="simulator.duration_s")
+    finite(cfg.stick_time_constant_s, "stick_time_constant_s", 0.0, low_open=True)
+    finite(cfg.input_limit, "input_limit", 0.0, low_open=True)
+    for name, sd in cfg.stick_sd.items():
+        finite(sd, f"stick_sd.{name}", 0.0)
+    for name, value in cfg.trim.items():
+        finite(value, f"trim.{name}")
+    for name, sd in cfg.measurement_noise.items():
+        if name not in MAX_NOISE:
+            raise GpquadError(f"unknown signal {name!r}; measurement noise is given for "
+                              f"{list(MAX_NOISE)}", field=f"simulator.measurement_noise.{name}")
+        finite(sd, f"measurement_noise.{name}", 0.0, MAX_NOISE[name])
+    return cfg
+
+
+def check_motion(inputs: np.ndarray, rates: np.ndarray, vel: np.ndarray, input_names) -> None:
+    """A simulated flight that does not move, or an input that never changes, is a config
+    that identifies nothing: one line naming the settings to change."""
+    from gpquad.data.plausibility import MIN_MOTION_SD
+
+    if max(float(np.max(np.std(rates, axis=0))), float(np.max(np.std(vel, axis=0)))) \
+            < MIN_MOTION_SD:
+        raise GpquadError("the simulated flight does not move (rates and velocities constant): "
+                          "raise stick_sd or input_limit", field="simulator.stick_sd")
+    for j, name in enumerate(input_names):
+        if float(np.ptp(inputs[:, j])) == 0.0:
+            raise GpquadError(f"input {name} never changes in the simulated flight; give it a "
+                              "stick_sd > 0 (or a pilot gain) and an input_limit above its trim",
+                              field=f"simulator.stick_sd.{name}")
+
+
 def simulate(cfg: SimulatorConfig, input_names) -> Flight:
-    """Fly the configured truth model; the true accelerations are kept in meta["true_acc"]."""
+    """Fly the configured truth model; the true accelerations are kept in meta["true_acc"].
+    The config's tables are merged over the defaults first (`completed`)."""
+    cfg = completed(cfg)
     model = TruthModel(cfg.equations, input_names)
     dt = 1.0 / cfg.rate_hz
     n = int(round(cfg.duration_s * cfg.rate_hz))
@@ -112,6 +188,7 @@ def simulate(cfg: SimulatorConfig, input_names) -> Flight:
         true_acc[t] = acc
         if t < n - 1:
             integrate_step(quat, vel, rates, pos, acc, dt, mat)
+    check_motion(inputs, out_w, out_v, input_names)
     if any(cfg.measurement_noise.values()):
         out_q, out_v, out_w = add_measurement_noise(out_q, out_v, out_w, cfg.measurement_noise,
                                                     np.random.default_rng([cfg.seed, 1]))

@@ -29,14 +29,12 @@ from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.taps import (
     base_input,
     canonical_taps,
-    tap_index,
     tap_names,
     taps_of,
 )
 from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import (
     expr_string,
-    from_sympy,
     round_constants,
     simplify,
     to_latex,
@@ -44,6 +42,15 @@ from gpquad.engine.tree.export import (
 )
 from gpquad.engine.variables import TARGET_LATEX, TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
+from gpquad.models.model_checks import (
+    check_expr_agrees,
+    checked_input_names,
+    checked_number,
+    checked_targets,
+    checked_tree,
+    checked_trim,
+    parse_candidate,
+)
 from gpquad.study.store import read_json
 
 
@@ -154,8 +161,8 @@ class Equation:
         puts the found equation and its refinement path first); their validation error is
         unknown (NaN)."""
         out = []
-        for c in self.candidates:
-            tree = from_sympy(sp.sympify(c["expr"]), c.get("delays", {}), self.input_names)
+        for i, c in enumerate(self.candidates):
+            tree, _ = parse_candidate(self.target, i, c, self.input_names)
             out.append(Equation(self.target, tree, self.input_names, _number(c.get("error")),
                                 np.nan, dict(self.trim), [], self.digits,
                                 float(c.get("lag", 0.0))))
@@ -182,12 +189,28 @@ class Equation:
 
     @classmethod
     def from_dict(cls, target: str, d: dict, input_names, trim) -> Equation:
-        taps = 1 + max((tap_index(n) for n in d["delays"]), default=0)
-        delays = [int(d["delays"].get(n, 0)) for n in tap_names(input_names, taps)]
-        tree = Tree.from_lists(d["prefix"]["codes"], d["prefix"]["values"], delays)
-        return cls(target, tree, tuple(input_names), _number(d["error"]),
-                   _number(d.get("validation_error")), dict(trim), list(d.get("candidates", [])),
-                   int(d.get("digits", 3)), float(d.get("lag", 0.0)))
+        """The equation of a record read from a file, every field checked
+        (gpquad.models.model_checks; a bad one is a GpquadError naming it)."""
+        if not isinstance(d, dict):
+            raise GpquadError("an equation is an object", field=f"targets.{target}")
+        tree = checked_tree(target, d, input_names)
+        candidates = d.get("candidates", [])
+        if not isinstance(candidates, list):
+            raise GpquadError("candidates is a list", field=f"targets.{target}.candidates")
+        for i, c in enumerate(candidates):
+            parse_candidate(target, i, c, input_names)
+        lag = checked_number(d.get("lag", 0.0), f"targets.{target}.lag")
+        digits = d.get("digits", 3)
+        if isinstance(digits, bool) or not isinstance(digits, int) or not 1 <= digits <= 17:
+            raise GpquadError(f"digits is a whole number from 1 to 17, not {digits!r}",
+                              field=f"targets.{target}.digits")
+        equation = cls(target, tree, tuple(input_names), _number(d.get("error")),
+                       _number(d.get("validation_error")), dict(trim), list(candidates),
+                       digits, max(lag, 0.0))
+        if "expr" in d:
+            check_expr_agrees(target, d["expr"], equation.tree, equation.leaf_names,
+                              equation.delays)
+        return equation
 
 
 #: model.json's layout: 1 = gpquad 0.1 (no "schema" key), 2 = 0.2 (unmeasured, integrator).
@@ -266,14 +289,16 @@ class DiscoveredModel:
 
     @classmethod
     def from_dict(cls, d: dict) -> DiscoveredModel:
+        """The model of a model.json, every field checked (gpquad.models.model_checks)."""
         if int(d.get("schema", 1)) > SCHEMA:
             raise ValueError(f"schema {d['schema']}: written by a newer gpquad (this one reads "
                              f"up to {SCHEMA}); upgrade gpquad")
-        names = tuple(d["input_names"])
-        eqs = {t: Equation.from_dict(t, e, names, d.get("trim", {}))
-               for t, e in d["targets"].items()}
-        return cls(eqs, names, dict(d.get("trim", {})), float(d["dt"]), int(d["seed"]),
-                   d.get("config", {}), bool(d.get("interrupted", False)),
+        names = checked_input_names(d["input_names"])
+        trim = checked_trim(d.get("trim", {}), names)
+        eqs = {t: Equation.from_dict(t, e, names, trim)
+               for t, e in checked_targets(d["targets"]).items()}
+        return cls(eqs, names, dict(trim), checked_number(d["dt"], "dt", positive=True),
+                   int(d.get("seed", 0)), d.get("config", {}), bool(d.get("interrupted", False)),
                    **{name: d.get(name) for name in REPORTS},
                    integrator=str(d.get("integrator", "euler")),
                    substeps=int(d.get("substeps", 1)))
@@ -289,6 +314,8 @@ class DiscoveredModel:
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
                               "model.json a `gpquad run` wrote", source=str(path)) from None
+        except GpquadError as exc:  # a checked field (model_checks): name the file too
+            raise GpquadError(str(exc), source=str(path)) from None
 
     def to_sympy(self, raw: bool = False) -> dict[str, sp.Eq]:
         """Each equation as a sympy.Eq that is the model: a delayed input is its own symbol

@@ -103,6 +103,7 @@ def score_model(model, dataset: Dataset, horizon_steps: int, trim: dict | None =
     if missing or tuple(model.input_names) != tuple(dataset.input_names):
         raise GpquadError(f"the model reads inputs {list(model.input_names)} but the scoring data "
                           f"has {list(dataset.input_names)}", field="compare")
+    check_same_rate(model, dataset.dt, None)
     starts, steps = validation_windows(dataset, horizon_steps, max_delay)
     view = model_view(dataset, trim or {})
     pred = model.simulate(view, starts, steps)
@@ -127,6 +128,8 @@ class RunInfo:
 
 def load_run(run_dir) -> RunInfo:
     """Read a GP or baseline run folder (model.json + run.json)."""
+    from gpquad.models.model_checks import naming
+
     run_dir = Path(run_dir)
     fix = "give a folder written by `gpquad run` or `gpquad baseline`"
     d = read_json(run_dir / "model.json", "run folder", fix)
@@ -135,12 +138,14 @@ def load_run(run_dir) -> RunInfo:
     if d.get("kind") == "baseline":
         from gpquad.baselines.flyable import from_model_dict
 
-        model = from_model_dict(d)
+        with naming(run_dir / "model.json"):
+            model = from_model_dict(d)
         return RunInfo(run_dir, d["method"], model, model.n_parameters,
                        float(info.get("fit_time_s", np.nan)), {}, 0)
     from gpquad.models.equations import DiscoveredModel
 
-    model = DiscoveredModel.from_dict(d)
+    with naming(run_dir / "model.json"):
+        model = DiscoveredModel.from_dict(d)
     max_delay = max([int(np.max(e.tree.delays, initial=0)) for e in model.equations.values()]
                     + [0])
     return RunInfo(run_dir, "gp", model, model.n_parameters,
@@ -161,7 +166,7 @@ def run_dataset(run_dir) -> Dataset:
     if "scoring_data" in info:
         from gpquad.data.flight import read_flight_file
 
-        sd = info["scoring_data"]
+        sd = _scoring_data(info["scoring_data"], run_dir, info_path)
         flights = [read_flight_file(run_dir / f, tuple(sd["inputs"])) for f in sd["files"]]
         return build_dataset(flights, validation_fraction=sd["validation_fraction"])
     from gpquad.data.io import load_dataset
@@ -173,6 +178,46 @@ def run_dataset(run_dir) -> Dataset:
     return load_dataset(config_from_dict(table, str(info_path)))
 
 
+def _scoring_data(sd, run_dir: Path, info_path: Path) -> dict:
+    """run.json's scoring_data, checked: files are relative paths that stay inside the run
+    folder (no "..", no absolute path, no link out of it), inputs are names."""
+    def bad(message: str, field: str):
+        raise GpquadError(f"{message}; give a folder written by `gpquad baseline`",
+                          source=str(info_path), field=f"scoring_data.{field}")
+
+    if not isinstance(sd, dict) or not isinstance(sd.get("files"), list) or not sd["files"]:
+        bad("scoring_data lists its flight files", "files")
+    inside = run_dir.resolve()
+    for i, name in enumerate(sd["files"]):
+        if not isinstance(name, str) or Path(name).is_absolute() or ".." in Path(name).parts \
+                or inside not in (run_dir / name).resolve().parents:
+            bad(f"{str(name)[:60]!r} is not a file inside the run folder", f"files[{i}]")
+    inputs = sd.get("inputs")
+    if not isinstance(inputs, list) or not inputs or not all(isinstance(n, str) for n in inputs):
+        bad("inputs is a list of input names", "inputs")
+    fraction = sd.get("validation_fraction")
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) \
+            or not 0 < fraction < 1:
+        bad(f"validation_fraction is a number between 0 and 1, not {fraction!r}",
+            "validation_fraction")
+    return sd
+
+
+def check_same_rate(model, dt: float, source: str | None) -> None:
+    """A model whose delays count samples of another rate would read the wrong samples:
+    refuse a log sampled at another rate than the model's dt (one line)."""
+    model_dt = getattr(model, "dt", None)
+    if model_dt is not None and abs(dt - model_dt) > 1e-6 * model_dt:
+        raise GpquadError(f"the log is sampled at {1 / dt:.6g} Hz after the pipeline, the run's "
+                          f"equations at {1 / model_dt:.6g} Hz (their delays count samples); "
+                          "set data.resample_hz or data.downsample to give the run's rate",
+                          source=source, field="dt")
+
+
+#: Longest compare window (samples).
+MAX_HORIZON_STEPS = 1_000_000
+
+
 def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
     """One row per run: RSE per state, mean RSE, parameter count and fit time.
 
@@ -181,6 +226,10 @@ def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
     """
     if not run_dirs:
         raise GpquadError("give at least one run folder", field="compare")
+    if isinstance(horizon_steps, bool) or not isinstance(horizon_steps, (int, np.integer)) \
+            or not 1 <= horizon_steps <= MAX_HORIZON_STEPS:
+        raise GpquadError(f"the window length is a whole number of samples from 1 to "
+                          f"{MAX_HORIZON_STEPS}, not {horizon_steps}", field="--horizon")
     dataset = run_dataset(data_from or run_dirs[0])
     rows = []
     for run_dir in run_dirs:

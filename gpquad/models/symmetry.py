@@ -20,6 +20,7 @@ import sympy as sp
 
 from gpquad.data.mirror import ODD_STATES, ODD_TARGETS
 from gpquad.engine.taps import base_input
+from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.tree.export import round_constants
 from gpquad.models.analysis import term_series
 
@@ -30,7 +31,7 @@ PARITY_SHARE = 0.05
 def term_parity(term: str, flipped) -> int:
     """+1 for a term the mirror leaves alone, -1 for one it negates ("1" is even)."""
     sign = 1
-    for factor in sp.Mul.make_args(sp.sympify(term)):
+    for factor in sp.Mul.make_args(parse_in_symbols(term, None)):
         base, exponent = factor.as_base_exp()
         if not isinstance(base, sp.Symbol):
             continue
@@ -65,16 +66,11 @@ def mirror_odd_terms(model, dataset, flipped, share: float = PARITY_SHARE) -> di
         part_share = float(np.sqrt(np.mean(part ** 2))) / target_rms
         if part_share >= share:
             shown = equation.shown_inputs()
-            expr = sum(c * sp.sympify(t, locals=_symbols(t)) for t, c, _ in wrong)
+            expr = sum(c * parse_in_symbols(t, None) for t, c, _ in wrong)
             out[target] = {"share": part_share,
                            "terms": [{"term": t, "coefficient": c} for t, c, _ in wrong],
                            "text": str(round_constants(expr, 3).xreplace(shown))}
     return out
-
-
-def _symbols(text: str) -> dict:
-    """Real symbols for the names of a term (as Equation.sympy spells them)."""
-    return {str(s): sp.Symbol(str(s), real=True) for s in sp.sympify(text).free_symbols}
 
 
 def parity_summary(found: dict, flipped) -> str:

@@ -8,13 +8,19 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.study.store import atomic_write_text, package_versions, provenance, write_json
+from gpquad.study.store import (
+    atomic_write_text,
+    checked_name,
+    package_versions,
+    provenance,
+    write_json,
+)
 
 EXTRA_PACKAGES = ("orangebox", "statsmodels", "rotorpy")
 
 
 def default_out(kind: str, name: str) -> Path:
-    return Path("results") / f"physics-{kind}-{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return Path("results") / f"physics-{kind}-{checked_name(name)}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
 def _plain(obj):

@@ -148,7 +148,7 @@ def cached_flight(spec: dict, cache_dir: Path | None) -> dict:
     if cache_dir is not None:
         path = Path(cache_dir) / f"{spec['manoeuvre']}-{flight_key(key_spec)}.npz"
         if path.is_file():
-            with np.load(path) as data:
+            with np.load(path, allow_pickle=False) as data:
                 return {k: data[k] for k in data.files}
     manoeuvre = spec.pop("manoeuvre")
     flight = simulate(manoeuvre, **spec)

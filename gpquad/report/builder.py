@@ -24,6 +24,7 @@ from gpquad.engine.tree.export import to_latex
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel, Equation
+from gpquad.models.model_checks import naming
 from gpquad.study.assemble import load_sweep_config
 from gpquad.study.assemble import reassemble as rebuild_models
 from gpquad.study.store import atomic_write_text
@@ -201,11 +202,16 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
             return make_run_report(folder, formats)
         raise GpquadError("not a sweep folder (no sweep.json) nor a run folder (no model.json); "
                           "give the --out of a sweep or a run", source=str(folder))
-    info = json.loads((folder / "sweep.json").read_text())
+    with naming(folder / "sweep.json"):
+        info = json.loads((folder / "sweep.json").read_text())
+        int(info["runs"])
     if reassemble or not (folder / "assembly.json").exists():
         rebuild_models(folder)
     cfg = load_sweep_config(folder)
-    assembly = json.loads((folder / "assembly.json").read_text())
+    with naming(folder / "assembly.json"):
+        assembly = json.loads((folder / "assembly.json").read_text())
+        if not isinstance(assembly, dict):
+            raise ValueError("not an object")
     median = DiscoveredModel.load(folder / "models" / "median")
     out = folder / "report"
     written: list[Path] = []
@@ -215,9 +221,10 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
         runs[t], histories[t] = [], []
         for k in range(int(info["runs"])):
             d = run_dir(folder, RunKey(t, k))
-            res = json.loads((d / "result.json").read_text())
-            runs[t].append(Equation.from_dict(t, res["equation"], median.input_names,
-                                              median.trim))
+            with naming(d / "result.json"):
+                res = json.loads((d / "result.json").read_text())
+                runs[t].append(Equation.from_dict(t, res["equation"], median.input_names,
+                                                  median.trim))
             histories[t].append(d / "history.csv")
     if (folder / "predictions.npz").exists():
         written += plotting.prediction_figure(folder / "predictions.npz", out / "prediction",

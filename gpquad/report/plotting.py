@@ -55,7 +55,7 @@ def _label(name: str) -> str:
 def prediction_figure(npz_path, stem, formats=("png", "pdf"), n_models: int | None = None,
                       best_label: str = "best model") -> list[Path]:
     """Six panels (u, v, w, p, q, r) against time: data, best model, envelope (if any)."""
-    d = np.load(npz_path)
+    d = np.load(npz_path, allow_pickle=False)
     t, data, best, full = d["t"], d["data"], d["best"], d["full"]
     n = len(full) if n_models is None else n_models
     targets = d["targets"].tolist() if "targets" in d.files else list(TARGET_NAMES)
@@ -111,9 +111,23 @@ def read_history(path, iterations_per_gen: int | None = None, target: str | None
 
     target: keep only that equation's rows (a `gpquad run` history holds every target).
     """
-    h = pd.read_csv(path, usecols=["target", "iteration", "generation", "best_suite_error"])
+    from gpquad.errors import GpquadError
+
+    columns = ["target", "iteration", "generation", "best_suite_error"]
+    try:
+        h = pd.read_csv(path, usecols=columns)
+        h[columns[1:3]] = h[columns[1:3]].astype(np.int64)
+        h["best_suite_error"] = h["best_suite_error"].astype(float)
+    except (ValueError, TypeError, OSError, pd.errors.ParserError, pd.errors.EmptyDataError,
+            UnicodeDecodeError) as exc:
+        raise GpquadError(f"damaged history ({type(exc).__name__}); restore it or run again",
+                          source=str(path)) from None
     if target is not None:
         h = h[h["target"] == target].reset_index(drop=True)
+    if h.empty:
+        raise GpquadError(f"no rows{' of ' + target if target else ''}: a damaged history or "
+                          "a run that did not reach it; restore it or run again",
+                          source=str(path))
     gens = int(h["generation"].max()) + 1 if iterations_per_gen is None else iterations_per_gen
     h["step"] = h["iteration"] * gens + h["generation"] + 1
     return h

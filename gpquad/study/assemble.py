@@ -34,6 +34,7 @@ from gpquad.models import scoring
 from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
+from gpquad.models.model_checks import naming
 from gpquad.models.scoring import diverged
 from gpquad.study.config import Config, load_folder_config
 from gpquad.study.runner import write_model
@@ -72,10 +73,11 @@ def load_runs(out, targets, runs: int, input_names, trim) -> dict[str, list[RunR
             if not path.exists():
                 raise GpquadError("run not finished; run the same `gpquad sweep` command again "
                                   "to complete it", source=str(path))
-            d = json.loads(path.read_text())
-            eq = Equation.from_dict(t, d["equation"], input_names, trim)
-            found[t].append(RunResult(t, k, eq, float(d["train_error"]),
-                                      float(d["validation_error"])))
+            with naming(path):
+                d = json.loads(path.read_text())
+                eq = Equation.from_dict(t, d["equation"], input_names, trim)
+                found[t].append(RunResult(t, k, eq, float(d["train_error"]),
+                                          float(d["validation_error"])))
     return found
 
 

@@ -46,8 +46,8 @@ def validate(cfg: Config, source: str = "config") -> Config:
     if bad_noise or any(v < 0 for v in s.measurement_noise.values()):
         raise GpquadError("keys attitude, velocity, rates with SD >= 0", source=source,
                           field="simulator.measurement_noise")
-    if s.rate_hz <= 0 or s.duration_s <= 0:
-        raise GpquadError("rate_hz and duration_s must be > 0", source=source,
+    if not (s.rate_hz > 0 and s.duration_s > 0 and s.rate_hz * s.duration_s < float("inf")):
+        raise GpquadError("rate_hz and duration_s must be finite and > 0", source=source,
                           field="simulator.rate_hz")
     if round(s.rate_hz * s.duration_s) < 2:
         raise GpquadError(f"{s.duration_s} s at {s.rate_hz} Hz is less than two samples; fly "

@@ -23,7 +23,14 @@ def read_toml(path) -> tuple[dict, str]:
     if not path.is_file():
         raise GpquadError("config file not found", source=str(path))
     try:
-        return tomllib.loads(path.read_text()), str(path)
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise GpquadError(f"not UTF-8 text (byte {exc.start + 1} is 0x{exc.object[exc.start]:02x});"
+                          " a TOML file is UTF-8: save it as UTF-8", source=str(path)) from None
+    except OSError as exc:
+        raise GpquadError(f"cannot read ({exc.strerror})", source=str(path)) from None
+    try:
+        return tomllib.loads(text), str(path)
     except tomllib.TOMLDecodeError as exc:
         raise GpquadError(f"not valid TOML ({exc})", source=str(path)) from None
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.variables import TARGET_STATE
+from gpquad.errors import GpquadError
 from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.finish import finish_model
@@ -47,8 +48,12 @@ def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
         record = json.loads(path.read_text())
         equation = Equation.from_dict(path.stem, record["equation"], dataset.input_names,
                                       dataset.trim)
-        return equation, int(record["history_bytes"])
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError) as exc:
+        end = record["history_bytes"]
+        if type(end) is not int or not 0 < end <= (path.parents[1] / "history.csv").stat().st_size:
+            raise ValueError(f"history_bytes {end!r} is not within history.csv")
+        return equation, end
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError,
+            GpquadError) as exc:
         print(f"gpquad: warning: {path}: damaged record of a finished equation "
               f"({type(exc).__name__}); identifying {path.stem} again", file=sys.stderr)
         return None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -14,7 +15,13 @@ from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasured
 from gpquad.study.search import Progress
-from gpquad.study.store import atomic_write_text, provenance, read_json, write_json
+from gpquad.study.store import (
+    atomic_write_text,
+    checked_name,
+    provenance,
+    read_json,
+    write_json,
+)
 
 #: run.json's layout: 1 = gpquad 0.1 (no "schema" key), 2 = 0.2 (time profile).
 RUN_SCHEMA = 2
@@ -22,7 +29,61 @@ RUN_SCHEMA = 2
 
 def default_run_dir(cfg: Config) -> Path:
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    return Path(cfg.output.dir) / f"{cfg.name}-seed{cfg.seed}-{stamp}"
+    return Path(cfg.output.dir) / f"{checked_name(cfg.name)}-seed{cfg.seed}-{stamp}"
+
+
+#: Files and folders of a run folder that gpquad writes (none may be a link).
+RUN_FILES = ("config.json", "run.json", "model.json", "history.csv", "equations.tex",
+             "equations.md", "equations_raw_inputs.tex", "checkpoints")
+#: Run folders whose lock this process holds (released when the process ends).
+_HELD_LOCKS: dict[Path, object] = {}
+
+
+def claim_run_folder(run_dir: Path, cfg: Config) -> bool:
+    """Make or check the run folder and lock it for this process; True when it holds a run
+    of this config to resume. Refused with one line: a folder with files that are not a
+    gpquad run (a user's files, a sweep folder), a run of another config, a folder another
+    gpquad command is writing (lock held), a run file that is a link."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise GpquadError("not a folder; give a folder for the run", source=str(run_dir),
+                          field="--out")
+    if (run_dir / "sweep.json").exists():
+        raise GpquadError("a sweep folder (`gpquad sweep` resumes it), not a run folder; give "
+                          "`gpquad run` another --out", source=str(run_dir), field="--out")
+    entries = {p.name for p in run_dir.iterdir()} if run_dir.is_dir() else set()
+    if entries - {".lock"} and "config.json" not in entries:
+        raise GpquadError("the folder holds files that are not a gpquad run (no config.json); "
+                          "give an empty or new --out", source=str(run_dir), field="--out")
+    links = [name for name in RUN_FILES if (run_dir / name).is_symlink()]
+    if links:
+        raise GpquadError(f"{links[0]} is a link; gpquad writes no file through a link: give "
+                          "another --out", source=str(run_dir), field="--out")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    _lock(run_dir)
+    return _same_config(run_dir, cfg)
+
+
+def _lock(run_dir: Path) -> None:
+    """An exclusive lock on run_dir/.lock held until the process ends (a second command on
+    the same folder is refused; this process may claim it again)."""
+    import fcntl
+
+    key = run_dir.resolve()
+    if key in _HELD_LOCKS:
+        return
+    try:
+        fd = os.open(run_dir / ".lock", os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise GpquadError(f"cannot lock the folder ({exc.strerror})", source=str(run_dir),
+                          field="--out") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise GpquadError("another gpquad command is writing this run folder; wait for it to "
+                          "finish or give another --out", source=str(run_dir),
+                          field="--out") from None
+    _HELD_LOCKS[key] = fd
 
 
 def _same_config(run_dir: Path, cfg: Config) -> bool:
@@ -66,8 +127,7 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
         report.say("gpquad: loading the flight data ...")
         dataset = load_dataset(cfg)
     load_seconds = time.perf_counter() - t_load
-    resuming = _same_config(run_dir, cfg)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    resuming = claim_run_folder(run_dir, cfg)
     info = {"schema": RUN_SCHEMA, "seed": cfg.seed, "config": cfg.to_dict(),
             "dataset": dataset.summary(),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}

@@ -75,14 +75,7 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
     ev = cfg.evolution
     co = Coevolution(dataset, target, ev)
     if state is None and checkpoint_path is not None and checkpoint_path.exists():
-        try:
-            state, meta = checkpoint.load(checkpoint_path)
-            if history is not None:
-                history.truncate(int(meta["history_bytes"]))
-        except (checkpoint.CorruptCheckpoint, KeyError) as exc:
-            print(f"gpquad: warning: {checkpoint_path}: {exc}; restarting {target}",
-                  file=sys.stderr)
-            state = None
+        state = _resumed_state(co, checkpoint_path, history, history_start)
     if state is None:
         state = co.init_state(target_seed(cfg.seed, target))
         if history is not None and history_start is not None:
@@ -96,3 +89,19 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
         raise
     return final_equation(co, state, dataset, target), state
+
+
+def _resumed_state(co: Coevolution, path: Path, history: HistoryWriter | None,
+                   history_start: int | None) -> RunState | None:
+    """The state of a checkpoint that fits this run, with the history cut back to the length
+    it recorded (checked first); None, with one warning line, when the checkpoint is
+    damaged, foreign or an older pickled one (never unpickled)."""
+    try:
+        state, meta = checkpoint.load(path)
+        checkpoint.check_fits(state, co)
+        if history is not None:
+            history.truncate(checkpoint.history_bytes(meta, history_start or 0, history.size()))
+        return state
+    except checkpoint.CorruptCheckpoint as exc:
+        print(f"gpquad: warning: {path}: {exc}; restarting {co.target}", file=sys.stderr)
+        return None

@@ -91,8 +91,51 @@ def read_json(path, what: str = "file", fix: str = "") -> dict:
     return obj
 
 
+#: Longest run name (it becomes part of a folder name).
+MAX_NAME_CHARACTERS = 100
+
+
+def checked_name(name, field: str = "name") -> str:
+    """A run name that is a file name, not a path: letters, digits and . _ - + = , @ only,
+    not starting with a dot (GpquadError otherwise: name = "../../x" would put the run
+    folder outside output.dir)."""
+    import re
+
+    from gpquad.errors import GpquadError
+
+    if not isinstance(name, str) or len(name) > MAX_NAME_CHARACTERS \
+            or not re.fullmatch(r"[A-Za-z0-9_+=,@-][A-Za-z0-9._+=,@-]*", name):
+        raise GpquadError(f"{str(name)[:40]!r} is not a run name: use up to "
+                          f"{MAX_NAME_CHARACTERS} letters, digits, '_', '-' or '.', not "
+                          "starting with '.' (the name becomes a folder name, not a path)",
+                          field=field)
+    return name
+
+
 def write_json(path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+def open_for_append(path: Path):
+    """A text file opened to append, never through a symbolic link and only when it is a
+    regular file (GpquadError otherwise: a history.csv that links to another file must not
+    have that file truncated)."""
+    import stat
+
+    from gpquad.errors import GpquadError
+
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise GpquadError("not a regular file (a link, folder or pipe); gpquad writes no file "
+                          "through a link: delete it or give another folder", source=str(path))
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise GpquadError(f"cannot write ({exc.strerror})", source=str(path)) from None
+    return os.fdopen(fd, "a", newline="")
 
 
 class HistoryWriter:
@@ -105,7 +148,7 @@ class HistoryWriter:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         new = not self.path.exists()
-        self._fh = open(self.path, "a", newline="")
+        self._fh = open_for_append(self.path)
         self._writer = csv.DictWriter(self._fh, fieldnames=self.FIELDS)
         if new:
             self._writer.writeheader()
@@ -122,8 +165,11 @@ class HistoryWriter:
         return self._fh.tell()
 
     def truncate(self, size: int) -> None:
-        """Drop everything after `size` bytes (rows of an interrupted iteration)."""
+        """Drop everything after `size` bytes (rows of an interrupted iteration); never
+        extends the file (ValueError for a size outside 0 .. its length)."""
         self._fh.flush()
+        if type(size) is not int or not 0 <= size <= self.size():
+            raise ValueError(f"cannot cut {self.path} of {self.size()} bytes to {size!r}")
         self._fh.truncate(size)
         self._fh.seek(size)
 

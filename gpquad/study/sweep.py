@@ -30,10 +30,12 @@ from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.loop import evolve, final_equation
 from gpquad.study.seeding import run_seed
-from gpquad.study.store import HistoryWriter, provenance, write_json
+from gpquad.study.store import HistoryWriter, checked_name, provenance, write_json
 from gpquad.study.sweep_folders import RunKey, fingerprint, grid, run_dir
 
 BACKENDS = ("loky", "dask")
+#: Seconds to wait for a Dask scheduler given by --address.
+SCHEDULER_TIMEOUT_S = 10
 
 
 # --------------------------------------------------------------------------- one run
@@ -58,11 +60,9 @@ def _resume(folder: Path, fp: str):
         state, meta = checkpoint.load(ckpt)
         if meta.get("fingerprint") != fp:
             raise checkpoint.CorruptCheckpoint("written by a different config")
-        size = hist.stat().st_size if hist.exists() else -1
-        if size < meta["history_bytes"]:
-            raise checkpoint.CorruptCheckpoint(
-                f"history.csv has {size} bytes, fewer than the {meta['history_bytes']} recorded")
-        return state, int(meta["history_bytes"]), None
+        if hist.is_symlink() or not hist.is_file():
+            raise checkpoint.CorruptCheckpoint("history.csv is missing or not a regular file")
+        return state, checkpoint.history_bytes(meta, 0, hist.stat().st_size), None
     except (checkpoint.CorruptCheckpoint, KeyError) as exc:
         return None, 0, f"{ckpt}: corrupt checkpoint ({exc}); restarting this run from scratch"
 
@@ -93,7 +93,7 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
         try:
             done = json.loads(result_path.read_text())
             return {**_summary(done), "skipped": True, "warnings": []}
-        except (ValueError, KeyError) as exc:
+        except (ValueError, KeyError, TypeError) as exc:
             warnings.append(f"{result_path}: unreadable ({exc}); running it again")
             result_path.unlink()
     fp = fingerprint(cfg)
@@ -103,6 +103,11 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
     ckpt = folder / "checkpoint.bin"
     status = folder / "status.json"
     state, history_bytes, warning = _resume(folder, fp)
+    if state is not None:
+        try:
+            checkpoint.check_fits(state, co)
+        except checkpoint.CorruptCheckpoint as exc:
+            state, warning = None, f"{ckpt}: corrupt checkpoint ({exc}); restarting this run"
     if warning:
         warnings.append(warning)
     if state is None:
@@ -211,7 +216,13 @@ def _parallel(jobs: int, backend: str, address: str | None):
 
         cluster = None
         if address:
-            client = Client(address)
+            try:
+                client = Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise GpquadError(f"no Dask scheduler answers at {address} within "
+                                  f"{SCHEDULER_TIMEOUT_S} s ({type(exc).__name__}); start one "
+                                  "(`dask scheduler`) or give its address", field="--address"
+                                  ) from None
         else:
             cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                    host="127.0.0.1", dashboard_address=None,
@@ -291,5 +302,5 @@ def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
 
 def default_out(cfg: Config) -> Path:
     """A stable folder name, so that the same command resumes the same sweep."""
-    return Path(cfg.output.dir) / f"{cfg.name}-sweep-seed{cfg.seed}"
+    return Path(cfg.output.dir) / f"{checked_name(cfg.name)}-sweep-seed{cfg.seed}"
 

@@ -41,6 +41,7 @@ from gpquad.engine.tree.variation import (
     replace_with_constant,
 )
 from gpquad.engine.variables import N_STATE
+from gpquad.errors import GpquadError
 from gpquad.study.config import EvolutionConfig
 
 
@@ -69,7 +70,14 @@ SEED_HORIZONS = (2, 10)
 
 
 def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
-    """n_inputs: every tap of every input (gpquad.engine.taps)."""
+    """n_inputs: every tap of every input (gpquad.engine.taps). The constants' settings must
+    be finite (a GpquadError naming the field otherwise)."""
+    for name in ("const_low", "const_high", "const_variance"):
+        value = getattr(cfg, name)
+        if not np.isfinite(value) or (name == "const_variance" and value < 0):
+            raise GpquadError(f"{value} is not a finite number" + (" >= 0" if name ==
+                                                                  "const_variance" else ""),
+                              field=f"evolution.{name}")
     return VariationParams(
         n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
         taps=cfg.input_taps,

@@ -65,4 +65,10 @@ def measured_variables(dataset, exclude=(), keep_tracked: bool = False
                                        and dataset.unmeasured(name))]
     if not left_out:
         return None
+    if len(left_out) == len(names):
+        from gpquad.errors import GpquadError
+
+        raise GpquadError(f"every variable {names} is excluded or unmeasured: an equation "
+                          "needs at least one to read; shorten exclude_leaves",
+                          field="evolution.exclude_leaves")
     return tuple(i for i in range(len(names)) if i not in left_out)

@@ -6,14 +6,11 @@ Delayed inputs keep their plain names in sympy/JSON (delays are stored beside
 the expression) and are written u_{T-5} in LaTeX.
 """
 
-import re
-from tokenize import TokenError
-
 import numpy as np
 import sympy as sp
-from sympy.parsing.sympy_parser import parse_expr
 
 from gpquad.engine.taps import MAX_TAPS, base_input, tap_index, tap_name, tap_names
+from gpquad.engine.tree.arithmetic import parse_arithmetic
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, OPERATOR_BY_CODE, VAR_BASE
 from gpquad.engine.variables import STATE_LATEX, STATE_NAMES, input_latex, terminal_names
@@ -80,55 +77,48 @@ def expr_string(expr: sp.Expr) -> str:
     return sp.sstr(expr, full_prec=True)
 
 
-#: A name, with its delay when written name(t-k).
-_NAME_RE = re.compile(r"\b([A-Za-z_][A-Za-z0-9_]*)(?:\s*\(\s*t\s*-\s*(\d+)\s*\))?")
-
-
 def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple[sp.Expr, dict]:
-    """Parse '10.3*u_R(t-1) - 4.15*p' into (sympy expr, {'u_R': 1}).
+    """Parse '10.3*u_R(t-1) - 4.15*p' into (sympy expr, {'u_R': 1}) with the equations' own
+    parser (gpquad.engine.tree.arithmetic: the text is never evaluated as Python).
 
     Inputs may be written name(t-k) for a delay of k samples. An input written at several
     delays (u_R(t-1) - u_R(t-3)) takes one tap per delay (gpquad.engine.taps): the first
     delay is the input's own symbol, the next ones u_R__tap1, ... Unknown names are errors.
     """
     delays: dict[str, int] = {}
+    syms = symbols_for(tap_names(input_names, MAX_TAPS))
 
-    def leaf(match):
-        name, k = match.group(1), match.group(2)
+    def leaf(name: str, k: int | None) -> sp.Symbol:
         if name not in input_names:
             if k is not None:
                 raise GpquadError(f"'{name}(t-{k})': only inputs {list(input_names)} take a "
                                   "delay", source=source)
-            return name
-        k = int(k or 0)
+            if name not in syms:
+                raise GpquadError(f"unknown names ['{name}'] in '{text}'; variables are "
+                                  f"{list(terminal_names(input_names))}", source=source)
+            return syms[name]
+        k = k or 0
         for tap in range(MAX_TAPS):
             if delays.setdefault(tap_name(name, tap), k) == k:
-                return tap_name(name, tap)
+                return syms[tap_name(name, tap)]
         raise GpquadError(f"input {name} appears with more than {MAX_TAPS} delays",
                           source=source)
 
-    plain = _NAME_RE.sub(leaf, text)
-    syms = symbols_for(tap_names(input_names, MAX_TAPS))
-    # Only numbers and our symbols: any other name (even a sympy function) is an unknown symbol.
-    namespace = {"Integer": sp.Integer, "Float": sp.Float, "Rational": sp.Rational,
-                 "Symbol": sp.Symbol}
-    try:
-        expr = parse_expr(plain, local_dict=dict(syms), global_dict=namespace)
-    except NameError:  # a call of an unknown function, such as sin(p) or exp(u_R)
-        raise GpquadError(f"cannot parse '{text}': equations use + - * / and integer powers "
-                          "of states, inputs and numbers, no functions", source=source) from None
-    except (sp.SympifyError, SyntaxError, TypeError, TokenError) as exc:
-        raise GpquadError(f"cannot parse '{text}' ({exc})", source=source) from None
-    unknown = {str(s) for s in expr.free_symbols} - set(syms)
-    if unknown:
-        raise GpquadError(f"unknown names {sorted(unknown)} in '{text}'; variables are "
-                          f"{list(terminal_names(input_names))}", source=source)
-    return expr, delays
+    return parse_arithmetic(text, leaf, source=source), delays
+
+
+#: Largest tree from_sympy builds (a bound on what a hand-written equation may expand to).
+MAX_ENCODED_NODES = 4095
 
 
 def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
     """Encode a sympy expression of + - * / (integer powers allowed) as a Tree; `delays`
-    may hold taps (u_R__tap1, gpquad.engine.taps), which widen the tree's delay slots."""
+    may hold taps (u_R__tap1, gpquad.engine.taps), which widen the tree's delay slots.
+    Text is not accepted (parse it with parse_equation or gpquad.engine.tree.arithmetic)."""
+    if isinstance(expr, (int, float)):
+        expr = sp.Float(expr)
+    if not isinstance(expr, sp.Basic):
+        raise TypeError(f"from_sympy takes a sympy expression, not {type(expr).__name__}")
     leaves = tap_names(input_names, 1 + max((tap_index(n) for n in delays), default=0))
     index = {name: VAR_BASE + i for i, name in enumerate(terminal_names(leaves))}
     codes: list[int] = []
@@ -139,9 +129,16 @@ def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
         values.append(float(value))
 
     def emit(e):
+        if len(codes) > MAX_ENCODED_NODES:
+            raise GpquadError(f"the equation expands to more than {MAX_ENCODED_NODES} tree "
+                              "nodes")
         if e.is_Number:
+            if not np.isfinite(float(e)):
+                raise GpquadError(f"'{e}' is not a finite number")
             leaf(float(e))
         elif e.is_Symbol:
+            if str(e) not in index:
+                raise GpquadError(f"unknown name '{e}'; variables are {list(index)}")
             codes.append(index[str(e)])
             values.append(0.0)
         elif e.is_Add or e.is_Mul:
@@ -170,7 +167,7 @@ def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
         else:
             raise GpquadError(f"'{e}' uses an operation outside + - * / and integer powers")
 
-    emit(sp.sympify(expr))
+    emit(expr)
     delay_array = np.array([int(delays.get(n, 0)) for n in leaves], dtype=np.int64)
     return Tree.from_lists(codes, values, delay_array)
 

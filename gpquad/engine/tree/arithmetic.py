@@ -1,0 +1,216 @@
+"""A parser of the equations' own grammar, which builds sympy expressions from whitelisted
+pieces and never evaluates the text as Python (no eval, sympify or parse_expr).
+
+    expr    := term (("+" | "-") term)*
+    term    := unary (("*" | "/") unary)*
+    unary   := ("+" | "-") unary | power
+    power   := atom [("**" | "^") unary]        exponent: an integer, |n| <= MAX_POWER
+    atom    := NUMBER | NAME | NAME "(" "t" "-" INTEGER ")" | "(" expr ")"
+
+NUMBER is a decimal number with an optional exponent (1.5e-3); NAME is a letter or "_"
+followed by letters, digits or "_". What a name stands for is the caller's `leaf(name, k)`:
+k is the delay of `name(t-k)`, None for a bare name; it returns a sympy expression or raises
+GpquadError. Operator precedence is Python's (and sympy's): -p**2 is -(p**2).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+
+import sympy as sp
+
+from gpquad.errors import GpquadError
+
+#: Largest |integer exponent| of a power (a product of that many factors in a tree).
+MAX_POWER = 8
+#: Longest expression text read.
+MAX_CHARACTERS = 20_000
+#: Deepest nesting of parentheses, signs and powers.
+MAX_NESTING = 100
+
+_TOKEN = re.compile(r"\s*(?:(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+                    r"|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^()]))")
+
+Leaf = Callable[[str, "int | None"], sp.Expr]
+
+
+def tokenize(text: str, fail) -> list[tuple[str, str]]:
+    """[(kind, text)] with kind number, name or op; `fail(message)` raises."""
+    tokens = []
+    pos = 0
+    end = len(text.rstrip())
+    while pos < end:
+        match = _TOKEN.match(text, pos)
+        if match is None:
+            fail(f"unexpected {text[pos:].lstrip()[:1]!r} at character {pos + 1}")
+        kind = match.lastgroup
+        tokens.append((kind, match.group(kind)))
+        pos = match.end()
+    return tokens
+
+
+class _Parser:
+    def __init__(self, text: str, leaf: Leaf, caret: bool, fail):
+        self.text = text
+        self.leaf = leaf
+        self.caret = caret
+        self.fail = fail
+        self.tokens = tokenize(text, fail)
+        self.pos = 0
+        self.nesting = 0
+
+    def peek(self) -> tuple[str, str] | None:
+        return self.tokens[self.pos] if self.pos < len(self.tokens) else None
+
+    def take(self, op: str | None = None) -> tuple[str, str]:
+        token = self.peek()
+        if token is None:
+            self.fail("ends too early" if op is None else f"expected {op!r} at the end")
+        if op is not None and token != ("op", op):
+            self.fail(f"expected {op!r} before {token[1]!r}")
+        self.pos += 1
+        return token
+
+    def at(self, *ops: str) -> bool:
+        token = self.peek()
+        return token is not None and token[0] == "op" and token[1] in ops
+
+    def nest(self):
+        self.nesting += 1
+        if self.nesting > MAX_NESTING:
+            self.fail(f"nested deeper than {MAX_NESTING} levels")
+
+    def parse(self) -> sp.Expr:
+        if not self.tokens:
+            self.fail("empty expression")
+        expr = self.expr()
+        if self.peek() is not None:
+            self.fail(f"unexpected {self.peek()[1]!r} after a complete expression")
+        return expr
+
+    def expr(self) -> sp.Expr:
+        out = self.term()
+        while self.at("+", "-"):
+            op = self.take()[1]
+            right = self.term()
+            out = out + right if op == "+" else out - right
+        return out
+
+    def term(self) -> sp.Expr:
+        out = self.unary()
+        while self.at("*", "/"):
+            op = self.take()[1]
+            right = self.unary()
+            out = out * right if op == "*" else out / right
+        return out
+
+    def unary(self) -> sp.Expr:
+        if self.at("+", "-"):
+            self.nest()
+            op = self.take()[1]
+            inner = self.unary()
+            self.nesting -= 1
+            return inner if op == "+" else -inner
+        return self.power()
+
+    def power(self) -> sp.Expr:
+        base = self.atom()
+        if self.at("**") or (self.caret and self.at("^")):
+            self.take()
+            self.nest()
+            exponent = self.unary()
+            self.nesting -= 1
+            if not (exponent.is_Integer and abs(int(exponent)) <= MAX_POWER):
+                self.fail(f"powers take an integer exponent from -{MAX_POWER} to {MAX_POWER}, "
+                          f"not {exponent}")
+            return base ** exponent
+        if self.at("^"):
+            self.fail("write powers as x**2")
+        return base
+
+    def atom(self) -> sp.Expr:
+        kind, text = self.take()
+        if kind == "number":
+            return self.number(text)
+        if kind == "name":
+            if not self.at("("):
+                return self.leaf(text, None)
+            return self.leaf(text, self.delay(text))
+        if text == "(":
+            self.nest()
+            inner = self.expr()
+            self.take(")")
+            self.nesting -= 1
+            return inner
+        self.fail(f"unexpected {text!r}")
+
+    def number(self, text: str) -> sp.Expr:
+        if len(text) > 40:
+            self.fail(f"number {text[:20]}... has too many digits")
+        if re.fullmatch(r"\d+", text):
+            return sp.Integer(int(text))
+        if not math.isfinite(float(text)):
+            self.fail(f"number {text} is out of range")
+        return sp.Float(text)
+
+    def delay(self, name: str) -> int:
+        """k of `name(t-k)` (the name already read)."""
+        self.take("(")
+        token = self.peek()
+        if token != ("name", "t"):
+            self.fail(f"'{name}(...)': equations use + - * / and integer powers of states, "
+                      "inputs and numbers, no functions (a delayed input is written "
+                      "name(t-k))")
+        self.take()
+        if self.at(")"):
+            self.take()
+            return 0
+        if not self.at("-"):
+            self.fail(f"'{name}(t...)': a delay is written {name}(t-k) with k >= 0 samples")
+        self.take()
+        kind, k = self.take()
+        if kind != "number" or not k.isdigit() or len(k) > 9:
+            self.fail(f"'{name}(t-{k})': the delay k of {name}(t-k) is a whole number of "
+                      "samples")
+        self.take(")")
+        return int(k)
+
+
+def parse_arithmetic(text, leaf: Leaf, *, caret_power: bool = False, source: str | None = None,
+                     field: str | None = None) -> sp.Expr:
+    """The sympy expression of `text` (module grammar); names go through `leaf`.
+    caret_power: also read a ^ b as a power. Errors are GpquadError naming source/field."""
+    def fail(message: str):
+        shown = text if len(text) <= 80 else text[:77] + "..."
+        raise GpquadError(f"cannot parse '{shown}': {message}", source=source, field=field)
+
+    if not isinstance(text, str):
+        raise GpquadError(f"expected an equation as text, not {type(text).__name__}",
+                          source=source, field=field)
+    if len(text) > MAX_CHARACTERS:
+        raise GpquadError(f"an equation of {len(text)} characters is longer than the "
+                          f"{MAX_CHARACTERS} read", source=source, field=field)
+    return _Parser(text, leaf, caret_power, fail).parse()
+
+
+def parse_in_symbols(text, symbols: dict[str, sp.Symbol] | None, *, caret_power: bool = False,
+                     source: str | None = None, field: str | None = None) -> sp.Expr:
+    """`text` in the given symbols only (no delays written name(t-k)); symbols=None: every
+    name is a real Symbol of that name."""
+    def leaf(name: str, k):
+        if k is not None:
+            raise GpquadError(f"'{name}(t-{k})' in '{text}': delays are given beside the "
+                              "expression here, not in it", source=source, field=field)
+        if symbols is None:
+            return sp.Symbol(name, real=True)
+        if name not in symbols:
+            raise GpquadError(f"unknown name '{name}' in '{text}'; the names are "
+                              f"{sorted(symbols)}", source=source, field=field)
+        return symbols[name]
+
+    return parse_arithmetic(text, leaf, caret_power=caret_power, source=source, field=field)
+
+
+__all__ = ["MAX_POWER", "parse_arithmetic", "parse_in_symbols"]
