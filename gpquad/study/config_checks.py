@@ -83,6 +83,11 @@ SEGMENT_MODES = ("auto", "armed", "thrust", "range", "none")
 
 def validate_pipeline(d: DataConfig, source: str = "config") -> None:
     """Checks of the log-pipeline fields of [data]."""
+    from gpquad.data.io import READERS
+
+    if d.format not in READERS:
+        raise GpquadError(f"unknown format '{d.format}'; choose one of {sorted(READERS)}",
+                          source=source, field="data.format")
     if d.segment not in SEGMENT_MODES:
         raise GpquadError(f"choose one of {list(SEGMENT_MODES)}", source=source,
                           field="data.segment")

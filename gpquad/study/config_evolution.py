@@ -46,10 +46,10 @@ def validate_evolution(cfg: Config, source: str) -> None:
                               source=source, field=f"evolution.targets[{i}]")
     if not ev.targets:
         raise GpquadError("at least one target is needed", source=source, field="evolution.targets")
-    for name in ("iterations", "n_models", "n_tests", "suite_size"):
+    for name in ("iterations", "n_models", "n_tests", "suite_size", "model_generations"):
         if getattr(ev, name) < 1:
             raise GpquadError("must be >= 1", source=source, field=f"evolution.{name}")
-    for name in ("model_generations", "test_generations", "simplify_generations", "max_delay",
+    for name in ("test_generations", "simplify_generations", "max_delay",
                  "gradient_steps", "nelder_mead_evals"):
         if getattr(ev, name) < 0:
             raise GpquadError("must be >= 0", source=source, field=f"evolution.{name}")
@@ -75,6 +75,13 @@ def validate_evolution(cfg: Config, source: str) -> None:
                           field="evolution.substeps")
     for i, step in enumerate(ev.finish):
         _choice(step, FINISH_STEPS, source, f"evolution.finish[{i}]")
+    judged = [step for step in ev.finish if step in ("refine", "repair", "joint_fit")]
+    d = cfg.data
+    if judged and d.validation == "fraction" and not d.validation_fraction > 0:
+        raise GpquadError(f"validation_fraction = 0 leaves the finishing steps {judged} no "
+                          "validation data to judge on: give a fraction > 0, hold out files "
+                          "in data.validation, or set evolution.finish = []", source=source,
+                          field="data.validation_fraction")
     if len(set(ev.finish)) != len(ev.finish):
         raise GpquadError("a finishing step is listed twice; give each once", source=source,
                           field="evolution.finish")
