@@ -12,8 +12,9 @@ import pytest
 from gpquad.cli.commands import main
 from gpquad.data.align import estimate_offset
 from gpquad.data.flight import enu_flu_quat, flip_body
+from gpquad.data.formats import FORMATS
 from gpquad.data.integration_check import integration_check
-from gpquad.data.io import READERS, load_dataset
+from gpquad.data.io import READERS, load_dataset, register_reader
 from gpquad.data.simulator import simulate
 from gpquad.data.table import read_table_log
 from gpquad.engine.kernels.quaternion import euler_array
@@ -194,7 +195,7 @@ def test_run_refuses_a_dataset_that_fails_the_check(sim_flight, tmp_path):
     ref = np.hstack([euler_array(bad.quat), bad.vel, bad.rates])
     ref[:, 8] *= 2.0
     bad.meta["reference"] = ref
-    READERS["test-bad"] = lambda path, data: [bad]
+    register_reader("test-bad", lambda path, data: [bad])
     try:
         cfg = config_from_dict({"data": {"files": ["x"], "format": "test-bad"}})
         with pytest.raises(GpquadError, match="integration check failed: .* r "):
@@ -204,6 +205,7 @@ def test_run_refuses_a_dataset_that_fails_the_check(sim_flight, tmp_path):
         assert load_dataset(ok).n_samples == len(bad)
     finally:
         READERS.pop("test-bad")
+        FORMATS.discard("test-bad")
 
 
 @needs_shared

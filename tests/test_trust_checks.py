@@ -91,8 +91,8 @@ def test_a_partial_stick_table_moves_every_input():
     assert all(np.ptp(flight.inputs[:, j]) > 0.01 for j in range(4))
 
 
-@pytest.mark.parametrize("line,field", [("const_variance = inf", "evolution.const_variance"),
-                                        ("const_low = -inf", "evolution.const_low")])
+@pytest.mark.parametrize("line,field", [("const_variance = inf", "evolution.gp.const_variance"),
+                                        ("const_low = -inf", "evolution.gp.const_low")])
 def test_constant_settings_must_be_finite(tmp_path, capsys, line, field):
     (tmp_path / "c.toml").write_text(QUICK.replace("[simulator]", f"{line}\n[simulator]"))
     out = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r",

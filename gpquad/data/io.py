@@ -13,6 +13,7 @@ from pathlib import Path
 
 from gpquad.data.dataset import Dataset, build_dataset
 from gpquad.data.flight import Flight
+from gpquad.data.formats import FORMATS
 from gpquad.errors import GpquadError
 from gpquad.study.config import Config, DataConfig
 
@@ -30,6 +31,7 @@ READERS: dict[str, Callable[[Path, DataConfig], list[Flight]]] = {"generic": _re
 def register_reader(name: str, reader: Callable[[Path, DataConfig], list[Flight]]) -> None:
     """Make a log format available to `data.format`."""
     READERS[name] = reader
+    FORMATS.add(name)
 
 
 def _register_log_readers() -> None:

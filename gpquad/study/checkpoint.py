@@ -204,7 +204,7 @@ def check_fits(state: RunState, co) -> RunState:
             raise CorruptCheckpoint(f"model {i} uses leaves or delays this config has not")
     tests, suite = state.tests, state.suite
     if (len(tests) and (tests.min() < 0 or tests.max() >= co.space.size)) \
-            or (len(suite) and (suite.min() < 0 or suite.max() + cfg.window_steps >= n_rows)):
+            or (len(suite) and (suite.min() < 0 or suite.max() + co.window_steps >= n_rows)):
         raise CorruptCheckpoint("its windows lie outside the training data")
     return state
 

@@ -83,10 +83,10 @@ SEGMENT_MODES = ("auto", "armed", "thrust", "range", "none")
 
 def validate_pipeline(d: DataConfig, source: str = "config") -> None:
     """Checks of the log-pipeline fields of [data]."""
-    from gpquad.data.io import READERS
+    from gpquad.data.formats import FORMATS
 
-    if d.format not in READERS:
-        raise GpquadError(f"unknown format '{d.format}'; choose one of {sorted(READERS)}",
+    if d.format not in FORMATS:
+        raise GpquadError(f"unknown format '{d.format}'; choose one of {sorted(FORMATS)}",
                           source=source, field="data.format")
     if d.segment not in SEGMENT_MODES:
         raise GpquadError(f"choose one of {list(SEGMENT_MODES)}", source=source,

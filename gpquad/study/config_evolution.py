@@ -3,6 +3,7 @@ and the field, raised before any long work."""
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from gpquad.engine.kernels.step import SCHEMES
@@ -113,6 +114,10 @@ def _validate_gp(cfg: Config, source: str) -> None:
     gp = cfg.evolution.gp
     for name in ("p_leaf", "p_constant_leaf", "p_const_perturb", "p_delay"):
         check_probability(getattr(gp, name), source, f"evolution.gp.{name}")
+    for name in ("const_low", "const_high", "const_variance"):
+        if not math.isfinite(getattr(gp, name)):
+            raise GpquadError(f"{getattr(gp, name)} is not a finite number", source=source,
+                              field=f"evolution.gp.{name}")
     if gp.const_low >= gp.const_high or not gp.const_variance >= 0:
         raise GpquadError("need const_low < const_high and const_variance >= 0", source=source,
                           field="evolution.gp.const_low")

@@ -73,11 +73,11 @@ def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> Var
     """n_inputs: every tap of every input (gpquad.engine.taps). The constants' settings must
     be finite (a GpquadError naming the field otherwise)."""
     for name in ("const_low", "const_high", "const_variance"):
-        value = getattr(cfg, name)
+        value = getattr(cfg.gp, name)
         if not np.isfinite(value) or (name == "const_variance" and value < 0):
             raise GpquadError(f"{value} is not a finite number" + (" >= 0" if name ==
                                                                   "const_variance" else ""),
-                              field=f"evolution.{name}")
+                              field=f"evolution.gp.{name}")
     return VariationParams(
         n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
         taps=cfg.input_taps,
