@@ -258,8 +258,9 @@ class Model:
 
         references = [("model", self.discovered, dataset),
                       ("zero", zero_model(self.input_names, self.dt), raw)]
-        if is_rate_level(raw.flight_info):
-            references.append(("set-point", setpoint_model(self.input_names, self.dt), raw))
+        setpoint = setpoint_model(self.input_names, self.dt)
+        if setpoint is not None and is_rate_level(raw.flight_info):
+            references.append(("set-point", setpoint, raw))
         rows = {}
         for name, model, flown in references:
             with np.errstate(all="ignore"):
