@@ -52,8 +52,7 @@ def parse_variant(text: str) -> tuple[str, dict]:
     fields = {}
     for item in filter(None, rest.split(",")):
         key, _, value = item.partition("=")
-        fields[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"] if value.strip() \
-            else ""
+        fields[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"] if value.strip() else ""
     return name, fields
 
 
@@ -62,17 +61,25 @@ def scenario_config(scenario: str, base: str | None) -> Config:
     cfg = load_config(base or path) if scenario != "px4-s250" else load_config(path)
     if scenario.startswith("rigid") and base:
         # keep the rigid-body truth, take the engine settings of `base`
-        cfg = dataclasses.replace(load_config(path), evolution=dataclasses.replace(
-            load_config(base).evolution, targets=cfg.evolution.targets))
+        cfg = dataclasses.replace(
+            load_config(path),
+            evolution=dataclasses.replace(
+                load_config(base).evolution, targets=cfg.evolution.targets
+            ),
+        )
     if noisy:
-        cfg = dataclasses.replace(cfg, simulator=dataclasses.replace(
-            cfg.simulator, measurement_noise=dict(NOISE)))
+        cfg = dataclasses.replace(
+            cfg, simulator=dataclasses.replace(cfg.simulator, measurement_noise=dict(NOISE))
+        )
     if scenario == "px4-s250":
-        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data,
-                                                                validation_fraction=0.3))
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, validation_fraction=0.3))
         if base:
-            cfg = dataclasses.replace(cfg, evolution=dataclasses.replace(
-                load_config(base).evolution, targets=cfg.evolution.targets))
+            cfg = dataclasses.replace(
+                cfg,
+                evolution=dataclasses.replace(
+                    load_config(base).evolution, targets=cfg.evolution.targets
+                ),
+            )
     return validate(cfg, scenario)
 
 
@@ -96,8 +103,9 @@ def run_one(cfg: Config, scenario: str, seed: int, fields: dict, dataset, heldou
         eqs[target] = eq
         rows[target] = eq.text()
         if scenario != "px4-s250":
-            report = compare_to_truth(eq, cfg.simulator.equations[target], dataset,
-                                      rel_tol=0.02, threshold=0.01)
+            report = compare_to_truth(
+                eq, cfg.simulator.equations[target], dataset, rel_tol=0.02, threshold=0.01
+            )
             exact[target] = bool(report["passed"])
     wall = time.perf_counter() - t0
     model = DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, seed, {})
@@ -111,17 +119,28 @@ def run_one(cfg: Config, scenario: str, seed: int, fields: dict, dataset, heldou
         except GpquadError:
             continue
         rse[str(h)] = {s: score.rse[s] for s in scored}
-    return {"scenario": scenario, "seed": seed, "wall_s": wall, "exact": exact,
-            "n_exact": sum(exact.values()), "equations": rows, "rse": rse,
-            "mean_rse": {h: float(np.mean(list(v.values()))) for h, v in rse.items()},
-            "diverged": any(not np.isfinite(x) for v in rse.values() for x in v.values())}
+    return {
+        "scenario": scenario,
+        "seed": seed,
+        "wall_s": wall,
+        "exact": exact,
+        "n_exact": sum(exact.values()),
+        "equations": rows,
+        "rse": rse,
+        "mean_rse": {h: float(np.mean(list(v.values()))) for h, v in rse.items()},
+        "diverged": any(not np.isfinite(x) for v in rse.values() for x in v.values()),
+    }
 
 
 def summarise(results: list[dict]) -> str:
-    lines = ["| scenario | variant | exact (per seed) | mean RSE 1 s | 7 s | 30 s | "
-             "diverged | wall s |", "|---|---|---|---|---|---|---|---|"]
-    keys = sorted({(r["scenario"], r["variant"]) for r in results},
-                  key=lambda k: (k[0], [r["variant"] for r in results].index(k[1])))
+    lines = [
+        "| scenario | variant | exact (per seed) | mean RSE 1 s | 7 s | 30 s | diverged | wall s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    keys = sorted(
+        {(r["scenario"], r["variant"]) for r in results},
+        key=lambda k: (k[0], [r["variant"] for r in results].index(k[1])),
+    )
     for scen, var in keys:
         rs = [r for r in results if r["scenario"] == scen and r["variant"] == var]
         exact = "/".join(str(r["n_exact"]) for r in rs) if rs[0]["exact"] else "-"
@@ -131,19 +150,26 @@ def summarise(results: list[dict]) -> str:
             cells.append(f"{np.mean(vals):.3g} [{np.min(vals):.3g}, {np.max(vals):.3g}]")
         div = sum(r["diverged"] for r in rs)
         wall = np.mean([r["wall_s"] for r in rs])
-        lines.append(f"| {scen} | {var} | {exact} | " + " | ".join(cells)
-                     + f" | {div}/{len(rs)} | {wall:.0f} |")
+        lines.append(
+            f"| {scen} | {var} | {exact} | "
+            + " | ".join(cells)
+            + f" | {div}/{len(rs)} | {wall:.0f} |"
+        )
     return "\n".join(lines)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--scenario", action="append", required=True, choices=sorted(SCENARIOS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--variant", action="append", default=None)
-    parser.add_argument("--base", default=None,
-                        help="engine settings from this config (default: the scenario's own)")
+    parser.add_argument(
+        "--base",
+        default=None,
+        help="engine settings from this config (default: the scenario's own)",
+    )
     parser.add_argument("--json", default=None, help="write every result to this file")
     args = parser.parse_args()
     variants = [parse_variant(v) for v in (args.variant or ["base:"])]
@@ -157,10 +183,13 @@ def main() -> None:
                 r = run_one(cfg, scenario, seed, fields, dataset, heldout)
                 r["variant"] = name
                 results.append(r)
-                print(f"{scenario} {name} seed {seed}: exact {r['n_exact']} "
-                      f"{[t for t, ok in r['exact'].items() if not ok]} mean RSE "
-                      + " ".join(f"{h}s={v:.3g}" for h, v in r["mean_rse"].items())
-                      + f" ({r['wall_s']:.0f} s)", flush=True)
+                print(
+                    f"{scenario} {name} seed {seed}: exact {r['n_exact']} "
+                    f"{[t for t, ok in r['exact'].items() if not ok]} mean RSE "
+                    + " ".join(f"{h}s={v:.3g}" for h, v in r["mean_rse"].items())
+                    + f" ({r['wall_s']:.0f} s)",
+                    flush=True,
+                )
                 for text in r["equations"].values():
                     print(f"    {text}", flush=True)
     print(summarise(results))

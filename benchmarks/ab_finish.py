@@ -45,8 +45,10 @@ RATE_REFINE = {"p_dot": 20, "q_dot": 20, "r_dot": 20}
 VARIANTS = {
     "none": {"finish": ()},
     "repair+joint": {"finish": ("symmetrize", "repair", "joint_fit")},
-    "refine+repair+joint": {"finish": ("symmetrize", "refine", "repair", "joint_fit"),
-                            "refine_terms": RATE_REFINE},
+    "refine+repair+joint": {
+        "finish": ("symmetrize", "refine", "repair", "joint_fit"),
+        "refine_terms": RATE_REFINE,
+    },
 }
 
 
@@ -97,20 +99,37 @@ def run_seed(name: str, seed: int, engine: dict, out: Path, variants) -> list[di
             return pred
 
         metrics = evaluate.score(simulate, scenario.test, scenario.measured, HORIZONS_S)
-        swaps = {g: [s["target"] + ":" + s.get("why", "diverged")
-                     for s in (m.stability or {}).get("swaps", [])] for g, m in models.items()}
+        swaps = {
+            g: [
+                s["target"] + ":" + s.get("why", "diverged")
+                for s in (m.stability or {}).get("swaps", [])
+            ]
+            for g, m in models.items()
+        }
         exact = (recovery_gpquad(models["all"], scenario) if "all" in models else None) or {}
-        rows.append({"scenario": name, "seed": seed, "variant": variant, "metrics": metrics,
-                     "exact": sum(exact.values()) if exact else None,
-                     "swaps": swaps, "finish_s": finish_s,
-                     "equations": {g: {t: e.text() for t, e in m.equations.items()}
-                                   for g, m in models.items()}})
+        rows.append(
+            {
+                "scenario": name,
+                "seed": seed,
+                "variant": variant,
+                "metrics": metrics,
+                "exact": sum(exact.values()) if exact else None,
+                "swaps": swaps,
+                "finish_s": finish_s,
+                "equations": {
+                    g: {t: e.text() for t, e in m.equations.items()} for g, m in models.items()
+                },
+            }
+        )
     return rows
 
 
 def table(rows: list[dict], variants) -> str:
-    lines = ["| scenario | variant | 1 s | 7 s | 30 s | diverged | exact per seed | "
-             "swaps (seed: group target) |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| scenario | variant | 1 s | 7 s | 30 s | diverged | exact per seed | "
+        "swaps (seed: group target) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name in dict.fromkeys(r["scenario"] for r in rows):
         for variant in variants:
             rs = [r for r in rows if r["scenario"] == name and r["variant"] == variant]
@@ -119,44 +138,60 @@ def table(rows: list[dict], variants) -> str:
                 vals = np.array([r["metrics"][f"{h:g}s"]["mean"] or np.nan for r in rs])
                 cells.append(f"{np.mean(vals):.3g} ({np.min(vals):.3g}-{np.max(vals):.3g})")
             div = sum(r["metrics"][f"{h:g}s"]["diverged"] for r in rs for h in HORIZONS_S)
-            swaps = "; ".join(f"{r['seed']}: " + ", ".join(f"{g} {s}" for g, ss in
-                                                           r["swaps"].items() for s in ss)
-                              for r in rs if any(r["swaps"].values()))
+            swaps = "; ".join(
+                f"{r['seed']}: " + ", ".join(f"{g} {s}" for g, ss in r["swaps"].items() for s in ss)
+                for r in rs
+                if any(r["swaps"].values())
+            )
             exact = ", ".join(str(r["exact"]) for r in rs if r["exact"] is not None) or "-"
-            lines.append(f"| {name} | {variant} | " + " | ".join(cells)
-                         + f" | {div} | {exact} | {swaps or '-'} |")
+            lines.append(
+                f"| {name} | {variant} | "
+                + " | ".join(cells)
+                + f" | {div} | {exact} | {swaps or '-'} |"
+            )
     return "\n".join(lines)
 
 
 def paired_table(rows: list[dict], peers_dir: Path, variants) -> str:
-    lines = ["| scenario | variant | peer | horizon | peer RSE | gpquad RSE (min-max) |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        "| scenario | variant | peer | horizon | peer RSE | gpquad RSE (min-max) |",
+        "|---|---|---|---|---|---|",
+    ]
     for name in dict.fromkeys(r["scenario"] for r in rows):
-        peer_cells = [c for p in ("sindy", "ols") for c in
-                      [load_cell(cell_path(peers_dir, name, p, 0))] if c]
+        peer_cells = [
+            c for p in ("sindy", "ols") for c in [load_cell(cell_path(peers_dir, name, p, 0))] if c
+        ]
         for variant in variants:
-            ours = [{"scenario": name, "method": "gpquad", "seed": r["seed"],
-                     "metrics": r["metrics"]} for r in rows
-                    if r["scenario"] == name and r["variant"] == variant]
+            ours = [
+                {"scenario": name, "method": "gpquad", "seed": r["seed"], "metrics": r["metrics"]}
+                for r in rows
+                if r["scenario"] == name and r["variant"] == variant
+            ]
             for p in paired(ours + peer_cells):
                 g = p["gpquad_rse"]
-                lines.append(f"| {name} | {variant} | {p['peer']} | {p['horizon']} | "
-                             f"{p['peer_rse']:.3g} | {g['mean']:.3g} ({g['min']:.3g}-"
-                             f"{g['max']:.3g}) |")
+                lines.append(
+                    f"| {name} | {variant} | {p['peer']} | {p['horizon']} | "
+                    f"{p['peer_rse']:.3g} | {g['mean']:.3g} ({g['min']:.3g}-"
+                    f"{g['max']:.3g}) |"
+                )
     return "\n".join(lines)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("scenarios", nargs="+")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--engine", nargs="*", help="EvolutionConfig overrides FIELD=VALUE")
     parser.add_argument("--out", type=Path, default=Path("results/ab-finish"))
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--peers", type=Path, help="benchmark folder with the peer cells")
-    parser.add_argument("--variants", default="none,repair+joint",
-                        help=f"comma-separated, or 'all' ({', '.join(VARIANTS)})")
+    parser.add_argument(
+        "--variants",
+        default="none,repair+joint",
+        help=f"comma-separated, or 'all' ({', '.join(VARIANTS)})",
+    )
     args = parser.parse_args()
     variants = list(VARIANTS) if args.variants == "all" else args.variants.split(",")
     unknown = [v for v in variants if v not in VARIANTS]
@@ -167,12 +202,20 @@ def main() -> None:
     for name in args.scenarios:  # build (and cache) the flights once, before the workers
         build_scenario(name, args.out / "flights")
     jobs = [(n, s) for n in args.scenarios for s in args.seeds]
-    results = Parallel(n_jobs=args.jobs)(delayed(run_seed)(n, s, engine, args.out, variants)
-                                         for n, s in jobs)
+    results = Parallel(n_jobs=args.jobs)(
+        delayed(run_seed)(n, s, engine, args.out, variants) for n, s in jobs
+    )
     rows = [r for rs in results for r in rs]
-    (args.out / "ab_finish.json").write_text(json.dumps(
-        {"engine_overrides": engine, "variants": {v: VARIANTS[v] for v in variants},
-         "rows": rows}, default=float))
+    (args.out / "ab_finish.json").write_text(
+        json.dumps(
+            {
+                "engine_overrides": engine,
+                "variants": {v: VARIANTS[v] for v in variants},
+                "rows": rows,
+            },
+            default=float,
+        )
+    )
     print(table(rows, variants))
     if args.peers:
         print()

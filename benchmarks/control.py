@@ -58,24 +58,39 @@ def main() -> int:
     cfg = load_control_config(args.config)
     out = Path(args.out) / Path(args.model).name
     if args.replace:
-        args.model = str(compose(Path(args.model), args.replace,
-                                 Path(args.out) / f"{Path(args.model).name}-composed"))
+        args.model = str(
+            compose(
+                Path(args.model), args.replace, Path(args.out) / f"{Path(args.model).name}-composed"
+            )
+        )
     rows = []
     for seed in range(1, args.seeds + 1):
         t0 = time.perf_counter()
-        s = run_pid(args.model, cfg, out / f"seed{seed}", courses=args.courses, seed=seed,
-                    say=lambda *a: None)
+        s = run_pid(
+            args.model,
+            cfg,
+            out / f"seed{seed}",
+            courses=args.courses,
+            seed=seed,
+            say=lambda *a: None,
+        )
         if s["truth_rmse_m"] is not None:
             ok = s["truth_rmse_m"] <= 1.5 * s["model_rmse_m"] and s["completion"] >= 0.9
         else:
             ok = s["model_diverged"] == 0
         rows.append({**s, "pass": bool(ok), "wall_time_s": time.perf_counter() - t0})
-        truth = ("" if s["truth_rmse_m"] is None else
-                 f"truth RMSE {s['truth_rmse_m']:.3f} m ({s['rmse_ratio']:.2f}x), "
-                 f"completion {s['completion']:.1%}; ")
-        print(f"seed {seed}: model RMSE {s['model_rmse_m']:.3f} m, model completion "
-              f"{s['model_completion']:.1%}, diverged {s['model_diverged']}; {truth}"
-              f"{'pass' if ok else 'FAIL'} ({rows[-1]['wall_time_s']:.0f} s)", flush=True)
+        truth = (
+            ""
+            if s["truth_rmse_m"] is None
+            else f"truth RMSE {s['truth_rmse_m']:.3f} m ({s['rmse_ratio']:.2f}x), "
+            f"completion {s['completion']:.1%}; "
+        )
+        print(
+            f"seed {seed}: model RMSE {s['model_rmse_m']:.3f} m, model completion "
+            f"{s['model_completion']:.1%}, diverged {s['model_diverged']}; {truth}"
+            f"{'pass' if ok else 'FAIL'} ({rows[-1]['wall_time_s']:.0f} s)",
+            flush=True,
+        )
     out.mkdir(parents=True, exist_ok=True)
     (out / "control_benchmark.json").write_text(json.dumps(rows, indent=1))
     print(f"{sum(r['pass'] for r in rows)}/{len(rows)} seeds pass")

@@ -32,11 +32,14 @@ def payloads(marker: Path) -> dict[str, str]:
     m = str(marker)
     return {
         "import": f"__import__('os').system('touch {m}')",
-        "globals": ("0*Integer.__new__.__globals__['__builtins__']['__import__']('os')"
-                    f".system('touch {m}')"),
+        "globals": (
+            f"0*Integer.__new__.__globals__['__builtins__']['__import__']('os').system('touch {m}')"
+        ),
         "lambda": f"(lambda: open('{m}', 'w'))()",
-        "symbol_attr": (f"p + Symbol('x').__class__.__init__.__globals__['__builtins__']"
-                        f"['open']('{m}', 'w').close()"),
+        "symbol_attr": (
+            f"p + Symbol('x').__class__.__init__.__globals__['__builtins__']"
+            f"['open']('{m}', 'w').close()"
+        ),
     }
 
 
@@ -75,17 +78,44 @@ def make_fixtures(fix: Path, env: dict) -> None:
     """A finished six-target run folder and a one-repetition sweep folder (no assembly)."""
     fix.mkdir(parents=True, exist_ok=True)
     write(fix / "six.toml", quick_config(SIX))
-    for argv in (["run", str(fix / "six.toml"), "--out", str(fix / "run6"), "--quiet"],
-                 ["sweep", str(fix / "six.toml"), "--runs", "1", "--out", str(fix / "sweep"),
-                  "--quiet", "--no-assemble"]):
+    for argv in (
+        ["run", str(fix / "six.toml"), "--out", str(fix / "run6"), "--quiet"],
+        [
+            "sweep",
+            str(fix / "six.toml"),
+            "--runs",
+            "1",
+            "--out",
+            str(fix / "sweep"),
+            "--quiet",
+            "--no-assemble",
+        ],
+    ):
         if not Path(argv[argv.index("--out") + 1]).exists():
-            proc = subprocess.run([sys.executable, "-m", "gpquad", *argv], env=env,
-                                  capture_output=True, text=True, timeout=900)
+            proc = subprocess.run(
+                [sys.executable, "-m", "gpquad", *argv],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=900,
+            )
             if proc.returncode != 0:
                 sys.exit(f"fixture {argv[0]} failed:\n{proc.stderr}")
-    proc = subprocess.run([sys.executable, "-m", "gpquad", "simulate", str(fix / "six.toml"),
-                           "--out", str(fix / "flight.csv")], env=env, capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gpquad",
+            "simulate",
+            str(fix / "six.toml"),
+            "--out",
+            str(fix / "flight.csv"),
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     if proc.returncode != 0:
         sys.exit(f"fixture simulate failed:\n{proc.stderr}")
 
@@ -115,5 +145,3 @@ def inputs_csv(path: Path, dt: float = 0.04, n: int = 60) -> Path:
 
 def gp(*argv) -> list[str]:
     return [str(a) for a in argv]
-
-

@@ -20,8 +20,7 @@ from hostile_common import (
 def config_cases(work_of, fix: Path) -> list[Case]:
     out = []
     texts = {
-        "latin1": quick_config().replace("[simulator]", "# caf\xe9\n[simulator]").encode(
-            "latin-1"),
+        "latin1": quick_config().replace("[simulator]", "# caf\xe9\n[simulator]").encode("latin-1"),
         "utf16": quick_config().encode("utf-16"),
         "binary": bytes(range(256)) * 4,
         "empty-bytes-nul": b"\x00" * 10,
@@ -31,17 +30,23 @@ def config_cases(work_of, fix: Path) -> list[Case]:
             name = f"config/encoding/{label}/{command}"
             work = work_of(name)
             cfg = write(work / "c.toml", blob)
-            argv = {"run": gp("run", cfg, "--out", work / "r", "--quiet"),
-                    "simulate": gp("simulate", cfg, "--out", work / "f.csv"),
-                    "sweep": gp("sweep", cfg, "--runs", "1", "--out", work / "s", "--quiet"),
-                    "data-check": gp("data", "check", fix / "flight.csv", "--config", cfg,
-                                     "--plot", work / "p.png")}[command]
+            argv = {
+                "run": gp("run", cfg, "--out", work / "r", "--quiet"),
+                "simulate": gp("simulate", cfg, "--out", work / "f.csv"),
+                "sweep": gp("sweep", cfg, "--runs", "1", "--out", work / "s", "--quiet"),
+                "data-check": gp(
+                    "data", "check", fix / "flight.csv", "--config", cfg, "--plot", work / "p.png"
+                ),
+            }[command]
             out.append(Case(name, argv))
     bad_sim = {
-        "duration-huge": "duration_s = 1e12", "rate-huge": "rate_hz = 1e9",
-        "duration-nan": "duration_s = nan", "duration-inf": "duration_s = inf",
-        "duration-negative": "duration_s = -5.0", "rate-zero": "rate_hz = 0.0",
-        "stick-negative": 'stick_sd = {u_P = -0.1, u_R = 0.08, u_Y = 0.08, u_T = 0.03}',
+        "duration-huge": "duration_s = 1e12",
+        "rate-huge": "rate_hz = 1e9",
+        "duration-nan": "duration_s = nan",
+        "duration-inf": "duration_s = inf",
+        "duration-negative": "duration_s = -5.0",
+        "rate-zero": "rate_hz = 0.0",
+        "stick-negative": "stick_sd = {u_P = -0.1, u_R = 0.08, u_Y = 0.08, u_T = 0.03}",
         "noise-huge": "measurement_noise = {attitude = 1e6}",
         "input-limit-zero": "input_limit = 0.0",
         "stick-partial": "stick_sd = {u_P = 0.08}",
@@ -62,16 +67,27 @@ def config_cases(work_of, fix: Path) -> list[Case]:
             if "duration" not in label:
                 text += "duration_s = 40.0\n"
             cfg = write(work / "c.toml", text + line + "\n")
-            argv = gp("simulate", cfg, "--out", work / "f.csv") if command == "simulate" else \
-                gp("run", cfg, "--out", work / "r", "--quiet")
+            argv = (
+                gp("simulate", cfg, "--out", work / "f.csv")
+                if command == "simulate"
+                else gp("run", cfg, "--out", work / "r", "--quiet")
+            )
             # a table that names one entry changes that one (merged over the defaults): the
             # flight must still move every state and input
             merged = label in ("stick-partial", "equations-partial")
-            out.append(Case(name, argv, expect="safe" if merged else "refuse", timeout=90,
-                            verify="moves" if merged else ""))
+            out.append(
+                Case(
+                    name,
+                    argv,
+                    expect="safe" if merged else "refuse",
+                    timeout=90,
+                    verify="moves" if merged else "",
+                )
+            )
     bad_ev = {
-        "const-variance-inf": "const_variance = inf", "model-generations-0":
-        "model_generations = 0", "exclude-all": 'exclude_leaves = ["phi", "theta", "psi", '
+        "const-variance-inf": "const_variance = inf",
+        "model-generations-0": "model_generations = 0",
+        "exclude-all": 'exclude_leaves = ["phi", "theta", "psi", '
         '"u", "v", "w", "p", "q", "r", "u_P", "u_R", "u_Y", "u_T"]',
     }
     for label, line in bad_ev.items():
@@ -80,12 +96,15 @@ def config_cases(work_of, fix: Path) -> list[Case]:
         text = quick_config().replace("[simulator]", line + "\n[simulator]")
         if label == "model-generations-0":
             key = line.split(" =")[0]
-            text = "\n".join(r for r in text.splitlines() if not r.startswith(key + " ")) \
-                .replace("[simulator]", line + "\n[simulator]")
+            text = "\n".join(r for r in text.splitlines() if not r.startswith(key + " ")).replace(
+                "[simulator]", line + "\n[simulator]"
+            )
         cfg = write(work / "c.toml", text)
         out.append(Case(name, gp("run", cfg, "--out", work / "r", "--quiet"), timeout=90))
-    for label, line in (("format-bogus", 'format = "bogus"'),
-                        ("validation-zero", "validation_fraction = 0.0")):
+    for label, line in (
+        ("format-bogus", 'format = "bogus"'),
+        ("validation-zero", "validation_fraction = 0.0"),
+    ):
         name = f"config/data/{label}/run"
         work = work_of(name)
         text = quick_config() + f"[data]\n{line}\n"
@@ -96,12 +115,14 @@ def config_cases(work_of, fix: Path) -> list[Case]:
 
 def model_cases(work_of, fix: Path) -> list[Case]:
     """Hand-edited model.json under export, fly and score."""
+
     def setter(key, value):
         return lambda o: o["targets"]["p_dot"].__setitem__(key, value)
 
     def prefix(codes, values):
         return lambda o: o["targets"]["p_dot"].__setitem__(
-            "prefix", {"codes": codes, "values": values})
+            "prefix", {"codes": codes, "values": values}
+        )
 
     edits = {
         "bad-codes": prefix([99, 4, 4], [0, 1, 2]),
@@ -113,14 +134,15 @@ def model_cases(work_of, fix: Path) -> list[Case]:
         "nan-constant": prefix([2, 4, 10], [float("nan"), 0, 0]),
         "huge-constant": prefix([2, 4, 10], [1e308, 0, 0]),
         "string-codes": prefix("abc", [1.0]),
-        "huge-delay": setter("delays", {"u_R": 10 ** 9}),
+        "huge-delay": setter("delays", {"u_R": 10**9}),
         "negative-delay": setter("delays", {"u_R": -3}),
         "delay-of-unknown": setter("delays", {"u_Q": 2}),
         "expr-disagrees": setter("expr", "42*q"),
         "empty-inputs": lambda o: o.__setitem__("input_names", []),
         "payload-input-name": lambda o: o.__setitem__(
-            "input_names", ["__import__('os').system('touch /tmp/gpquad-walk-name')", "u_R",
-                            "u_Y", "u_T"]),
+            "input_names",
+            ["__import__('os').system('touch /tmp/gpquad-walk-name')", "u_R", "u_Y", "u_T"],
+        ),
         "renamed-target": lambda o: o["targets"].__setitem__("x_dot", o["targets"].pop("p_dot")),
         "dt-zero": lambda o: o.__setitem__("dt", 0.0),
         "dt-nan": lambda o: o.__setitem__("dt", float("nan")),
@@ -134,12 +156,16 @@ def model_cases(work_of, fix: Path) -> list[Case]:
             work = work_of(name)
             run = copy_run(fix, work)
             edit_json(run / "model.json", change)
-            argv = {"export": gp("export", run, "--format", "json"),
-                    "fly": gp("fly", run, "--inputs", inputs_csv(work / "in.csv"), "--out",
-                              work / "o.csv"),
-                    "score": gp("score", run, "--data", fix / "flight.csv")}[command]
-            out.append(Case(name, argv, expect="warn" if label == "interrupted" else "refuse",
-                            timeout=90))
+            argv = {
+                "export": gp("export", run, "--format", "json"),
+                "fly": gp(
+                    "fly", run, "--inputs", inputs_csv(work / "in.csv"), "--out", work / "o.csv"
+                ),
+                "score": gp("score", run, "--data", fix / "flight.csv"),
+            }[command]
+            out.append(
+                Case(name, argv, expect="warn" if label == "interrupted" else "refuse", timeout=90)
+            )
     return out
 
 
@@ -149,38 +175,63 @@ def command_cases(work_of, fix: Path) -> list[Case]:
         name = f"command/compare-horizon/{label}"
         work = work_of(name)
         run = copy_run(fix, work)
-        out.append(Case(name, gp("compare", run, "--horizon", value, "--out", work / "c"),
-                        timeout=60))
+        out.append(
+            Case(name, gp("compare", run, "--horizon", value, "--out", work / "c"), timeout=60)
+        )
     for label, value in (("inf", "inf"), ("nan", "nan"), ("negative", "-1"), ("zero", "0")):
         name = f"command/score-horizon/{label}"
         work = work_of(name)
-        out.append(Case(name, gp("score", copy_run(fix, work), "--data", fix / "flight.csv",
-                                 "--horizon-s", value), timeout=60))
+        out.append(
+            Case(
+                name,
+                gp(
+                    "score", copy_run(fix, work), "--data", fix / "flight.csv", "--horizon-s", value
+                ),
+                timeout=60,
+            )
+        )
     for label, dt in (("model-50hz", 0.02), ("model-12.5hz", 0.08)):
         name = f"command/score-other-rate/{label}"
         work = work_of(name)
         run = copy_run(fix, work)
         edit_json(run / "model.json", lambda o, dt=dt: o.__setitem__("dt", dt))
         out.append(Case(name, gp("score", run, "--data", fix / "flight.csv"), timeout=60))
-    fly_inputs = {"empty": b"", "garbage": b"\x00\xff garbage \x01\n1,2\n",
-                  "utf16": "t,u_P,u_R,u_Y,u_T\n0,0,0,0,0\n0.04,0,0,0,0\n".encode("utf-16"),
-                  "header-only": b"t,u_P,u_R,u_Y,u_T\n",
-                  "nan": b"t,u_P,u_R,u_Y,u_T\n0,nan,0,0,0\n0.04,0,0,0,0\n0.08,0,0,0,0\n",
-                  "missing-column": b"t,u_P,u_R\n0,0,0\n0.04,0,0\n"}
+    fly_inputs = {
+        "empty": b"",
+        "garbage": b"\x00\xff garbage \x01\n1,2\n",
+        "utf16": "t,u_P,u_R,u_Y,u_T\n0,0,0,0,0\n0.04,0,0,0,0\n".encode("utf-16"),
+        "header-only": b"t,u_P,u_R,u_Y,u_T\n",
+        "nan": b"t,u_P,u_R,u_Y,u_T\n0,nan,0,0,0\n0.04,0,0,0,0\n0.08,0,0,0,0\n",
+        "missing-column": b"t,u_P,u_R\n0,0,0\n0.04,0,0\n",
+    }
     for label, blob in fly_inputs.items():
         name = f"command/fly-inputs/{label}"
         work = work_of(name)
-        out.append(Case(name, gp("fly", copy_run(fix, work), "--inputs",
-                                 write(work / "in.csv", blob), "--out", work / "o.csv"),
-                        timeout=60))
+        out.append(
+            Case(
+                name,
+                gp(
+                    "fly",
+                    copy_run(fix, work),
+                    "--inputs",
+                    write(work / "in.csv", blob),
+                    "--out",
+                    work / "o.csv",
+                ),
+                timeout=60,
+            )
+        )
     name = "command/data-check-fifo"
     work = work_of(name)
     os.mkfifo(work / "pipe.csv")
-    out.append(Case(name, gp("data", "check", work / "pipe.csv", "--plot", work / "p.png"),
-                    timeout=30))
-    for label, target in (("history", "runs/p_dot/rep000/history.csv"),
-                          ("sweep-json", "sweep.json"),
-                          ("result-json", "runs/p_dot/rep000/result.json")):
+    out.append(
+        Case(name, gp("data", "check", work / "pipe.csv", "--plot", work / "p.png"), timeout=30)
+    )
+    for label, target in (
+        ("history", "runs/p_dot/rep000/history.csv"),
+        ("sweep-json", "sweep.json"),
+        ("result-json", "runs/p_dot/rep000/result.json"),
+    ):
         for blob_label, blob in (("garbage", b"\x00\xffnot it"), ("empty", b"")):
             name = f"command/report-damaged/{label}/{blob_label}"
             work = work_of(name)
@@ -188,5 +239,3 @@ def command_cases(work_of, fix: Path) -> list[Case]:
             write(sweep / target, blob)
             out.append(Case(name, gp("report", sweep, "--format", "png"), timeout=180))
     return out
-
-

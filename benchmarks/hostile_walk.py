@@ -61,8 +61,7 @@ def still_signals(work: Path) -> list[str]:
         import pandas as pd
 
         table = pd.read_csv(work / "f.csv")
-        return [n for n in SIGNALS if n in table and float(table[n].max() - table[n].min())
-                < 1e-3]
+        return [n for n in SIGNALS if n in table and float(table[n].max() - table[n].min()) < 1e-3]
     model = work / "r" / "model.json"
     if model.exists():
         envelope = json.loads(model.read_text()).get("envelope") or {}
@@ -75,9 +74,17 @@ def limit_memory():
 
 
 def start(argv, cwd, env):
-    return subprocess.Popen([sys.executable, "-m", "gpquad", *argv], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            errors="replace", preexec_fn=limit_memory, start_new_session=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "gpquad", *argv],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        errors="replace",
+        preexec_fn=limit_memory,
+        start_new_session=True,
+    )
 
 
 def finish(proc, timeout):
@@ -99,8 +106,11 @@ def classify(case: Case, work: Path, cases_root: Path, before: set[Path], env) -
     results = [(c, e, h) for c, _, e, h in results]
     code, err, _ = results[0]
     marker = work.parent / "PWNED"
-    outside = {p for p in snapshot(cases_root, work) - before
-               if p.name != "PWNED" and work not in p.parents}
+    outside = {
+        p
+        for p in snapshot(cases_root, work) - before
+        if p.name != "PWNED" and work not in p.parents
+    }
     for extra in (Path("/tmp/gpquad-walk-absolute-name"), Path("/tmp/gpquad-walk-name")):
         if extra.exists():
             outside.add(extra)
@@ -141,16 +151,20 @@ def classify(case: Case, work: Path, cases_root: Path, before: set[Path], env) -
         if still:
             return "silent", f"exit 0 but {', '.join(still)} never change"
         if case.expect == "safe":
-            return "ok", ("every signal moves" if case.verify else
-                          "the command does not read the field")
+            return "ok", (
+                "every signal moves" if case.verify else "the command does not read the field"
+            )
         return "silent", (lines[0] if lines else "exit 0, nothing said")[:160]
     return "untidy", f"exit {code}, {len(lines)} lines: {first_line}"
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--root", default=str(Path(__file__).resolve().parents[1]),
-                        help="source tree whose gpquad is walked (default: this one)")
+    parser.add_argument(
+        "--root",
+        default=str(Path(__file__).resolve().parents[1]),
+        help="source tree whose gpquad is walked (default: this one)",
+    )
     parser.add_argument("--work", default="/tmp/gpquad-hostile-walk")
     parser.add_argument("--only", default="", help="run the cases whose name holds this")
     parser.add_argument("--json", default="", help="write every outcome to this file")
@@ -181,16 +195,29 @@ def main(argv=None) -> int:
         start_s = time.time()
         kind, detail = classify(case, work, cases_root, before, env)
         counts[kind] += 1
-        outcomes.append({"case": case.name, "outcome": kind, "detail": detail,
-                         "seconds": round(time.time() - start_s, 1)})
+        outcomes.append(
+            {
+                "case": case.name,
+                "outcome": kind,
+                "detail": detail,
+                "seconds": round(time.time() - start_s, 1),
+            }
+        )
         print(f"{kind:15s} {case.name:60s} {detail}", flush=True)
     print(f"\n{len(cases)} cases in {time.time() - t0:.0f} s:")
-    for kind in ("ok", "code execution", "file outside", "data lost", "traceback", "hang",
-                 "silent", "untidy"):
+    for kind in (
+        "ok",
+        "code execution",
+        "file outside",
+        "data lost",
+        "traceback",
+        "hang",
+        "silent",
+        "untidy",
+    ):
         print(f"  {kind:15s} {counts[kind]}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"counts": counts, "outcomes": outcomes},
-                                              indent=1))
+        Path(args.json).write_text(json.dumps({"counts": counts, "outcomes": outcomes}, indent=1))
     return 0
 
 

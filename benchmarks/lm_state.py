@@ -48,29 +48,29 @@ def trial_hashes(res, jac, free, x0) -> list[str]:
         points.append(x.copy())
         return res if np.array_equal(x, x0[free]) else 2.0 * res
 
-    least_squares(fun, x0[free], jac=lambda x: jac[:, free], method="lm", max_nfev=3,
-                  x_scale="jac")
+    least_squares(fun, x0[free], jac=lambda x: jac[:, free], method="lm", max_nfev=3, x_scale="jac")
     return [hashlib.sha256(p.tobytes()).hexdigest()[:10] for p in points[:3]]
 
 
 def unrelated_fit() -> None:
     rng = np.random.default_rng(1)
     a, b = rng.standard_normal((1500, 16)), rng.standard_normal(1500)
-    least_squares(lambda x: a @ x - b, np.zeros(16), jac=lambda x: a, method="lm",
-                  max_nfev=5, x_scale="jac")
+    least_squares(
+        lambda x: a @ x - b, np.zeros(16), jac=lambda x: a, method="lm", max_nfev=5, x_scale="jac"
+    )
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--call", type=int, default=9000)
     parser.add_argument("--flights", type=Path, default=Path("results/ab-finish/flights"))
     args = parser.parse_args()
     scenario = build_scenario("rotorpy-heldout-angle", args.flights)
     sub = next(iter(scenario.groups.values()))
     cfg = engine_config(1)
-    cfg = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
-                                                                 targets=["p_dot"]))
+    cfg = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution, targets=["p_dot"]))
     original = gradient_fit.residuals_and_jacobian
     calls = [0]
 
@@ -81,8 +81,10 @@ def main() -> None:
         if calls[0] >= args.call and np.all(np.isfinite(jac)) and jac.shape[1] > 1:
             free = gradient_fit.identifiable(jac)
             x0 = tree.values[np.flatnonzero(tree.codes == CONST)]
-            print(f"call {calls[0]}: residuals {res.shape}, Jacobian {jac.shape}, "
-                  f"{free.size} free constants")
+            print(
+                f"call {calls[0]}: residuals {res.shape}, Jacobian {jac.shape}, "
+                f"{free.size} free constants"
+            )
             for label in ("after the engine's LM calls", "again", "again"):
                 print(f"  {label:28s}", trial_hashes(res, jac, free, x0))
             unrelated_fit()

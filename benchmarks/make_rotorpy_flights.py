@@ -25,11 +25,15 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     for name, (mode, noisy, fleet) in ROTORPY.items():
         t0 = time.perf_counter()
-        res = ensure_flights(mode, noisy, args.out, fleet=fleet,
-                             progress=lambda m: print(" ", m, flush=True))
+        res = ensure_flights(
+            mode, noisy, args.out, fleet=fleet, progress=lambda m: print(" ", m, flush=True)
+        )
         n = sum(len(res[r]) for r in ("train", "validation", "test"))
-        print(f"{name}: {n} flights, seeds {res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
-              f"{res['train'][0].rsplit('/', 1)[0]}", flush=True)
+        print(
+            f"{name}: {n} flights, seeds {res['seeds']}, {time.perf_counter() - t0:.1f} s -> "
+            f"{res['train'][0].rsplit('/', 1)[0]}",
+            flush=True,
+        )
     print(f"total {time.perf_counter() - start:.1f} s")
     return 0
 

@@ -57,8 +57,9 @@ def rollout_rse(ds, target: str, rhs, seconds: float) -> float:
     state = STATE_NAMES.index(TARGET_STATE[target])
     cols = columns(ds)
     steps = max(1, int(round(seconds / ds.dt)))
-    starts = np.concatenate([np.arange(a + MAX_LAG + 1, b - steps - 1, STRIDE)
-                             for a, b in ds.validation])
+    starts = np.concatenate(
+        [np.arange(a + MAX_LAG + 1, b - steps - 1, STRIDE) for a, b in ds.validation]
+    )
     x = ds.arrays.states[starts, state].copy()
     err = np.zeros(len(starts))
     recorded = []
@@ -90,6 +91,7 @@ def sympy_rhs(expr: sp.Expr, rename: dict[str, str]):
     def rhs(view, rows):
         args = [view[rename.get(s.name, s.name)][rows] for s in symbols]
         return np.broadcast_to(np.asarray(func(*args), dtype=float), (len(rows),))
+
     return rhs, len(expr.as_ordered_terms())
 
 
@@ -102,8 +104,11 @@ def gpquad_rhs(path: Path, target: str):
 
 def sindy_rhs(path: Path, group: str, target: str):
     cell = json.loads(path.read_text())
-    text = cell["equations"][group][target] if group in cell["equations"] else \
-        cell["equations"][target]
+    text = (
+        cell["equations"][group][target]
+        if group in cell["equations"]
+        else cell["equations"][target]
+    )
     return sympy_rhs(parse_in_symbols(text, None, caret_power=True), {})
 
 
@@ -117,18 +122,20 @@ def library_rhs(ds_fit, target: str, library: str):
         for part in name.split("*"):
             out = out * view[part][at]
         return out
+
     x = np.column_stack([monomial(cols, n, rows) for n in names])
-    coef, *_ = np.linalg.lstsq(x, ds_fit.arrays.acc[rows, TARGET_NAMES.index(target)],
-                               rcond=None)
+    coef, *_ = np.linalg.lstsq(x, ds_fit.arrays.acc[rows, TARGET_NAMES.index(target)], rcond=None)
 
     def rhs(view, at):
         return np.column_stack([monomial(view, n, at) for n in names]) @ coef
+
     return rhs, len(names)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("scenario")
     parser.add_argument("--group", help="vehicle of a per-vehicle (rotorpy) scenario")
     parser.add_argument("--target", default="r_dot", choices=TARGET_NAMES)
@@ -145,14 +152,19 @@ def main() -> None:
     sources = [(f"gpquad {p}", lambda p=p: gpquad_rhs(p, args.target)) for p in args.model]
     if args.sindy:
         sources.append(("sindy", lambda: sindy_rhs(args.sindy, args.group, args.target)))
-    sources += [(f"least squares [{lib}]", lambda lib=lib: library_rhs(sub.fit, args.target, lib))
-                for lib in args.library]
+    sources += [
+        (f"least squares [{lib}]", lambda lib=lib: library_rhs(sub.fit, args.target, lib))
+        for lib in args.library
+    ]
     for label, make in sources:
         rhs, terms = make()
         with np.errstate(all="ignore"):
             rse = rollout_rse(sub.test, args.target, rhs, args.horizon)
-        print(f"| {label} | {terms} | {rse:.3g} |" if np.isfinite(rse) else
-              f"| {label} | {terms} | diverged |")
+        print(
+            f"| {label} | {terms} | {rse:.3g} |"
+            if np.isfinite(rse)
+            else f"| {label} | {terms} | diverged |"
+        )
 
 
 if __name__ == "__main__":

@@ -34,13 +34,24 @@ def main() -> None:
             report = compare_to_truth(eq, cfg.simulator.equations[target], dataset)
             passed += report["passed"]
             if not args.json:
-                print(f"{target} seed {seed:2d}: {'pass' if report['passed'] else 'FAIL'}  "
-                      f"{eq.text()}  ({times[-1]:.1f} s)", flush=True)
-        summary[target] = {"passed": passed, "seeds": args.seeds,
-                           "mean_time_s": sum(times) / len(times)}
-    print(json.dumps(summary) if args.json else "\n".join(
-        f"{t}: {s['passed']}/{s['seeds']} seeds recovered, {s['mean_time_s']:.1f} s per run"
-        for t, s in summary.items()))
+                print(
+                    f"{target} seed {seed:2d}: {'pass' if report['passed'] else 'FAIL'}  "
+                    f"{eq.text()}  ({times[-1]:.1f} s)",
+                    flush=True,
+                )
+        summary[target] = {
+            "passed": passed,
+            "seeds": args.seeds,
+            "mean_time_s": sum(times) / len(times),
+        }
+    print(
+        json.dumps(summary)
+        if args.json
+        else "\n".join(
+            f"{t}: {s['passed']}/{s['seeds']} seeds recovered, {s['mean_time_s']:.1f} s per run"
+            for t, s in summary.items()
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -78,7 +78,7 @@ def continuous_fit(paths, inp, ang, rate, mode):
             u = f[inp].to_numpy()
             sl = slice(300 + d, len(f) - 1)  # skip the excitation's fade-in
             ys.append(np.gradient(w, dt)[sl])
-            feats.append(np.column_stack([u[300: len(f) - 1 - d] - ref[sl], -w[sl]]))
+            feats.append(np.column_stack([u[300 : len(f) - 1 - d] - ref[sl], -w[sl]]))
         y, x = np.concatenate(ys), np.vstack(feats)
         coef, *_ = np.linalg.lstsq(x, y, rcond=None)
         r2 = 1.0 - np.mean((y - x @ coef) ** 2) / np.var(y)
@@ -97,21 +97,29 @@ def report_vehicle(name: str, vehicle: str, paths: list[str], config: dict, mode
         def cols(idx, d):
             _, u = lagged(ds, col, d)
             return (u - s[idx, ref], -s[idx, STATE[rate]])
+
         return cols
 
-    for tgt, inp, ang, rate in (("p_dot", "u_R", "phi", "p"), ("q_dot", "u_P", "theta", "q"),
-                                ("r_dot", "u_Y", "psi", "r")):
+    for tgt, inp, ang, rate in (
+        ("p_dot", "u_R", "phi", "p"),
+        ("q_dot", "u_P", "theta", "q"),
+        ("r_dot", "u_Y", "psi", "r"),
+    ):
         ref = STATE[ang] if mode == "angle" else STATE[rate]
         (k, c), r2, d = fit(ds, tgt, feedback(names.index(inp), ref, rate))
         kc, cc, dc, r2c = continuous_fit(paths, inp, ang, rate, mode)
         law = f"k ({inp}(t-{d}) - {ang if mode == 'angle' else rate}) - c {rate}"
-        print(f"{name:20s} {vehicle:12s} {tgt} = {law}: k = {k:.1f}, c = {c:.1f}, "
-              f"one-step R^2 = {r2:.3f} | 100 Hz continuous: k = {kc:.1f}, c = {cc:.1f}, "
-              f"delay {10 * dc} ms, R^2 = {r2c:.3f}")
+        print(
+            f"{name:20s} {vehicle:12s} {tgt} = {law}: k = {k:.1f}, c = {c:.1f}, "
+            f"one-step R^2 = {r2:.3f} | 100 Hz continuous: k = {kc:.1f}, c = {cc:.1f}, "
+            f"delay {10 * dc} ms, R^2 = {r2c:.3f}"
+        )
     col = names.index("u_T")
     (kt, b), r2, d = fit(ds, "a_z", lambda idx, d: (lagged(ds, col, d)[1], np.ones(len(idx))))
-    print(f"{name:20s} {vehicle:12s} a_z = k_T u_T(t-{d}) + b: k_T = {kt:.2f}, b = {b:.2f}, "
-          f"one-step R^2 = {r2:.3f}")
+    print(
+        f"{name:20s} {vehicle:12s} a_z = k_T u_T(t-{d}) + b: k_T = {kt:.2f}, b = {b:.2f}, "
+        f"one-step R^2 = {r2:.3f}"
+    )
     for tgt, ang in (("a_y", "phi"), ("a_x", "theta")):
         j = STATE[ang]
         (g,), r2, _ = fit(ds, tgt, lambda idx, d, j=j: (s[idx, j],))

@@ -38,8 +38,10 @@ def main(out_dir: Path) -> float:
 
     # 4. simulate: the equations flown over 7 s windows of the other flight
     flown = model.simulate(other, horizon_s=7.0)
-    print(f"flown {flown['window'].nunique()} windows; largest |p error| "
-          f"{np.abs(flown['p'] - flown['p_data']).max():.3g} rad/s")
+    print(
+        f"flown {flown['window'].nunique()} windows; largest |p error| "
+        f"{np.abs(flown['p'] - flown['p_data']).max():.3g} rad/s"
+    )
 
     # 5. export C, compile, fly from the inputs alone, compare with model.fly
     paths = model.export("c", out_dir / "quad_model.c")
@@ -52,8 +54,20 @@ def main(out_dir: Path) -> float:
         print("no C compiler found: skipped compiling the export")
         return float("nan")
     library = out_dir / "libquad_model.so"
-    subprocess.run([compiler, "-std=c99", "-O2", "-shared", "-fPIC", "-o", str(library),
-                    str(out_dir / "quad_model.c"), "-lm"], check=True)
+    subprocess.run(
+        [
+            compiler,
+            "-std=c99",
+            "-O2",
+            "-shared",
+            "-fPIC",
+            "-o",
+            str(library),
+            str(out_dir / "quad_model.c"),
+            "-lm",
+        ],
+        check=True,
+    )
     lib = ctypes.CDLL(str(library))
     double_p = ctypes.POINTER(ctypes.c_double)
     lib.gpquad_fly.argtypes = [double_p, ctypes.c_int, double_p, double_p]
@@ -63,14 +77,20 @@ def main(out_dir: Path) -> float:
     for name, value in x0.items():
         state0["phi theta psi u v w p q r".split().index(name)] = value
     states = np.zeros((len(raw), 9))
-    code = lib.gpquad_fly(raw.ctypes.data_as(double_p), len(raw),
-                          state0.ctypes.data_as(double_p), states.ctypes.data_as(double_p))
+    code = lib.gpquad_fly(
+        raw.ctypes.data_as(double_p),
+        len(raw),
+        state0.ctypes.data_as(double_p),
+        states.ctypes.data_as(double_p),
+    )
     assert code == 0, f"gpquad_fly returned {code}"
     expected = reference[["phi", "theta", "psi", "u", "v", "w", "p", "q", "r"]].to_numpy()
     scale = np.maximum(np.abs(expected), 1.0)
     difference = float(np.max(np.abs(states - expected) / scale))
-    print(f"compiled C model flies {len(raw)} samples; largest relative difference from "
-          f"model.fly: {difference:.3g}")
+    print(
+        f"compiled C model flies {len(raw)} samples; largest relative difference from "
+        f"model.fly: {difference:.3g}"
+    )
     return difference
 
 

@@ -18,5 +18,15 @@ from gpquad.errors import GpquadError
 from gpquad.model import EquationForms, Model
 from gpquad.study.config import Config, load_config
 
-__all__ = ["Config", "EquationForms", "GpquadError", "Model", "__version__", "fit", "load",
-           "load_config", "read_log", "reference_flight"]
+__all__ = [
+    "Config",
+    "EquationForms",
+    "GpquadError",
+    "Model",
+    "__version__",
+    "fit",
+    "load",
+    "load_config",
+    "read_log",
+    "reference_flight",
+]

@@ -44,8 +44,11 @@ def _config(config) -> Config:
         return config_from_dict({"preset": config}, f"preset {config}")
     if isinstance(config, (str, Path)):
         return load_config(config)
-    raise GpquadError(f"config must be None, a preset name {sorted(PRESETS)}, a TOML path or a "
-                      f"gpquad Config, got {type(config).__name__}", field="config")
+    raise GpquadError(
+        f"config must be None, a preset name {sorted(PRESETS)}, a TOML path or a "
+        f"gpquad Config, got {type(config).__name__}",
+        field="config",
+    )
 
 
 def _with_overrides(cfg: Config, seed: int | None, overrides: dict) -> Config:
@@ -55,8 +58,10 @@ def _with_overrides(cfg: Config, seed: int | None, overrides: dict) -> Config:
     if seed is not None:
         table["seed"] = seed
     for key, value in overrides.items():
-        section = next((name for name, cls in _SECTIONS
-                        if key in {f.name for f in dataclasses.fields(cls)}), None)
+        section = next(
+            (name for name, cls in _SECTIONS if key in {f.name for f in dataclasses.fields(cls)}),
+            None,
+        )
         if section is None:
             known = [f.name for _, cls in _SECTIONS for f in dataclasses.fields(cls)]
             close = difflib.get_close_matches(key, known, n=1)
@@ -93,8 +98,9 @@ def read_log(path, *, format: str | None = None, config=None, **data) -> list[Fl
     path = Path(path)
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(path))
-    fmt = format or (cfg.data.format if cfg.data.format != "generic" else None) \
-        or guess_format(path)
+    fmt = (
+        format or (cfg.data.format if cfg.data.format != "generic" else None) or guess_format(path)
+    )
     cfg = _with_overrides(cfg, None, {**data, "format": fmt, "files": [str(path.resolve())]})
     return read_log_file(path, cfg.data, fmt)
 
@@ -114,22 +120,38 @@ def _flights_and_config(data, cfg: Config):
     flights: list[Flight] = []
     inputs = cfg.data.inputs
     if isinstance(inputs, str):
-        raise GpquadError(f"input level '{inputs}' is for log readers; a DataFrame needs a "
-                          "list of input column names: inputs=[...]", field="inputs")
+        raise GpquadError(
+            f"input level '{inputs}' is for log readers; a DataFrame needs a "
+            "list of input column names: inputs=[...]",
+            field="inputs",
+        )
     for k, d in enumerate(items):
         if isinstance(d, Flight):
             flights.append(d)
         elif isinstance(d, pd.DataFrame):
-            flights.append(flight_from_frame(d, inputs, cfg.data.frame, cfg.data.columns,
-                                             f"DataFrame {k}", f"flight{k}"))
+            flights.append(
+                flight_from_frame(
+                    d, inputs, cfg.data.frame, cfg.data.columns, f"DataFrame {k}", f"flight{k}"
+                )
+            )
         else:
-            raise GpquadError(f"data[{k}] is a {type(d).__name__}; give DataFrames, Flights or "
-                              "log paths", field="data")
+            raise GpquadError(
+                f"data[{k}] is a {type(d).__name__}; give DataFrames, Flights or log paths",
+                field="data",
+            )
     return flights, cfg, "DataFrame"
 
 
-def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: bool = False,
-        jobs: int | None = None, **overrides) -> Model:
+def fit(
+    data,
+    config=None,
+    *,
+    seed: int | None = None,
+    run_dir=None,
+    progress: bool = False,
+    jobs: int | None = None,
+    **overrides,
+) -> Model:
     """Discover one equation per body-frame acceleration from flight data.
 
     Parameters
@@ -183,13 +205,18 @@ def fit(data, config=None, *, seed: int | None = None, run_dir=None, progress: b
         ev = cfg.evolution
         if jobs is not None and jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
-        found = fit_dataset(dataset, cfg, Progress(progress, ev.iterations * len(ev.targets)),
-                            jobs=default_jobs(len(ev.targets)) if jobs is None else jobs)
+        found = fit_dataset(
+            dataset,
+            cfg,
+            Progress(progress, ev.iterations * len(ev.targets)),
+            jobs=default_jobs(len(ev.targets)) if jobs is None else jobs,
+        )
     return Model(found, cfg)
 
 
-def reference_flight(*, seed: int = 0, duration_s: float = 552.0, config=None,
-                     **simulator) -> pd.DataFrame:
+def reference_flight(
+    *, seed: int = 0, duration_s: float = 552.0, config=None, **simulator
+) -> pd.DataFrame:
     """A flight of gpquad's reference simulator as a DataFrame of the generic columns.
 
     The simulator flies a known model (default: the dominant terms of the paper's median

@@ -31,5 +31,7 @@ def require(module: str, feature: str):
         top = module.split(".")[0]
         package, extra = EXTRAS.get(top, (top, None))
         how = f"pip install 'gpquad[{extra}]'" if extra else f"pip install {package}"
-        raise GpquadError(f"{feature} needs the optional package '{package}'; install it with: "
-                          f"{how}", field=extra or package) from None
+        raise GpquadError(
+            f"{feature} needs the optional package '{package}'; install it with: {how}",
+            field=extra or package,
+        ) from None

@@ -97,8 +97,7 @@ class Model:
         out = {}
         for t in self.targets:
             e = self.discovered.equations[t]
-            out[t] = EquationForms(t, e.text(), e.latex(), exact[t], float(e.lag),
-                                   e.used_delays())
+            out[t] = EquationForms(t, e.text(), e.latex(), exact[t], float(e.lag), e.used_delays())
         return out
 
     def __str__(self) -> str:
@@ -110,8 +109,10 @@ class Model:
 
     def __repr__(self) -> str:
         flag = ", interrupted" if self.discovered.interrupted else ""
-        return (f"<gpquad.Model {len(self.targets)} equations ({', '.join(self.targets)}), "
-                f"dt={self.dt:g} s, {self.discovered.n_parameters} constants{flag}>")
+        return (
+            f"<gpquad.Model {len(self.targets)} equations ({', '.join(self.targets)}), "
+            f"dt={self.dt:g} s, {self.discovered.n_parameters} constants{flag}>"
+        )
 
     # ------------------------------------------------------------------ data
     def _dataset(self, data, trimmed: bool = True):
@@ -123,9 +124,11 @@ class Model:
         flights = self._flights(data)
         dataset = build_dataset(flights, validation_fraction=0.0, held_out=[True] * len(flights))
         if abs(dataset.dt - self.dt) > DT_TOLERANCE * self.dt:
-            raise GpquadError(f"the data's sample period is {dataset.dt:.6g} s but the model's "
-                              f"delays are samples of {self.dt:.6g} s; resample the data",
-                              field="t")
+            raise GpquadError(
+                f"the data's sample period is {dataset.dt:.6g} s but the model's "
+                f"delays are samples of {self.dt:.6g} s; resample the data",
+                field="t",
+            )
         return model_view(dataset, self.trim) if trimmed else dataset
 
     def _flights(self, data) -> list[Flight]:
@@ -135,8 +138,11 @@ class Model:
             if isinstance(d, Flight):
                 flights.append(d)
             elif isinstance(d, pd.DataFrame):
-                flights.append(flight_from_frame(d, self.input_names, source=f"DataFrame {k}",
-                                                 name=f"flight{k}"))
+                flights.append(
+                    flight_from_frame(
+                        d, self.input_names, source=f"DataFrame {k}", name=f"flight{k}"
+                    )
+                )
             elif isinstance(d, (str, Path)):
                 from gpquad.data.io import read_log_file
                 from gpquad.study.config import DataConfig
@@ -145,13 +151,18 @@ class Model:
                 data = dataclasses.replace(data, inputs=self.input_names, files=(str(d),))
                 flights.extend(read_log_file(d, data))
             else:
-                raise GpquadError(f"data[{k}] is a {type(d).__name__}; give DataFrames, "
-                                  "Flights or log paths", field="data")
+                raise GpquadError(
+                    f"data[{k}] is a {type(d).__name__}; give DataFrames, Flights or log paths",
+                    field="data",
+                )
         for f in flights:
             if tuple(f.input_names) != self.input_names:
-                raise GpquadError(f"the model reads inputs {list(self.input_names)} but the "
-                                  f"data gives {list(f.input_names)}", source=f.name,
-                                  field="inputs")
+                raise GpquadError(
+                    f"the model reads inputs {list(self.input_names)} but the "
+                    f"data gives {list(f.input_names)}",
+                    source=f.name,
+                    field="inputs",
+                )
         return flights
 
     # ------------------------------------------------------------------ use
@@ -172,10 +183,13 @@ class Model:
 
         dataset = self._dataset(data)
         rows = np.concatenate([np.arange(a + self._history(), b) for a, b in dataset.segments])
-        flight = np.concatenate([np.full(b - a - self._history(), k)
-                                 for k, (a, b) in enumerate(dataset.segments)])
-        out = {"t": (rows - np.array([dataset.segments[k][0] for k in flight])) * dataset.dt,
-               "flight": flight}
+        flight = np.concatenate(
+            [np.full(b - a - self._history(), k) for k, (a, b) in enumerate(dataset.segments)]
+        )
+        out = {
+            "t": (rows - np.array([dataset.segments[k][0] for k in flight])) * dataset.dt,
+            "flight": flight,
+        }
         arrays = dataset.arrays
         for t in self.targets:
             e = self.discovered.equations[t]
@@ -186,8 +200,15 @@ class Model:
             for j, d in enumerate(e.tree.delays):
                 feats[9 + j] = inputs[rows - int(d), j]
             pred = np.empty(len(rows))
-            eval_lanes(e.tree.codes, e.tree.values, e.tree.size, np.ascontiguousarray(feats),
-                       np.empty((64, len(rows))), pred, len(rows))
+            eval_lanes(
+                e.tree.codes,
+                e.tree.values,
+                e.tree.size,
+                np.ascontiguousarray(feats),
+                np.empty((64, len(rows))),
+                pred,
+                len(rows),
+            )
             alpha = lag_alpha(e.lag, self.dt)
             if alpha < 1.0:
                 before = arrays.acc[rows - 1, target_index(t)]
@@ -196,15 +217,19 @@ class Model:
         return pd.DataFrame(out, index=rows)
 
     def _history(self) -> int:
-        return max([int(np.max(e.tree.delays, initial=0))
-                    for e in self.discovered.equations.values()] + [1])
+        return max(
+            [int(np.max(e.tree.delays, initial=0)) for e in self.discovered.equations.values()]
+            + [1]
+        )
 
     def _windows(self, dataset, horizon_s: float):
         from gpquad.models.scoring import validation_windows
 
         if not np.isfinite(horizon_s) or horizon_s <= 0:
-            raise GpquadError(f"horizon_s must be a positive number of seconds, got {horizon_s}",
-                              field="horizon_s")
+            raise GpquadError(
+                f"horizon_s must be a positive number of seconds, got {horizon_s}",
+                field="horizon_s",
+            )
         steps = max(1, int(round(horizon_s / dataset.dt)))
         return validation_windows(dataset, steps, self._history())
 
@@ -224,8 +249,10 @@ class Model:
             flown = self.discovered.simulate(dataset, starts, steps)
         truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
         n = len(starts)
-        frame = {"window": np.repeat(np.arange(n), steps + 1),
-                 "t": np.tile(np.arange(steps + 1) * dataset.dt, n)}
+        frame = {
+            "window": np.repeat(np.arange(n), steps + 1),
+            "t": np.tile(np.arange(steps + 1) * dataset.dt, n),
+        }
         frame.update({s: flown[:, :, i].ravel() for i, s in enumerate(STATE_NAMES)})
         frame.update({f"{s}_data": truth[:, :, i].ravel() for i, s in enumerate(STATE_NAMES)})
         return pd.DataFrame(frame)
@@ -252,12 +279,15 @@ class Model:
         raw = self._dataset(data, trimmed=False)
         starts, steps = self._windows(dataset, horizon_s)
         truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
-        bound = np.full(len(SCORED_INDEX),
-                        DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
+        bound = np.full(
+            len(SCORED_INDEX), DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max()
+        )
         from gpquad.models.reference_models import is_rate_level, setpoint_model, zero_model
 
-        references = [("model", self.discovered, dataset),
-                      ("zero", zero_model(self.input_names, self.dt), raw)]
+        references = [
+            ("model", self.discovered, dataset),
+            ("zero", zero_model(self.input_names, self.dt), raw),
+        ]
         setpoint = setpoint_model(self.input_names, self.dt)
         if setpoint is not None and is_rate_level(raw.flight_info):
             references.append(("set-point", setpoint, raw))
@@ -266,11 +296,13 @@ class Model:
             with np.errstate(all="ignore"):
                 pred = model.simulate(flown, starts, steps)
             bad = diverged(pred, bound)
-            values = (rse(pred[~bad], truth[~bad]) if (~bad).any()
-                      else np.full(len(SCORED), np.nan))
-            rows[name] = {**dict(zip(SCORED, map(float, values), strict=True)),
-                          "diverged": int(bad.sum()), "windows": int(len(starts)),
-                          "horizon_s": float(steps * dataset.dt)}
+            values = rse(pred[~bad], truth[~bad]) if (~bad).any() else np.full(len(SCORED), np.nan)
+            rows[name] = {
+                **dict(zip(SCORED, map(float, values), strict=True)),
+                "diverged": int(bad.sum()),
+                "windows": int(len(starts)),
+                "horizon_s": float(steps * dataset.dt),
+            }
         return pd.DataFrame.from_dict(rows, orient="index")
 
     def fly(self, inputs: pd.DataFrame, x0=None) -> pd.DataFrame:
@@ -292,24 +324,32 @@ class Model:
             ``t`` and the nine flown states, one row per input row.
         """
         if not isinstance(inputs, pd.DataFrame):
-            raise GpquadError(f"inputs must be a DataFrame with the columns "
-                              f"{list(self.input_names)} (named, not by position)",
-                              field="inputs")
+            raise GpquadError(
+                f"inputs must be a DataFrame with the columns "
+                f"{list(self.input_names)} (named, not by position)",
+                field="inputs",
+            )
         missing = [n for n in self.input_names if n not in inputs.columns]
         if missing:
-            raise GpquadError(f"inputs lack the columns {missing}; the model reads "
-                              f"{list(self.input_names)}", field="inputs")
+            raise GpquadError(
+                f"inputs lack the columns {missing}; the model reads {list(self.input_names)}",
+                field="inputs",
+            )
         if "t" in inputs.columns and len(inputs) > 1:
             steps = np.diff(inputs["t"].to_numpy(dtype=float))
             if not np.all(np.abs(steps - self.dt) <= DT_TOLERANCE * self.dt):
-                raise GpquadError(f"column t steps by {np.median(steps):.6g} s but the model's "
-                                  f"dt is {self.dt:.6g} s; resample the inputs", field="t")
+                raise GpquadError(
+                    f"column t steps by {np.median(steps):.6g} s but the model's "
+                    f"dt is {self.dt:.6g} s; resample the inputs",
+                    field="t",
+                )
         state0 = np.zeros(9)
         if isinstance(x0, dict):
             unknown = [k for k in x0 if k not in STATE_NAMES]
             if unknown:
-                raise GpquadError(f"unknown states {unknown}; name some of {list(STATE_NAMES)}",
-                                  field="x0")
+                raise GpquadError(
+                    f"unknown states {unknown}; name some of {list(STATE_NAMES)}", field="x0"
+                )
             for k, v in x0.items():
                 state0[STATE_NAMES.index(k)] = float(v)
         elif x0 is not None:

@@ -27,8 +27,12 @@ def median_flight():
 @pytest.fixture(scope="session")
 def short_flight():
     """A 60 s flight with livelier sticks, for kernel tests."""
-    cfg = dataclasses.replace(SimulatorConfig(), duration_s=60.0, seed=7,
-                              stick_sd={"u_P": 0.2, "u_R": 0.2, "u_Y": 0.2, "u_T": 0.05})
+    cfg = dataclasses.replace(
+        SimulatorConfig(),
+        duration_s=60.0,
+        seed=7,
+        stick_sd={"u_P": 0.2, "u_R": 0.2, "u_Y": 0.2, "u_T": 0.05},
+    )
     return simulate(cfg, INPUTS)
 
 
@@ -40,8 +44,9 @@ def short_dataset(short_flight):
 @pytest.fixture(scope="session")
 def median_dataset(median_flight):
     cfg = Config(data=DataConfig(trim="mean"))
-    return build_dataset([median_flight], validation_fraction=cfg.data.validation_fraction,
-                         trim="mean")
+    return build_dataset(
+        [median_flight], validation_fraction=cfg.data.validation_fraction, trim="mean"
+    )
 
 
 def truth_dataset(equations: dict[str, str], duration_s: float, seed: int):

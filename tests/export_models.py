@@ -52,8 +52,9 @@ def equation(target, node, delays, trim, lag=0.0) -> Equation:
     codes: list = []
     values: list = []
     _prefix(node, codes, values)
-    return Equation(target, Tree.from_lists(codes, values, delays), INPUTS, 0.1, 0.2,
-                    dict(trim), [], 4, lag)
+    return Equation(
+        target, Tree.from_lists(codes, values, delays), INPUTS, 0.1, 0.2, dict(trim), [], 4, lag
+    )
 
 
 HAND_TRIM = {"u_P": 0.25, "u_R": -0.05, "u_Y": 0.1, "u_T": 0.5}
@@ -66,16 +67,27 @@ def hand_model() -> DiscoveredModel:
     t = HAND_TRIM
     delays = [0, 1, 2, 4, 0, 3, 0, 0]
     eqs = {
-        "a_x": equation("a_x", ("+", ("-", ("*", 9.81, "theta"), ("*", 0.1, "u")),
-                                ("*", 0.01, "psi")), delays, t),
+        "a_x": equation(
+            "a_x",
+            ("+", ("-", ("*", 9.81, "theta"), ("*", 0.1, "u")), ("*", 0.01, "psi")),
+            delays,
+            t,
+        ),
         "a_y": equation("a_y", ("-", ("*", -9.81, "phi"), ("*", 0.1, "v")), delays, t),
         "a_z": equation("a_z", ("-", ("-", ("*", 20.0, ("in", 3)), "w"), 9.81), delays, t),
-        "p_dot": equation("p_dot", ("-", ("-", ("*", 10.0, ("in", 1)), ("*", 3.0, ("in", 5))),
-                                    ("*", 4.0, "p")), delays, t, lag=0.05),
-        "q_dot": equation("q_dot", ("-", ("/", 0.3, ("-", ("in", 0), 0.5)), ("*", 3.0, "q")),
-                          delays, t),
-        "r_dot": equation("r_dot", ("+", ("*", -1.9, "r"),
-                                    ("*", 0.1 + 0.2, ("*", -7.8, ("in", 2)))), delays, t),
+        "p_dot": equation(
+            "p_dot",
+            ("-", ("-", ("*", 10.0, ("in", 1)), ("*", 3.0, ("in", 5))), ("*", 4.0, "p")),
+            delays,
+            t,
+            lag=0.05,
+        ),
+        "q_dot": equation(
+            "q_dot", ("-", ("/", 0.3, ("-", ("in", 0), 0.5)), ("*", 3.0, "q")), delays, t
+        ),
+        "r_dot": equation(
+            "r_dot", ("+", ("*", -1.9, "r"), ("*", 0.1 + 0.2, ("*", -7.8, ("in", 2)))), delays, t
+        ),
     }
     return DiscoveredModel(eqs, INPUTS, dict(t), 0.04, 1, {})
 
@@ -102,8 +114,9 @@ def median_model() -> DiscoveredModel:
     eqs = {}
     for target, text in SimulatorConfig().equations.items():
         expr, delays = parse_equation(text, INPUTS)
-        eqs[target] = Equation(target, from_sympy(expr, delays, INPUTS), INPUTS, 0.0, 0.0,
-                               dict(trim))
+        eqs[target] = Equation(
+            target, from_sympy(expr, delays, INPUTS), INPUTS, 0.0, 0.0, dict(trim)
+        )
     return DiscoveredModel(eqs, INPUTS, trim, 0.04, 1, {})
 
 
@@ -138,9 +151,25 @@ def compile_c(files: dict[str, str], folder: Path) -> ctypes.CDLL:
         (folder / name).write_text(text)
     source = next(folder / n for n in files if n.endswith(".c"))
     lib = folder / (source.stem + ".so")
-    done = subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic",
-                           "-shared", "-fPIC", "-o", str(lib), str(source), "-lm"],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [
+            cc,
+            "-std=c99",
+            "-O2",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-shared",
+            "-fPIC",
+            "-o",
+            str(lib),
+            str(source),
+            "-lm",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert done.returncode == 0, done.stderr
     return ctypes.CDLL(str(lib))
 

@@ -123,9 +123,15 @@ def evaluate_on_table(tree, table: np.ndarray) -> np.ndarray:
     from gpquad.engine.kernels.tree_eval import eval_on_samples
 
     samples = np.arange(5, len(table), dtype=np.int64)
-    return eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
-                           np.ascontiguousarray(table[:, :9]),
-                           np.ascontiguousarray(table[:, 9:]), samples)
+    return eval_on_samples(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        np.ascontiguousarray(table[:, :9]),
+        np.ascontiguousarray(table[:, 9:]),
+        samples,
+    )
 
 
 def rigid_body_derivative(y, acc):
@@ -151,15 +157,22 @@ def rk4_step(f, y, h):
     return out
 
 
-def rk4_window_error(tree, target, arrays, start, n_steps, substeps, squared=False,
-                     att_weight=0.0, alpha=1.0):
+def rk4_window_error(
+    tree, target, arrays, start, n_steps, substeps, squared=False, att_weight=0.0, alpha=1.0
+):
     """window_error flown by RK4 on the continuous-time ODE: `substeps` steps per sample, the
     tree at every stage, inputs and the data's other accelerations held over the sample, a
     lag as the state l with tau l_dot = tree - l (1 / tau = -log(1 - alpha) / dt)."""
     dt = arrays.dt
     rate = -np.log1p(-alpha) / dt if alpha < 1.0 else 0.0
-    y = np.concatenate([arrays.quat[start], arrays.states[start, 3:6],
-                        arrays.states[start, 6:9], [arrays.acc[start - 1, target]]])
+    y = np.concatenate(
+        [
+            arrays.quat[start],
+            arrays.states[start, 3:6],
+            arrays.states[start, 6:9],
+            [arrays.acc[start - 1, target]],
+        ]
+    )
     total = 0.0
     for k in range(n_steps):
         idx = start + k

@@ -18,13 +18,29 @@ import pandas as pd
 SHARED_S250 = Path(__file__).resolve().parents[2] / "shared" / "data" / "px4" / "S250AQ_2016-12-13"
 START_S, END_S, RESET_S = 130.0, 162.0, 137.0
 TOPICS = {  # topic -> columns kept
-    "vehicle_attitude_0": ["timestamp", "rollspeed", "pitchspeed", "yawspeed",
-                           "q[0]", "q[1]", "q[2]", "q[3]"],
-    "vehicle_local_position_0": ["timestamp", "vx", "vy", "vz", "v_xy_valid", "v_z_valid",
-                                 "xy_reset_counter", "z_reset_counter", "vxy_reset_counter",
-                                 "vz_reset_counter"],
-    "actuator_controls_0_0": ["timestamp", "control[0]", "control[1]", "control[2]",
-                              "control[3]"],
+    "vehicle_attitude_0": [
+        "timestamp",
+        "rollspeed",
+        "pitchspeed",
+        "yawspeed",
+        "q[0]",
+        "q[1]",
+        "q[2]",
+        "q[3]",
+    ],
+    "vehicle_local_position_0": [
+        "timestamp",
+        "vx",
+        "vy",
+        "vz",
+        "v_xy_valid",
+        "v_z_valid",
+        "xy_reset_counter",
+        "z_reset_counter",
+        "vxy_reset_counter",
+        "vz_reset_counter",
+    ],
+    "actuator_controls_0_0": ["timestamp", "control[0]", "control[1]", "control[2]", "control[3]"],
     "vehicle_rates_setpoint_0": ["timestamp", "roll", "pitch", "yaw", "thrust"],
     "vehicle_status_0": ["timestamp", "arming_state", "nav_state"],
     "control_state_0": ["timestamp", "quat_reset_counter"],
@@ -39,10 +55,15 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of a (4,) with rows of b (N, 4)."""
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b.T
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=1)
+    return np.stack(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ],
+        axis=1,
+    )
 
 
 def make_yaw_reset_log(folder: Path) -> Path:

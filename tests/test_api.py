@@ -40,8 +40,9 @@ def test_fit_recovers_the_truth_and_describes_itself(model, flight):
     assert model.targets == ("p_dot", "q_dot") and model.dt == pytest.approx(0.04)
     dataset = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
     for t in model.targets:
-        assert compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t],
-                                dataset)["passed"], t
+        assert compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t], dataset)[
+            "passed"
+        ], t
     assert str(model).startswith("dt = 0.04 s") and "p_dot = " in str(model)
     assert repr(model).startswith("<gpquad.Model 2 equations (p_dot, q_dot), dt=0.04 s")
     forms = model.equations["p_dot"]
@@ -55,9 +56,13 @@ def test_fit_is_the_run_path_bit_for_bit(flight, tmp_path, model):
     same model.json bytes, and fit(run_dir=) writes the folder `gpquad run` writes."""
     path = tmp_path / "flight.csv"
     flight.to_csv(path, index=False, float_format="%.17g")
-    cfg = config_from_dict({"seed": 1, "data": {"files": [str(path)]},
-                            "evolution": {"iterations": 1, "input_taps": 1,
-                                          "targets": ["p_dot", "q_dot"]}})
+    cfg = config_from_dict(
+        {
+            "seed": 1,
+            "data": {"files": [str(path)]},
+            "evolution": {"iterations": 1, "input_taps": 1, "targets": ["p_dot", "q_dot"]},
+        }
+    )
     run_experiment(cfg, tmp_path / "run", progress=False)
     again = gpquad.fit(path, seed=1, run_dir=tmp_path / "api", **FAST)
     from_run = json.loads((tmp_path / "run" / "model.json").read_text())
@@ -86,29 +91,35 @@ def test_score_predict_simulate_and_fly(model, other):
     assert np.array_equal(reordered.to_numpy(), trace.to_numpy())
 
 
-@pytest.mark.parametrize("call, message", [
-    (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y"]]), r"lack the columns \['u_T'\]"),
-    (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y", "u_T"]].to_numpy()), "named"),
-    (lambda m, d: m.fly(d.assign(t=d["t"] * 2)[["t", "u_P", "u_R", "u_Y", "u_T"]]), "dt"),
-    (lambda m, d: m.fly(d[list(INPUTS)], {"alpha": 1.0}), "unknown states"),
-    (lambda m, d: m.score(d, horizon_s=0.0), "horizon_s"),
-    (lambda m, d: m.score(d.rename(columns={"u_T": "thrust"})), "u_T"),
-    (lambda m, d: m.score([3]), "DataFrames"),
-    (lambda m, d: m.export("pdf"), "unknown export format"),
-])
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y"]]), r"lack the columns \['u_T'\]"),
+        (lambda m, d: m.fly(d[["u_P", "u_R", "u_Y", "u_T"]].to_numpy()), "named"),
+        (lambda m, d: m.fly(d.assign(t=d["t"] * 2)[["t", "u_P", "u_R", "u_Y", "u_T"]]), "dt"),
+        (lambda m, d: m.fly(d[list(INPUTS)], {"alpha": 1.0}), "unknown states"),
+        (lambda m, d: m.score(d, horizon_s=0.0), "horizon_s"),
+        (lambda m, d: m.score(d.rename(columns={"u_T": "thrust"})), "u_T"),
+        (lambda m, d: m.score([3]), "DataFrames"),
+        (lambda m, d: m.export("pdf"), "unknown export format"),
+    ],
+)
 def test_user_mistakes_are_one_line_errors(model, other, call, message):
     with pytest.raises(gpquad.GpquadError, match=message) as info:
         call(model, other)
     assert "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"iteratons": 2}, "did you mean 'iterations'"),
-    ({"targets": ["x_dot"]}, "unknown target"),
-    ({"config": 3}, "config must be"),
-    ({"config": "fastest"}, "config file not found"),
-    ({"window_s": -1.0}, "window_s"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"iteratons": 2}, "did you mean 'iterations'"),
+        ({"targets": ["x_dot"]}, "unknown target"),
+        ({"config": 3}, "config must be"),
+        ({"config": "fastest"}, "config file not found"),
+        ({"window_s": -1.0}, "window_s"),
+    ],
+)
 def test_bad_settings_fail_before_any_work(flight, kwargs, message):
     with pytest.raises(gpquad.GpquadError, match=message):
         gpquad.fit(flight, **kwargs)
@@ -150,8 +161,10 @@ def test_default_fit_recovers_the_six_equations_of_the_quickstart_flight():
     df = gpquad.reference_flight()
     model = gpquad.fit(df, seed=1)
     dataset = build_dataset([flight_from_frame(df, INPUTS)], validation_fraction=0.15)
-    assert all(compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t],
-                                dataset)["passed"] for t in MEDIAN_MODEL)
+    assert all(
+        compare_to_truth(model.discovered.equations[t], MEDIAN_MODEL[t], dataset)["passed"]
+        for t in MEDIAN_MODEL
+    )
 
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "notebook_workflow.py"
@@ -197,8 +210,10 @@ def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
 
     dataset = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
     assert unmeasured_notes(dataset, ["a_x", "p_dot"]) is None
-    info = [dict(f, measured={"u": "not measured (no GPS)", "v": "not measured (no GPS)"})
-            for f in dataset.flight_info]
+    info = [
+        dict(f, measured={"u": "not measured (no GPS)", "v": "not measured (no GPS)"})
+        for f in dataset.flight_info
+    ]
     blind = dataclasses.replace(dataset, flight_info=info)
     notes = unmeasured_notes(blind, ["a_x", "a_y", "p_dot"])
     assert set(notes) == {"a_x", "a_y"} and "u not measured" in notes["a_x"]

@@ -90,13 +90,15 @@ def test_the_cycle_check_finds_a_cycle(tmp_path):
     (pkg / "a.py").write_text("from gpquad.sub import b\n")
     (pkg / "sub" / "b.py").write_text("def f():\n    from gpquad.a import x\n")
     (pkg / "c.py").write_text("import gpquad.a\n")
-    (pkg / "d.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                              "    from gpquad.sub.e import y\n")  # type-only: no cycle
+    (pkg / "d.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from gpquad.sub.e import y\n"
+    )  # type-only: no cycle
     (pkg / "sub" / "e.py").write_text("from gpquad.d import z\n")
     assert cycles(import_graph(pkg)) == [["gpquad.a", "gpquad.sub.b"]]
 
 
 def test_no_module_is_oversized():
-    sizes = {str(p.relative_to(PACKAGE)): len(p.read_text().splitlines())
-             for p in PACKAGE.rglob("*.py")}
+    sizes = {
+        str(p.relative_to(PACKAGE)): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")
+    }
     assert {p: n for p, n in sizes.items() if n > MAX_LINES} == {}

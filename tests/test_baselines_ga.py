@@ -43,6 +43,7 @@ def test_loop_gradient_matches_finite_differences(record, loop):
 
 def test_user_model_gradient_nonlinear():
     """A user f(X, U, theta) with sin and a parameter product: symbolic gradient == FD."""
+
     def f(X, U, th):
         return [X[1], th[0] * sp.sin(X[0]) + th[1] * th[2] * U[0] - th[2] * X[1] ** 2]
 
@@ -55,8 +56,12 @@ def test_user_model_gradient_nonlinear():
     fd = fd_gradient(lambda t: model.cost(X, U, D, t[None])[0], theta[0])
     np.testing.assert_allclose(grad[0], fd, rtol=1e-6)
     # the symbolic Jacobian is what sympy says
-    assert sp.simplify(model.jacobian[("v", "g")] - sp.Symbol("c", real=True)
-                       * sp.Symbol("u", real=True)) == 0
+    assert (
+        sp.simplify(
+            model.jacobian[("v", "g")] - sp.Symbol("c", real=True) * sp.Symbol("u", real=True)
+        )
+        == 0
+    )
 
 
 def test_forward_difference_of_zoh_record_is_consistent(record):
@@ -69,8 +74,11 @@ def test_forward_difference_of_zoh_record_is_consistent(record):
         for p in prob.names:
             e = np.zeros((1, len(prob.names)))
             e[0, prob.names.index(p)] = 1.0
-            cols.append((prob.model.predict(prob.X, prob.U, e)
-                         - prob.model.predict(prob.X, prob.U, zero)).reshape(-1))
+            cols.append(
+                (
+                    prob.model.predict(prob.X, prob.U, e) - prob.model.predict(prob.X, prob.U, zero)
+                ).reshape(-1)
+            )
         sol = np.linalg.lstsq(np.array(cols).T, prob.D.T.reshape(-1), rcond=None)[0]
         truth = np.array([cfg.simulator.true_params[p] for p in prob.names])
         assert np.abs((sol - truth) / truth).max() < 5e-3
@@ -87,18 +95,28 @@ def test_mutation_stays_in_box_and_moves_genes():
 
 def test_ga_recovers_quadratic_minimum_and_is_deterministic():
     target = np.array([0.3, -0.2, 0.8])
-    scale = np.array([1.0, 10.0, 100.0])   # ill-conditioned
+    scale = np.array([1.0, 10.0, 100.0])  # ill-conditioned
 
     def cost(th):
         return 0.5 * (((th - target) * scale) ** 2).sum(axis=1)
 
     def grad(th):
-        return cost(th), (th - target) * scale ** 2
+        return cost(th), (th - target) * scale**2
 
     low, high = np.full(3, -1.0), np.full(3, 1.0)
     init = initial_population(np.random.default_rng(0), 20, 3)
-    runs = [run_ga(cost, grad, low, high, init, GAParams(population=20, generations=40),
-                   np.random.default_rng(5)) for _ in range(2)]
+    runs = [
+        run_ga(
+            cost,
+            grad,
+            low,
+            high,
+            init,
+            GAParams(population=20, generations=40),
+            np.random.default_rng(5),
+        )
+        for _ in range(2)
+    ]
     np.testing.assert_array_equal(runs[0].best, runs[1].best)
     # steepest descent is slow along the weak (scale 1) axis, so that one is looser
     assert np.abs(runs[0].theta - target).max() < 1e-2
@@ -154,8 +172,9 @@ def test_gradient_operator_speeds_up_convergence(record):
     """Same initial populations and streams: the gradient GA reaches 5 % of the initial
     position-loop error in fewer generations than the traditional GA (3 seeds)."""
     cfg, rec = record
-    cfg = dataclasses.replace(cfg, ga=dataclasses.replace(cfg.ga, generations=80,
-                                                          loops=("position",)))
+    cfg = dataclasses.replace(
+        cfg, ga=dataclasses.replace(cfg.ga, generations=80, loops=("position",))
+    )
     gens = {}
     for grad in (True, False):
         gens[grad] = []

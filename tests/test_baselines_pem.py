@@ -21,8 +21,9 @@ from gpquad.errors import GpquadError
 
 
 def config(train_s=30.0, **pem_kw):
-    return PemConfig(simulator=PemSimConfig(train_s=train_s, unseen_s=(10.0,)),
-                     pem=PemSection(**pem_kw))
+    return PemConfig(
+        simulator=PemSimConfig(train_s=train_s, unseen_s=(10.0,)), pem=PemSection(**pem_kw)
+    )
 
 
 def theta0_of(cfg):
@@ -32,8 +33,7 @@ def theta0_of(cfg):
 
 def with_truth(cfg, **changes):
     truth = {**TRUE_PARAMS, **changes}
-    return dataclasses.replace(cfg, simulator=dataclasses.replace(cfg.simulator,
-                                                                  true_params=truth))
+    return dataclasses.replace(cfg, simulator=dataclasses.replace(cfg.simulator, true_params=truth))
 
 
 def test_noise_free_recovery_within_5_percent():
@@ -60,8 +60,9 @@ def test_perpendicular_axis_constraints_hold_when_truth_violates_them():
     assert i[2] <= (i[0] + i[1]) * (1 + 1e-6)
     assert (A @ (i / theta0)).min() >= -1e-6
     assert constrained.e_refined > 1e-8  # the truth is out of reach
-    free = pem.fit(dataclasses.replace(base, pem=PemSection(constraints=False)), rec,
-                   rec.outputs(), theta0)
+    free = pem.fit(
+        dataclasses.replace(base, pem=PemSection(constraints=False)), rec, rec.outputs(), theta0
+    )
     assert abs(free.theta[2] / 0.04 - 1) < 0.05
     assert free.theta[2] > free.theta[0] + free.theta[1]
 
@@ -80,8 +81,8 @@ def test_bounds_are_respected():
 def test_perpendicular_axis_matrix():
     theta0 = np.array([1.0, 2.0, 4.0, 1, 1, 1])
     A = pem.perpendicular_axis_matrix(theta0)
-    ok = np.array([1.0, 1.0, 0.7, 1, 1, 1])     # I = (1, 2, 2.8): all three hold
-    bad = np.array([1.0, 1.0, 1.0, 1, 1, 1])    # I_zz = 4 > 1 + 2
+    ok = np.array([1.0, 1.0, 0.7, 1, 1, 1])  # I = (1, 2, 2.8): all three hold
+    bad = np.array([1.0, 1.0, 1.0, 1, 1, 1])  # I_zz = 4 > 1 + 2
     assert (A @ ok).min() >= 0 and (A @ bad)[2] == pytest.approx(1 + 2 - 4)
 
 
@@ -95,18 +96,28 @@ def test_open_loop_fails_within_two_seconds_closed_loop_holds():
 
 def test_geometry_formulas():
     g = Geometry()
-    assert lift_factor(g, 1.5, 9.8) == pytest.approx(1.5 * 9.8 / (4 * 405.0 ** 2))
+    assert lift_factor(g, 1.5, 9.8) == pytest.approx(1.5 * 9.8 / (4 * 405.0**2))
     be = dataclasses.replace(g, lift_method="blade_element")
     bracket = 0.30 / 6 - 0.15 / 8 - 0.05 / 4
     assert lift_factor(be, 1.5, 9.8) == pytest.approx(
-        2 * math.pi * 1.225 * 2 * 0.025 * 0.127 ** 3 * bracket)
+        2 * math.pi * 1.225 * 2 * 0.025 * 0.127**3 * bracket
+    )
     assert drag_factor(g) == pytest.approx(
-        2 * math.pi * 1.225 * 2 * 0.025 * 0.127 ** 4 * (0.01 / (16 * math.pi) + 0.05 * bracket))
-    tips = dataclasses.replace(g, rod_mass=0.0, box_mass=0.0, motor_radius=0.0,
-                               motor_height=0.0, prop_mass=0.0, rotor_mass=0.0)
+        2 * math.pi * 1.225 * 2 * 0.025 * 0.127**4 * (0.01 / (16 * math.pi) + 0.05 * bracket)
+    )
+    tips = dataclasses.replace(
+        g,
+        rod_mass=0.0,
+        box_mass=0.0,
+        motor_radius=0.0,
+        motor_height=0.0,
+        prop_mass=0.0,
+        rotor_mass=0.0,
+    )
     ixx, iyy, izz, jr = inertia(tips, 0.2)
-    assert (ixx, iyy, izz, jr) == pytest.approx((2 * 0.1 * 0.04, 2 * 0.1 * 0.04,
-                                                 4 * 0.1 * 0.04, 0.0))
+    assert (ixx, iyy, izz, jr) == pytest.approx(
+        (2 * 0.1 * 0.04, 2 * 0.1 * 0.04, 4 * 0.1 * 0.04, 0.0)
+    )
     ixx, iyy, izz, _ = inertia(g, 0.2178)
     assert izz <= ixx + iyy  # a flat vehicle satisfies eq. (20)
 

@@ -38,16 +38,19 @@ duration_s = 40.0
 """
 
 
-@pytest.mark.parametrize("argv, field", [
-    (["benchmark", "no-such-scenario"], "scenario"),
-    (["benchmark", "median", "--peers", "zero,lasso"], "--peers"),
-    (["benchmark", "median", "--seeds", "0"], "--seeds"),
-    (["benchmark", "median", "--jobs", "0"], "--jobs"),
-    (["benchmark", "median", "--horizons", "1,abc"], "--horizons"),
-    (["benchmark", "median", "--horizons", "0"], "--horizons"),
-    (["benchmark", "median", "median"], "scenario"),
-    (["benchmark", "missing.toml"], None),
-])
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        (["benchmark", "no-such-scenario"], "scenario"),
+        (["benchmark", "median", "--peers", "zero,lasso"], "--peers"),
+        (["benchmark", "median", "--seeds", "0"], "--seeds"),
+        (["benchmark", "median", "--jobs", "0"], "--jobs"),
+        (["benchmark", "median", "--horizons", "1,abc"], "--horizons"),
+        (["benchmark", "median", "--horizons", "0"], "--horizons"),
+        (["benchmark", "median", "median"], "scenario"),
+        (["benchmark", "missing.toml"], None),
+    ],
+)
 def test_bad_arguments_are_one_line_and_exit_2(argv, field, capsys, tmp_path):
     assert main(argv + ["--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err.strip()
@@ -86,9 +89,16 @@ def tiny(tmp_path_factory):
 
 
 def _run(tiny, out, jobs=1):
-    return run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, jobs=jobs,
-                         horizons_s=(1.0, 2.0), engine=tiny / "engine" / "engine.toml",
-                         log=lambda s: None)
+    return run_benchmark(
+        [str(tiny / "tiny.toml")],
+        ["zero", "ols"],
+        2,
+        out,
+        jobs=jobs,
+        horizons_s=(1.0, 2.0),
+        engine=tiny / "engine" / "engine.toml",
+        log=lambda s: None,
+    )
 
 
 def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
@@ -97,8 +107,11 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     cells = sorted((out / "cells").rglob("*.json"))
     # gpquad seeds 1 and 2, zero and ols once each (deterministic)
     assert [c.relative_to(out / "cells").as_posix() for c in cells] == [
-        "tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json", "tiny/ols/seed0.json",
-        "tiny/zero/seed0.json"]
+        "tiny/gpquad/seed1.json",
+        "tiny/gpquad/seed2.json",
+        "tiny/ols/seed0.json",
+        "tiny/zero/seed0.json",
+    ]
     first = {c: c.read_bytes() for c in cells}
     agg = table.aggregate(collect(out, info))
     assert agg["tiny"]["gpquad"]["recovery"] is not None  # the simulator's truth is known
@@ -119,7 +132,7 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     assert (out2 / "figures" / "tiny.png").is_file()
     text = (out2 / "benchmark.md").read_text()
     assert "| gpquad | 1s |" in text and "| zero | 2s |" in text
-    summary = text[text.index("## Summary"):text.index("## Per state")]
+    summary = text[text.index("## Summary") : text.index("## Per state")]
     assert "| tiny | gpquad |" in summary and "| tiny | zero |" in summary
     assert "/6, " in summary  # exact equations of each gpquad seed (the truth is known)
     assert "| parameters | fit s |" in summary
@@ -140,8 +153,15 @@ def test_folder_scored_at_other_horizons_is_refused(tiny, capsys):
     out = tiny / "run3"
     shutil.copytree(tiny / "run1", out)
     with pytest.raises(Exception, match="other horizons"):
-        run_benchmark([str(tiny / "tiny.toml")], ["zero"], 1, out, horizons_s=(1.0,),
-                      engine=tiny / "engine" / "engine.toml", log=lambda s: None)
+        run_benchmark(
+            [str(tiny / "tiny.toml")],
+            ["zero"],
+            1,
+            out,
+            horizons_s=(1.0,),
+            engine=tiny / "engine" / "engine.toml",
+            log=lambda s: None,
+        )
     assert Path(out / "benchmark.json").is_file()
 
 
@@ -150,17 +170,32 @@ def test_changed_engine_config_recomputes_only_gpquad_cells(tiny):
     shutil.copytree(tiny / "run1", out)
     engine = tiny / "engine2"
     engine.mkdir()
-    (engine / "engine.toml").write_text(TINY_ENGINE.replace("iterations = 1",
-                                                            "iterations = 2"))
+    (engine / "engine.toml").write_text(TINY_ENGINE.replace("iterations = 1", "iterations = 2"))
     before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
     # peers only: gpquad's cells (made with the old engine) are not touched
-    run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
-                  engine=engine / "engine.toml", log=lambda s: None, with_gpquad=False)
+    run_benchmark(
+        [str(tiny / "tiny.toml")],
+        ["zero", "ols"],
+        2,
+        out,
+        horizons_s=(1.0, 2.0),
+        engine=engine / "engine.toml",
+        log=lambda s: None,
+        with_gpquad=False,
+    )
     assert {c: c.read_bytes() for c in before} == before
-    info = run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out,
-                         horizons_s=(1.0, 2.0), engine=engine / "engine.toml", log=lambda s: None)
-    changed = sorted(c.relative_to(out / "cells").as_posix() for c in before
-                     if c.read_bytes() != before[c])
+    info = run_benchmark(
+        [str(tiny / "tiny.toml")],
+        ["zero", "ols"],
+        2,
+        out,
+        horizons_s=(1.0, 2.0),
+        engine=engine / "engine.toml",
+        log=lambda s: None,
+    )
+    changed = sorted(
+        c.relative_to(out / "cells").as_posix() for c in before if c.read_bytes() != before[c]
+    )
     assert changed == ["tiny/gpquad/seed1.json", "tiny/gpquad/seed2.json"]
     cell = json.loads((out / "cells/tiny/gpquad/seed1.json").read_text())
     assert cell["settings"]["evolution"]["iterations"] == 2
@@ -175,6 +210,13 @@ def test_a_comment_in_the_engine_config_recomputes_nothing(tiny):
     engine.mkdir()
     (engine / "engine.toml").write_text("# a note on the settings\n" + TINY_ENGINE)
     before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
-    run_benchmark([str(tiny / "tiny.toml")], ["zero", "ols"], 2, out, horizons_s=(1.0, 2.0),
-                  engine=engine / "engine.toml", log=lambda s: None)
+    run_benchmark(
+        [str(tiny / "tiny.toml")],
+        ["zero", "ols"],
+        2,
+        out,
+        horizons_s=(1.0, 2.0),
+        engine=engine / "engine.toml",
+        log=lambda s: None,
+    )
     assert {c: c.read_bytes() for c in before} == before

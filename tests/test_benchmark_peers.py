@@ -17,8 +17,9 @@ def median_scenario():
     """60 s of the median model for training, 40 s of another seed for testing."""
     train = simulate(SimulatorConfig(duration_s=60.0, seed=0), INPUTS)
     test = simulate(SimulatorConfig(duration_s=40.0, seed=7), INPUTS)
-    return make_scenario("small", [train], [test], trim="mean", truth=dict(MEDIAN_MODEL),
-                         validation_fraction=0.25)
+    return make_scenario(
+        "small", [train], [test], trim="mean", truth=dict(MEDIAN_MODEL), validation_fraction=0.25
+    )
 
 
 def test_ols_on_exact_linear_data_recovers_the_median_model(median_scenario):
@@ -64,4 +65,4 @@ def test_sindy_picks_a_threshold_and_flies(median_scenario):
     assert peer.settings["validation_rse_7s"] < 0.01
     x, y = peers.regression_data(median_scenario.test, median_scenario.test.validation)
     err = np.sqrt(np.mean((peer.predict(x, None) - y) ** 2, axis=0))
-    assert np.all(err < 0.02 * np.sqrt(np.mean(y ** 2, axis=0)))
+    assert np.all(err < 0.02 * np.sqrt(np.mean(y**2, axis=0)))

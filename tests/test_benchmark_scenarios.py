@@ -22,6 +22,7 @@ OTHER_ROLL = "20.0*u_R(t-1) - 8.0*p"
 def _fake_module(tmp_path, calls):
     """Stands in for gpquad.benchmark.rotorpy_flights: two vehicles a and b whose roll
     equations differ, 2 training, 1 validation and 1 test flight each."""
+
     def ensure_flights(mode, noisy, cache_dir, fleet="tuned"):
         calls.append((mode, noisy, str(cache_dir)) + (() if fleet == "tuned" else (fleet,)))
         paths, flights = {"train": [], "validation": [], "test": []}, []
@@ -31,14 +32,20 @@ def _fake_module(tmp_path, calls):
                 sim = dataclasses.replace(sim, equations={**sim.equations, "p_dot": OTHER_ROLL})
             for part, seeds in (("train", (1, 2)), ("validation", (3,)), ("test", (4,))):
                 for s in seeds:
-                    path = write_flight_file(simulate(dataclasses.replace(sim, seed=s), INPUTS),
-                                             tmp_path / f"{vehicle}_{part}{s}.parquet")
+                    path = write_flight_file(
+                        simulate(dataclasses.replace(sim, seed=s), INPUTS),
+                        tmp_path / f"{vehicle}_{part}{s}.parquet",
+                    )
                     paths[part].append(path)
-                    flights.append({"path": str(path), "vehicle": vehicle, "role": part,
-                                    "seed": s})
-        return {**paths, "input_names": INPUTS, "config": {"format": "generic", "trim": "none",
-                                                          "inputs": list(INPUTS)},
-                "vehicles": ["a", "b"], "seeds": [1, 2, 3, 4], "flights": flights}
+                    flights.append({"path": str(path), "vehicle": vehicle, "role": part, "seed": s})
+        return {
+            **paths,
+            "input_names": INPUTS,
+            "config": {"format": "generic", "trim": "none", "inputs": list(INPUTS)},
+            "vehicles": ["a", "b"],
+            "seeds": [1, 2, 3, 4],
+            "flights": flights,
+        }
 
     module = types.ModuleType("gpquad.benchmark.rotorpy_flights")
     module.ensure_flights = ensure_flights
@@ -47,8 +54,9 @@ def _fake_module(tmp_path, calls):
 
 def test_rotorpy_scenario_is_fitted_per_vehicle(tmp_path, monkeypatch):
     calls = []
-    monkeypatch.setitem(sys.modules, "gpquad.benchmark.rotorpy_flights",
-                        _fake_module(tmp_path, calls))
+    monkeypatch.setitem(
+        sys.modules, "gpquad.benchmark.rotorpy_flights", _fake_module(tmp_path, calls)
+    )
     sc = scenarios.build_scenario("rotorpy-angle-noisy", tmp_path / "cache")
     assert calls == [("angle", True, str(tmp_path / "cache"))]
     assert sc.name == "rotorpy-angle-noisy" and sc.truth is None
@@ -98,23 +106,40 @@ def test_unknown_scenario_is_a_user_error(tmp_path):
 
 def test_every_rotorpy_scenario_asks_for_its_mode_and_noise(tmp_path, monkeypatch):
     calls = []
-    monkeypatch.setitem(sys.modules, "gpquad.benchmark.rotorpy_flights",
-                        _fake_module(tmp_path, calls))
-    names = ("rotorpy-angle", "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy",
-             "rotorpy-heldout-angle", "rotorpy-heldout-angle-noisy", "rotorpy-heldout-rate",
-             "rotorpy-heldout-rate-noisy")
+    monkeypatch.setitem(
+        sys.modules, "gpquad.benchmark.rotorpy_flights", _fake_module(tmp_path, calls)
+    )
+    names = (
+        "rotorpy-angle",
+        "rotorpy-angle-noisy",
+        "rotorpy-rate",
+        "rotorpy-rate-noisy",
+        "rotorpy-heldout-angle",
+        "rotorpy-heldout-angle-noisy",
+        "rotorpy-heldout-rate",
+        "rotorpy-heldout-rate-noisy",
+    )
     for name in names:
         assert name in scenarios.SCENARIOS
-        assert scenarios.build_scenario(name, tmp_path / "cache").source.get("fleet") == \
-            ("heldout" if "heldout" in name else None)
+        assert scenarios.build_scenario(name, tmp_path / "cache").source.get("fleet") == (
+            "heldout" if "heldout" in name else None
+        )
     assert [(c[0], c[1]) + c[3:] for c in calls] == [
-        ("angle", False), ("angle", True), ("rate", False), ("rate", True),
-        ("angle", False, "heldout"), ("angle", True, "heldout"), ("rate", False, "heldout"),
-        ("rate", True, "heldout")]
+        ("angle", False),
+        ("angle", True),
+        ("rate", False),
+        ("rate", True),
+        ("angle", False, "heldout"),
+        ("angle", True, "heldout"),
+        ("rate", False, "heldout"),
+        ("rate", True, "heldout"),
+    ]
 
 
-@pytest.mark.skipif(not (scenarios.repo_root().parent / "shared" / "data" / "betaflight")
-                    .is_dir(), reason="../shared/data/betaflight is not present")
+@pytest.mark.skipif(
+    not (scenarios.repo_root().parent / "shared" / "data" / "betaflight").is_dir(),
+    reason="../shared/data/betaflight is not present",
+)
 def test_betaflight_scenario_tests_on_another_flight(tmp_path):
     """betaflight-gecko: every training segment comes from btfl_002.bbl, every test segment
     from btfl_all.bbl (the config's data.validation file, another flight of the quad), and
@@ -123,19 +148,29 @@ def test_betaflight_scenario_tests_on_another_flight(tmp_path):
     assert scenario.fit.n_samples > 1000 and scenario.test.n_samples > 1000
     assert {info["name"].split(".")[0] for info in scenario.fit.flight_info} == {"btfl_002"}
     assert {info["name"].split(".")[0] for info in scenario.test.flight_info} == {"btfl_all"}
-    assert scenario.measured == {"u": False, "v": False, "w": False, "p": True, "q": True,
-                                 "r": True}
+    assert scenario.measured == {
+        "u": False,
+        "v": False,
+        "w": False,
+        "p": True,
+        "q": True,
+        "r": True,
+    }
 
 
 def test_user_config_with_validation_files_tests_on_them(tmp_path):
     """A user's config that holds b.parquet out whole (data.validation) is tested on b
     alone and trained on a alone; before, each file's last validation_fraction tested."""
     for name, seed in (("a", 1), ("b", 2)):
-        write_flight_file(simulate(SimulatorConfig(duration_s=30.0, seed=seed), INPUTS),
-                          tmp_path / f"{name}.parquet")
+        write_flight_file(
+            simulate(SimulatorConfig(duration_s=30.0, seed=seed), INPUTS),
+            tmp_path / f"{name}.parquet",
+        )
     config = tmp_path / "mine.toml"
-    config.write_text('name = "mine"\nseed = 1\n[data]\nfiles = ["a.parquet"]\n'
-                      'validation = ["b.parquet"]\ntrim = "none"\n')
+    config.write_text(
+        'name = "mine"\nseed = 1\n[data]\nfiles = ["a.parquet"]\n'
+        'validation = ["b.parquet"]\ntrim = "none"\n'
+    )
     scenario = scenarios.user_scenario(config)
     assert [f["name"] for f in scenario.fit.flight_info] == ["a.parquet"]
     assert [f["name"] for f in scenario.test.flight_info] == ["b.parquet"]
@@ -148,8 +183,9 @@ def test_named_log_scenario_without_its_log_is_skipped(tmp_path, monkeypatch):
     config with a missing file stays an error."""
     config = tmp_path / "experiments" / "px4_s250.toml"
     config.parent.mkdir()
-    config.write_text('name = "x"\nseed = 1\n[data]\nfiles = ["nowhere/S250"]\n'
-                      'format = "px4-csv"\n')
+    config.write_text(
+        'name = "x"\nseed = 1\n[data]\nfiles = ["nowhere/S250"]\nformat = "px4-csv"\n'
+    )
     monkeypatch.setattr(scenarios, "repo_root", lambda: tmp_path)
     with pytest.raises(scenarios.Skipped, match="not on this machine"):
         scenarios.build_scenario("px4-s250", tmp_path)

@@ -53,7 +53,7 @@ def test_round_trip_then_continue_equals_uninterrupted(engine, tmp_path):
 def test_every_runstate_field_but_history_is_stored(engine):
     state = engine.init_state(np.random.SeedSequence(4))
     blob = checkpoint.encode(state, {})
-    payload = json.loads(blob[checkpoint._HEADER.size:])
+    payload = json.loads(blob[checkpoint._HEADER.size :])
     names = {f.name for f in dataclasses.fields(RunState)} - {"history"}
     assert set(payload["state"]) == names
 
@@ -95,8 +95,9 @@ def test_truncated_checkpoint_restarts_the_run_with_a_warning(reference, tmp_pat
     (folder / "checkpoint.bin").write_bytes(blob[: len(blob) - 7])
     (folder / "history.csv").write_text("garbage\n")  # must be thrown away, not appended to
     stream = io.StringIO()
-    res = run_sweep(tiny_config(), out, jobs=1, assemble=False,
-                    progress=SweepProgress("quiet", stream=stream))
+    res = run_sweep(
+        tiny_config(), out, jobs=1, assemble=False, progress=SweepProgress("quiet", stream=stream)
+    )
     assert any("corrupt checkpoint" in w and "a_z" in w for w in res["warnings"])
     assert "corrupt checkpoint" in stream.getvalue()
     again = {s["repetition"] for s in res["runs"] if not s["skipped"]}
@@ -104,8 +105,9 @@ def test_truncated_checkpoint_restarts_the_run_with_a_warning(reference, tmp_pat
     assert result_files(out) == result_files(reference)
 
 
-def test_crash_between_history_and_checkpoint_does_not_duplicate_rows(reference, tmp_path,
-                                                                      monkeypatch):
+def test_crash_between_history_and_checkpoint_does_not_duplicate_rows(
+    reference, tmp_path, monkeypatch
+):
     out = tmp_path / "s"
     shutil.copytree(reference, out)
     key = RunKey("p_dot", 0)
@@ -132,7 +134,9 @@ def test_crash_between_history_and_checkpoint_does_not_duplicate_rows(reference,
     state, meta = checkpoint.load(folder / "checkpoint.bin")
     assert state.iteration == 1
     run_sweep(tiny_config(), out, jobs=1, assemble=False)
-    assert (folder / "history.csv").read_bytes() == \
-        (run_dir(reference, key) / "history.csv").read_bytes()
-    assert json.loads((folder / "result.json").read_text()) == \
-        json.loads((run_dir(reference, key) / "result.json").read_text())
+    assert (folder / "history.csv").read_bytes() == (
+        run_dir(reference, key) / "history.csv"
+    ).read_bytes()
+    assert json.loads((folder / "result.json").read_text()) == json.loads(
+        (run_dir(reference, key) / "result.json").read_text()
+    )

@@ -20,14 +20,16 @@ def _commands(parser, path=()):
 
 
 def test_every_command_has_examples():
-    missing = [name for name, child in _commands(build_parser())
-               if not (child.epilog or "").startswith("examples:")]
+    missing = [
+        name
+        for name, child in _commands(build_parser())
+        if not (child.epilog or "").startswith("examples:")
+    ]
     assert missing == []
 
 
 def _all_examples():
-    lines = [line.strip().split("  ")[0] for line in TOP_EXAMPLES.splitlines()[1:]
-             if line.strip()]
+    lines = [line.strip().split("  ")[0] for line in TOP_EXAMPLES.splitlines()[1:] if line.strip()]
     lines += [e for examples in EXAMPLES.values() for e in examples]
     return [line.strip() for line in lines]
 
@@ -67,7 +69,9 @@ def test_hints_name_what_the_command_has(tmp_path):
         read_px4_folder(tmp_path / "file.txt")
     import inspect
 
-    assert inspect.signature(screen_segments).parameters["skip_hint"].default == \
-        "set data.check_before_run = false"
+    assert (
+        inspect.signature(screen_segments).parameters["skip_hint"].default
+        == "set data.check_before_run = false"
+    )
     score_args = build_parser().parse_args(["score", "RUN", "--data", "x.ulg", "--no-check"])
     assert score_args.no_check

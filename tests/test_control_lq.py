@@ -22,7 +22,7 @@ def test_scalar_tracker_by_hand():
     # x+ = x + u, y = x, Q_y = R = 1: P^2 - P - 1 = 0, P = (1 + sqrt 5) / 2, K = P / (1 + P),
     # F = [C (1 - 1 + K)^-1 Gamma]^-1 = K, Pi = K^-1 F = 1.
     t = lq_tracker([[1.0]], [[1.0]], [[1.0]], [[0.0]], [[1.0]], [[1.0]])
-    golden = (1 + 5 ** 0.5) / 2
+    golden = (1 + 5**0.5) / 2
     assert t.P[0, 0] == pytest.approx(golden, rel=1e-12)
     assert t.K[0, 0] == pytest.approx(golden / (1 + golden), rel=1e-12)
     assert t.F[0, 0] == pytest.approx(golden / (1 + golden), rel=1e-12)
@@ -61,8 +61,7 @@ def _rounding_envelope(q_xy: float, n: int = 60):
         ks.append(t.K)
         fs.append(t.F)
     half = 0.005 + 1e-9  # half of the last printed digit of K and F
-    return (np.min(ks, 0) - half, np.max(ks, 0) + half, np.min(fs, 0) - half,
-            np.max(fs, 0) + half)
+    return (np.min(ks, 0) - half, np.max(ks, 0) + half, np.min(fs, 0) - half, np.max(fs, 0) + half)
 
 
 def test_table_a1_gains_within_printed_rounding():
@@ -99,8 +98,9 @@ def test_pi_gives_0102_rad_per_unit_acceleration():
     """Section 6.2: steady pitch and roll per unit a_x, a_y reference = 0.102 rad (1/g)."""
     T = TABLE_A1
     for q_xy in (5e3, 6e3):
-        t = lq_tracker(T["Phi"], T["Gamma"], T["C"], T["D"],
-                       np.diag([180e3, q_xy, q_xy, 5e3]), T["R"])
+        t = lq_tracker(
+            T["Phi"], T["Gamma"], T["C"], T["D"], np.diag([180e3, q_xy, q_xy, 5e3]), T["R"]
+        )
         assert t.Pi[1, 1] == pytest.approx(-0.102, abs=5e-4)  # a_x > 0: nose down
         assert t.Pi[0, 2] == pytest.approx(0.102, abs=5e-4)  # a_y > 0: roll right
         assert t.Pi[2, 0] == pytest.approx(1.0, abs=1e-9)  # psi follows psi_r
@@ -149,16 +149,21 @@ def test_step_metrics_by_hand():
 def _pem_folder(tmp_path, theta=THETA):
     run = tmp_path / "pem"
     run.mkdir()
-    (run / "model.json").write_text(json.dumps({
-        "method": "pem", "parameters": dict(zip(PARAMS, theta.tolist(), strict=True)),
-        "vehicle": VEHICLE.tolist()}))
+    (run / "model.json").write_text(
+        json.dumps(
+            {
+                "method": "pem",
+                "parameters": dict(zip(PARAMS, theta.tolist(), strict=True)),
+                "vehicle": VEHICLE.tolist(),
+            }
+        )
+    )
     return run
 
 
 def test_run_lq_end_to_end(tmp_path):
     cfg = ControlConfig(lq=LqConfig(dt=0.002, step_s=3.0, joystick_s=5.0))
-    s = run_lq(_pem_folder(tmp_path), cfg, tmp_path / "out", say=lambda *a: None,
-               figures=False)
+    s = run_lq(_pem_folder(tmp_path), cfg, tmp_path / "out", say=lambda *a: None, figures=False)
     assert s["pitch_per_unit_ax_rad"] == pytest.approx(-0.102, abs=5e-4)
     for axis in ("a_x", "a_y"):
         assert s["step"][axis]["settling_time_s"] < 1.0

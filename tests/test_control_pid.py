@@ -22,8 +22,14 @@ from gpquad.study.store import write_json
 NAMES = ("u_P", "u_R", "u_Y", "u_T")
 DT = 0.04
 #: A linear plant with round numbers: rate-level roll/pitch/yaw, thrust with a hover offset.
-LINEAR = {"a_x": "-10.0*theta", "a_y": "8.0*phi", "a_z": "-20.0*u_T + 10.0",
-          "p_dot": "2.0*u_R", "q_dot": "-4.0*u_P", "r_dot": "0.5*u_Y"}
+LINEAR = {
+    "a_x": "-10.0*theta",
+    "a_y": "8.0*phi",
+    "a_z": "-20.0*u_T + 10.0",
+    "p_dot": "2.0*u_R",
+    "q_dot": "-4.0*u_P",
+    "r_dot": "0.5*u_Y",
+}
 SPAN = np.ones(4)
 GAINS = np.array([2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 0.5, 0.25, 1.0, 2.0, 3.0, 0.5, 1.5])
 
@@ -46,8 +52,16 @@ def test_pid_command_by_hand():
     (0.3, 0.4, 0.5), integral 1, g_x = -10, g_y = 8, max angle 0.35, rate level."""
     ctrl = np.array([-10.0, 8.0, 0.35, 1.0, 0.5, 5.0, 0, 0, 0])
     cmd = np.empty(4)
-    pid_command(GAINS, ctrl, np.array([3.0, 4.0, 2.0]), np.array([0.5, -1.0, 0.2]),
-                np.array([0.1, -0.05, 0.0]), np.array([0.3, 0.4, 0.5]), np.array([1.0]), cmd)
+    pid_command(
+        GAINS,
+        ctrl,
+        np.array([3.0, 4.0, 2.0]),
+        np.array([0.5, -1.0, 0.2]),
+        np.array([0.1, -0.05, 0.0]),
+        np.array([0.3, 0.4, 0.5]),
+        np.array([1.0]),
+        cmd,
+    )
     # theta* = (0.5*3 - 0.25*0.5)/-10 = -0.1375; phi* = (1*4 - 2*(-1))/8 = 0.75 -> 0.35
     assert cmd[0] == pytest.approx(2.0 * (0.35 - 0.1) - 3.0 * 0.3)
     assert cmd[1] == pytest.approx(4.0 * (-0.1375 + 0.05) - 5.0 * 0.4)
@@ -55,8 +69,16 @@ def test_pid_command_by_hand():
     assert cmd[3] == pytest.approx(3.0 * 2.0 + 0.5 * 1.0 - 1.5 * 0.2)
     # angle level: the inner loop does not subtract the measured angle
     ctrl[3] = 0.0
-    pid_command(GAINS, ctrl, np.array([3.0, 4.0, 2.0]), np.array([0.5, -1.0, 0.2]),
-                np.array([0.1, -0.05, 0.0]), np.array([0.3, 0.4, 0.5]), np.array([1.0]), cmd)
+    pid_command(
+        GAINS,
+        ctrl,
+        np.array([3.0, 4.0, 2.0]),
+        np.array([0.5, -1.0, 0.2]),
+        np.array([0.1, -0.05, 0.0]),
+        np.array([0.3, 0.4, 0.5]),
+        np.array([1.0]),
+        cmd,
+    )
     assert cmd[0] == pytest.approx(2.0 * 0.35 - 3.0 * 0.3)
 
 
@@ -66,8 +88,16 @@ def test_pid_command_heading_frame():
     cmd = np.empty(4)
     g = np.zeros(13)
     g[6], g[0], g[2] = 1.0, 1.0, 1.0
-    pid_command(g, ctrl, np.array([0.0, 2.0, 0.0]), np.zeros(3),
-                np.array([0.0, 0.0, math.pi / 2]), np.zeros(3), np.zeros(1), cmd)
+    pid_command(
+        g,
+        ctrl,
+        np.array([0.0, 2.0, 0.0]),
+        np.zeros(3),
+        np.array([0.0, 0.0, math.pi / 2]),
+        np.zeros(3),
+        np.zeros(1),
+        cmd,
+    )
     assert cmd[1] == pytest.approx(2.0 / -10.0)
     assert cmd[0] == pytest.approx(0.0, abs=1e-12)
 
@@ -140,8 +170,12 @@ def test_unsteerable_model_is_refused():
         design_point(truth_plant(no_tilt, NAMES, DT), SPAN)
 
 
-TINY = PidConfig(popsize=4, generations=3, courses_per_generation=1,
-                 course=CourseConfig(legs=2, leg_min_m=2.0, leg_max_m=3.0))
+TINY = PidConfig(
+    popsize=4,
+    generations=3,
+    courses_per_generation=1,
+    course=CourseConfig(legs=2, leg_min_m=2.0, leg_max_m=3.0),
+)
 
 
 def test_es_is_deterministic_for_a_seed():
@@ -166,12 +200,13 @@ def _run_folder(tmp_path):
 
     cfg = Config(simulator=SimulatorConfig(duration_s=40.0))
     truth = TruthModel(cfg.simulator.equations, NAMES)
-    eqs = {t: Equation(t, from_sympy(truth.exprs[t], truth.delays[t], NAMES), NAMES, 0.0, 0.0, {})
-           for t in truth.exprs}
+    eqs = {
+        t: Equation(t, from_sympy(truth.exprs[t], truth.delays[t], NAMES), NAMES, 0.0, 0.0, {})
+        for t in truth.exprs
+    }
     run = tmp_path / "run"
     run.mkdir()
-    write_model(run, DiscoveredModel(eqs, NAMES, {n: 0.0 for n in NAMES}, 0.04, 1,
-                                     cfg.to_dict()))
+    write_model(run, DiscoveredModel(eqs, NAMES, {n: 0.0 for n in NAMES}, 0.04, 1, cfg.to_dict()))
     write_json(run / "config.json", folder_config_dict(cfg))
     return run
 
@@ -179,11 +214,27 @@ def _run_folder(tmp_path):
 def test_command_end_to_end(tmp_path, capsys):
     run = _run_folder(tmp_path)
     conf = tmp_path / "control.toml"
-    conf.write_text("[pid]\npopsize = 4\ngenerations = 2\nrepetitions = 2\n"
-                    "[pid.course]\nlegs = 2\n")
+    conf.write_text(
+        "[pid]\npopsize = 4\ngenerations = 2\nrepetitions = 2\n[pid.course]\nlegs = 2\n"
+    )
     out = tmp_path / "out"
-    assert main(["control", "pid", str(run), "--config", str(conf), "--out", str(out),
-                 "--json", "--courses", "2"]) == 0
+    assert (
+        main(
+            [
+                "control",
+                "pid",
+                str(run),
+                "--config",
+                str(conf),
+                "--out",
+                str(out),
+                "--json",
+                "--courses",
+                "2",
+            ]
+        )
+        == 0
+    )
     last = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert set(last) >= {"model_rmse_m", "truth_rmse_m", "completion"}
     # the model is the truth: both plants fly alike (only the noise differs)
@@ -196,10 +247,10 @@ def test_command_end_to_end(tmp_path, capsys):
 
 def test_bad_inputs(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text("[pid]\ninput_level = \"torque\"\n")
+    bad.write_text('[pid]\ninput_level = "torque"\n')
     with pytest.raises(GpquadError, match="pid.input_level"):
         load_control_config(bad)
-    bad.write_text("[pid]\nmodel_form = \"raw\"\n")
+    bad.write_text('[pid]\nmodel_form = "raw"\n')
     with pytest.raises(GpquadError, match="pid.model_form"):
         load_control_config(bad)
     bad.write_text("[pid]\ncommand_limit = -1.0\n")
@@ -231,8 +282,11 @@ def test_waypoint_passed_counts_as_reached():
     """Side and forward forces of 0.5 and 0.3 m/s^2 would hold the craft 0.5 / kp_y = 1 m
     beside and 0.3 / kp_x = 0.6 m beyond the waypoint, outside the 0.5 m radius: passing the
     waypoint (projection beyond it) switches legs, at the first step north of 3 m."""
-    plant = truth_plant(dict(MEDIAN_MODEL, a_y="-9.2*phi - 0.6*v + 0.5",
-                             a_x="10.0*theta - 0.6*u + 0.3"), NAMES, 0.04)
+    plant = truth_plant(
+        dict(MEDIAN_MODEL, a_y="-9.2*phi - 0.6*v + 0.5", a_x="10.0*theta - 0.6*u + 0.3"),
+        NAMES,
+        0.04,
+    )
     cfg = PidConfig()
     d = design_point(plant, np.array([0.5, 0.5, 0.5, 0.2]))
     c = make_controller(cfg.nominal_gains, d, -np.ones(4), np.ones(4), cfg)
@@ -253,8 +307,9 @@ def test_model_forms_differ_where_protected_division_fires():
     u_p = VAR_BASE + 9 + NAMES.index("u_P")
     tree = Tree.from_lists([DIV, CONST, DIV, CONST, u_p], [0, -100.0, 0, 34.0, 0], [0] * 4)
     trim = {"u_P": 0.2, "u_R": 0.0, "u_Y": 0.0, "u_T": 0.0}
-    model = DiscoveredModel({"q_dot": Equation("q_dot", tree, NAMES, 0.0, 0.0, trim)}, NAMES,
-                            trim, 0.04, 1, {})
+    model = DiscoveredModel(
+        {"q_dot": Equation("q_dot", tree, NAMES, 0.0, 0.0, trim)}, NAMES, trim, 0.04, 1, {}
+    )
     at_trim = np.array([0.2, 0.0, 0.0, 0.0])
     assert model_plant(model, "tree").accelerations(np.zeros(9), at_trim)[4] == -100.0
     assert model_plant(model).accelerations(np.zeros(9), at_trim)[4] == pytest.approx(0.0)

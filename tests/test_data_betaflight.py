@@ -15,8 +15,9 @@ from gpquad.study.config import DataConfig
 
 FIXTURE = Path(__file__).parent / "fixtures" / "btfl_001_cut.bbl"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "betaflight"
-needs_shared = pytest.mark.skipif(not SHARED.is_dir(),
-                                  reason="../shared/data/betaflight is not present")
+needs_shared = pytest.mark.skipif(
+    not SHARED.is_dir(), reason="../shared/data/betaflight is not present"
+)
 DATA = DataConfig(format="betaflight", segment="none", min_segment_s=2.0)
 
 
@@ -113,10 +114,13 @@ def test_real_logs_load(name):
     assert all(f.dt == pytest.approx(0.04) for f in flights)
 
 
-@pytest.mark.parametrize("edit, field, words", [
-    (lambda df: df.drop(columns=["gyroADC[1]"]), "gyroADC[1]", "missing field"),
-    (lambda df: df.assign(**{"gyroADC[0]": df["gyroADC[0]"] * 100.0}), "gyroADC[0]", "deg/s"),
-])
+@pytest.mark.parametrize(
+    "edit, field, words",
+    [
+        (lambda df: df.drop(columns=["gyroADC[1]"]), "gyroADC[1]", "missing field"),
+        (lambda df: df.assign(**{"gyroADC[0]": df["gyroADC[0]"] * 100.0}), "gyroADC[0]", "deg/s"),
+    ],
+)
 def test_bad_fields_are_one_line_errors_naming_the_field(edit, field, words):
     """A log without a gyro axis, or a gyro far beyond any rate a craft can reach."""
     from gpquad.data.betaflight import _log_table
@@ -145,8 +149,7 @@ def test_garbage_piece_overlapping_the_clock_is_dropped(monkeypatch):
     tables, skipped, warned = _read_logs(FIXTURE, dataclasses.replace(DATA, log_index=2))
     assert len(tables) == 1 and len(tables[0].table) > 0
     assert any("overlaps a longer piece" in w and "piece 1" in w for w in warned)
-    assert bf._overlapping([(0, 10), (10, 14)], np.r_[np.arange(10.0), 2.0, 3.0, 4.0, 5.0]) \
-        == [1]
+    assert bf._overlapping([(0, 10), (10, 14)], np.r_[np.arange(10.0), 2.0, 3.0, 4.0, 5.0]) == [1]
     assert bf._overlapping([(0, 10), (10, 14)], np.arange(14.0)) == []
 
 

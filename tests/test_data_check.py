@@ -24,8 +24,9 @@ from gpquad.study.config import Config, DataConfig, SimulatorConfig, config_from
 FIXTURES = Path(__file__).parent / "fixtures"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 S250 = SHARED / "px4" / "S250AQ_2016-12-13"
-needs_shared = pytest.mark.skipif(not S250.is_dir(),
-                                  reason="../shared/data (real PX4 logs) is not present")
+needs_shared = pytest.mark.skipif(
+    not S250.is_dir(), reason="../shared/data (real PX4 logs) is not present"
+)
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
 
@@ -112,11 +113,20 @@ def _write_table(flight, path, frame):
 
 
 def test_table_format_frames_round_trip(sim_flight, tmp_path):
-    data = DataConfig(format="table", segment="none", min_segment_s=5.0, resample_hz=25.0,
-                      cutoff_hz=0.0, downsample=1, rates_from="log")
+    data = DataConfig(
+        format="table",
+        segment="none",
+        min_segment_s=5.0,
+        resample_hz=25.0,
+        cutoff_hz=0.0,
+        downsample=1,
+        rates_from="log",
+    )
     ned = read_table_log(_write_table(sim_flight, tmp_path / "ned.csv", "NED/FRD"), data)
-    enu = read_table_log(_write_table(sim_flight, tmp_path / "enu.csv", "ENU/FLU"),
-                         dataclasses.replace(data, frame="ENU/FLU"))
+    enu = read_table_log(
+        _write_table(sim_flight, tmp_path / "enu.csv", "ENU/FLU"),
+        dataclasses.replace(data, frame="ENU/FLU"),
+    )
     (a,), (b,) = ned, enu
     assert np.allclose(a.quat, b.quat, atol=1e-9) and np.allclose(a.vel, b.vel, atol=1e-9)
     assert np.allclose(a.rates, b.rates, atol=1e-9)
@@ -144,8 +154,7 @@ def test_table_rates_in_degrees_or_another_frame_are_one_line_errors(sim_flight,
     on q and r (FLU rates beside an FRD attitude), name the file and the mapped column."""
     df = sim_flight.to_frame().drop(columns=["x", "y", "z"], errors="ignore")
     df = df.rename(columns={"q": "gyro_y"})
-    data = DataConfig(format="table", segment="none", min_segment_s=5.0,
-                      columns={"q": "gyro_y"})
+    data = DataConfig(format="table", segment="none", min_segment_s=5.0, columns={"q": "gyro_y"})
     path = tmp_path / "deg.csv"
     df.assign(p=np.degrees(df["p"])).to_csv(path, index=False)
     with pytest.raises(GpquadError) as err:
@@ -162,8 +171,17 @@ def test_table_rates_in_degrees_or_another_frame_are_one_line_errors(sim_flight,
 
 def test_cli_check_prints_table_writes_png(capsys, tmp_path):
     png = tmp_path / "look.png"
-    code = main(["data", "check", str(FIXTURES / "px4_sample_20s.ulg"), "--plot", str(png),
-                 "--config", str(_cfg(tmp_path, 'segment = "none"\nmin_segment_s = 2.0\n'))])
+    code = main(
+        [
+            "data",
+            "check",
+            str(FIXTURES / "px4_sample_20s.ulg"),
+            "--plot",
+            str(png),
+            "--config",
+            str(_cfg(tmp_path, 'segment = "none"\nmin_segment_s = 2.0\n')),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0
     assert "vehicle_attitude" in out and "not measured (v_xy_valid = 0" in out
@@ -178,8 +196,9 @@ def _cfg(tmp_path, data_lines: str) -> Path:
 
 
 def test_cli_check_unusable_data_exits_nonzero_with_one_line(capsys, tmp_path):
-    code = main(["data", "check", str(FIXTURES / "px4_sample_20s.ulg"),
-                 "--plot", str(tmp_path / "x.png")])
+    code = main(
+        ["data", "check", str(FIXTURES / "px4_sample_20s.ulg"), "--plot", str(tmp_path / "x.png")]
+    )
     err = capsys.readouterr().err.strip()
     assert code != 0
     assert err.count("\n") == 0 and "no usable flight" in err and "px4_sample_20s.ulg" in err
@@ -200,8 +219,9 @@ def test_run_refuses_a_dataset_that_fails_the_check(sim_flight, tmp_path):
         cfg = config_from_dict({"data": {"files": ["x"], "format": "test-bad"}})
         with pytest.raises(GpquadError, match="integration check failed: .* r "):
             load_dataset(cfg)
-        ok = config_from_dict({"data": {"files": ["x"], "format": "test-bad",
-                                        "check_before_run": False}})
+        ok = config_from_dict(
+            {"data": {"files": ["x"], "format": "test-bad", "check_before_run": False}}
+        )
         assert load_dataset(ok).n_samples == len(bad)
     finally:
         READERS.pop("test-bad")
@@ -216,8 +236,9 @@ def test_gpquad_run_on_s250aq_gives_six_equations(tmp_path, capsys):
     root = Path(__file__).resolve().parents[1]
     table = tomllib.loads((root / "experiments" / "px4_s250.toml").read_text())
     table["data"]["files"] = [str(S250)]
-    table["evolution"].update(iterations=1, model_generations=5, test_generations=2,
-                              simplify_generations=2)
+    table["evolution"].update(
+        iterations=1, model_generations=5, test_generations=2, simplify_generations=2
+    )
     table["output"] = {"progress": False}
     cfg = config_from_dict(table, "px4_s250.toml")
     from gpquad.study.runner import run_experiment
@@ -231,11 +252,13 @@ def test_gpquad_run_on_s250aq_gives_six_equations(tmp_path, capsys):
 
 
 def test_config_rejects_bad_pipeline_settings():
-    for bad, field in (({"segment": "sometimes"}, "data.segment"),
-                       ({"segment": "range"}, "data.time_range"),
-                       ({"cutoff_hz": 60.0}, "data.cutoff_hz"),
-                       ({"downsample": 0}, "data.downsample"),
-                       ({"rates_from": "magic"}, "data.rates_from")):
+    for bad, field in (
+        ({"segment": "sometimes"}, "data.segment"),
+        ({"segment": "range"}, "data.time_range"),
+        ({"cutoff_hz": 60.0}, "data.cutoff_hz"),
+        ({"downsample": 0}, "data.downsample"),
+        ({"rates_from": "magic"}, "data.rates_from"),
+    ):
         with pytest.raises(GpquadError) as err:
             config_from_dict({"data": bad})
         assert field in str(err.value)
@@ -247,8 +270,13 @@ def test_generic_frame_table_column_mapping(sim_flight, tmp_path):
     df = df.drop(columns=["x", "y", "z"], errors="ignore")
     path = tmp_path / "mapped.csv"
     pd.DataFrame(df).to_csv(path, index=False)
-    data = DataConfig(format="table", segment="range", time_range=(5.0, 60.0),
-                      columns={"qw": "att_w", "u_T": "throttle"}, min_segment_s=5.0)
+    data = DataConfig(
+        format="table",
+        segment="range",
+        time_range=(5.0, 60.0),
+        columns={"qw": "att_w", "u_T": "throttle"},
+        min_segment_s=5.0,
+    )
     (f,) = read_table_log(path, data)
     assert f.t[0] >= 5.0 and f.t[-1] <= 60.0
     with pytest.raises(GpquadError, match="missing column 'nope'"):
@@ -263,14 +291,26 @@ def test_velocity_from_position_only(sim_flight, tmp_path):
         from gpquad.engine.kernels.integrator import integrate as _integrate
 
         acc = body_accelerations(sim_flight.vel, sim_flight.rates, sim_flight.dt)
-        _, _, _, pos = _integrate(sim_flight.quat[0].copy(), sim_flight.vel[0].copy(),
-                                  sim_flight.rates[0].copy(), np.zeros(3), acc, sim_flight.dt)
+        _, _, _, pos = _integrate(
+            sim_flight.quat[0].copy(),
+            sim_flight.vel[0].copy(),
+            sim_flight.rates[0].copy(),
+            np.zeros(3),
+            acc,
+            sim_flight.dt,
+        )
         df["x"], df["y"], df["z"] = pos[:, 0], pos[:, 1], pos[:, 2]
     df = df.drop(columns=["u", "v", "w"])
     path = tmp_path / "mocap.csv"
     df.to_csv(path, index=False)
-    data = DataConfig(format="table", segment="none", min_segment_s=5.0, resample_hz=25.0,
-                      cutoff_hz=0.0, downsample=1)
+    data = DataConfig(
+        format="table",
+        segment="none",
+        min_segment_s=5.0,
+        resample_hz=25.0,
+        cutoff_hz=0.0,
+        downsample=1,
+    )
     (f,) = read_table_log(path, data)
     assert any("position differences" in s for s in f.meta["pipeline"])
     # the integrator's position update inverted exactly: the simulator's body velocity back
@@ -287,15 +327,33 @@ def test_cli_align_two_logs_on_different_clocks(tmp_path, capsys):
     df = log.table[cols].copy()
     df["t"] += 2.5
     df.to_csv(tmp_path / "other.csv", index=False)
-    code = main(["data", "align", str(FIXTURES / "px4_sample_20s.ulg"),
-                 str(tmp_path / "other.csv"), "--signal", "p,q,r", "--max-lag", "5"])
+    code = main(
+        [
+            "data",
+            "align",
+            str(FIXTURES / "px4_sample_20s.ulg"),
+            str(tmp_path / "other.csv"),
+            "--signal",
+            "p,q,r",
+            "--max-lag",
+            "5",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0
     offset = float(out.split("clock offset (B - A): ")[1].split(" s")[0])
     assert offset == pytest.approx(2.5, abs=0.01)
     assert "residual RMSE of p, q, r" in out
-    code = main(["data", "align", str(FIXTURES / "px4_sample_20s.ulg"),
-                 str(tmp_path / "other.csv"), "--signal", "nope"])
+    code = main(
+        [
+            "data",
+            "align",
+            str(FIXTURES / "px4_sample_20s.ulg"),
+            str(tmp_path / "other.csv"),
+            "--signal",
+            "nope",
+        ]
+    )
     assert code != 0 and "no signal ['nope']" in capsys.readouterr().err
 
 
@@ -314,8 +372,17 @@ def test_a_failing_check_still_writes_its_figure(capsys, tmp_path):
     command still exits 2 with one error line."""
     png = tmp_path / "fail.png"
     strict = _cfg(tmp_path, 'segment = "none"\nmin_segment_s = 2.0\ncheck_max_rse = 1e-12\n')
-    code = main(["data", "check", str(FIXTURES / "px4_sample_20s.ulg"), "--plot", str(png),
-                 "--config", str(strict)])
+    code = main(
+        [
+            "data",
+            "check",
+            str(FIXTURES / "px4_sample_20s.ulg"),
+            "--plot",
+            str(png),
+            "--config",
+            str(strict),
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 2 and "integration check failed" in captured.err
     assert [line for line in captured.err.splitlines() if "error" in line][0].count("\n") == 0
@@ -339,8 +406,17 @@ def test_quick_look_marks_unmeasured_signals(tmp_path, sim_flight):
         labels.append(kwargs.get("label"))
         return real(self, *args, **kwargs)
 
-    blind = dataclasses.replace(sim_flight, meta={**sim_flight.meta, "measured": {
-        "u": "not measured (no GPS)", "v": "not measured (no GPS)", "w": "measured (baro)"}})
+    blind = dataclasses.replace(
+        sim_flight,
+        meta={
+            **sim_flight.meta,
+            "measured": {
+                "u": "not measured (no GPS)",
+                "v": "not measured (no GPS)",
+                "w": "measured (baro)",
+            },
+        },
+    )
     with mock.patch.object(matplotlib.axes.Axes, "plot", spy):
         cli_data.quick_look([blind], tmp_path / "a.png", "t")
     assert "u (not measured)" in labels and "w" in labels

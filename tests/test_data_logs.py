@@ -75,8 +75,9 @@ def test_data_check_accepts_the_reset_log(capsys, tmp_path):
 
 
 def test_failing_segment_is_dropped_not_the_flight():
-    good, = read_px4_csv(reset_log(), dataclasses.replace(PX4, time_range=(138.0, 160.0),
-                                                      segment="range"))
+    (good,) = read_px4_csv(
+        reset_log(), dataclasses.replace(PX4, time_range=(138.0, 160.0), segment="range")
+    )
     bad = dataclasses.replace(good, name="bad", meta=dict(good.meta))
     ref = bad.meta["reference"].copy()
     ref[:, 8] = ref[:, 8] * 3.0 + 0.5
@@ -111,8 +112,11 @@ def test_signal_names_need_no_column_map_and_bad_names_are_one_line():
     with pytest.raises(GpquadError) as err:
         read_ulog_log(V114, dataclasses.replace(DataConfig(format="ulog"), inputs="sticks"))
     assert "no signals for input level 'sticks'" in _one_line(err)
-    for bad in ({"inputs": "rats", "files": ["x"], "format": "ulog"}, {"inputs": "rates"},
-                {"validation": "nope"}):
+    for bad in (
+        {"inputs": "rats", "files": ["x"], "format": "ulog"},
+        {"inputs": "rates"},
+        {"validation": "nope"},
+    ):
         with pytest.raises(GpquadError) as err:
             config_from_dict({"data": bad})
         assert "data." in _one_line(err)
@@ -127,7 +131,8 @@ def test_px4_v114_layout():
     thrust = log.table["thrust_cmd"].to_numpy()[log.in_flight]
     assert 0.2 < np.median(thrust) < 0.8  # -vehicle_thrust_setpoint.xyz[2]
     assert np.median(log.table["thrust_sp"].to_numpy()[log.in_flight]) == pytest.approx(
-        np.median(thrust), abs=0.05)
+        np.median(thrust), abs=0.05
+    )
     assert {"esc_krpm_0", "motor_3"} <= set(log.table.columns)
     assert any("quat_reset_counter) 1 -> 2" in n for n in log.notes)
     motors = read_ulog_log(V114, DataConfig(format="ulog", min_segment_s=5.0, inputs="motors"))
@@ -172,9 +177,21 @@ def test_ardupilot_reader():
     assert any("'RATE' logged at 9.9 Hz" in n for n in log.notes)
     (flight,) = read_ardupilot(AP, data)
     assert 40.0 < flight.t[-1] - flight.t[0] < 50.0
-    eul_yaw = np.degrees(np.unwrap(np.arctan2(
-        2 * (flight.quat[:, 0] * flight.quat[:, 3] + flight.quat[:, 1] * flight.quat[:, 2]),
-        1 - 2 * (flight.quat[:, 2] ** 2 + flight.quat[:, 3] ** 2)))) % 360
+    eul_yaw = (
+        np.degrees(
+            np.unwrap(
+                np.arctan2(
+                    2
+                    * (
+                        flight.quat[:, 0] * flight.quat[:, 3]
+                        + flight.quat[:, 1] * flight.quat[:, 2]
+                    ),
+                    1 - 2 * (flight.quat[:, 2] ** 2 + flight.quat[:, 3] ** 2),
+                )
+            )
+        )
+        % 360
+    )
     assert 240 < eul_yaw[0] < 270  # ATT.Yaw about 256 deg at the start
     bad = AP.parent / "nope.bin"
     with pytest.raises(GpquadError):
@@ -212,13 +229,25 @@ def test_export_then_run_gives_the_same_model(tmp_path):
 
     out = tmp_path / "e.parquet"
     assert main(["data", "export", str(reset_log()), "--out", str(out)]) == 0
-    evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_s": 4.0, "finish": ["repair"]}
+    evo = {
+        "targets": ["p_dot"],
+        "iterations": 1,
+        "model_generations": 5,
+        "test_generations": 2,
+        "window_s": 4.0,
+        "finish": ["repair"],
+    }
     runs = []
     for files, fmt in (([str(reset_log())], "px4-csv"), ([str(out)], "generic")):
-        cfg = config_from_dict({"seed": 3, "preset": "paper",
-                                "data": {"files": files, "format": fmt},
-                                "evolution": evo, "output": {"progress": False}})
+        cfg = config_from_dict(
+            {
+                "seed": 3,
+                "preset": "paper",
+                "data": {"files": files, "format": fmt},
+                "evolution": evo,
+                "output": {"progress": False},
+            }
+        )
         run_experiment(cfg, tmp_path / fmt, progress=False)
         d = json.loads((tmp_path / fmt / "model.json").read_text())
         d.pop("config")
@@ -230,8 +259,9 @@ def test_export_then_run_gives_the_same_model(tmp_path):
 def test_validation_by_whole_files(tmp_path):
     for name in ("a.csv", "b.csv"):
         assert main(["data", "export", str(reset_log()), "--out", str(tmp_path / name)]) == 0
-    cfg = config_from_dict({"data": {"files": ["a.csv"], "validation": ["b.csv"]}},
-                           base_dir=str(tmp_path))
+    cfg = config_from_dict(
+        {"data": {"files": ["a.csv"], "validation": ["b.csv"]}}, base_dir=str(tmp_path)
+    )
     ds = load_dataset(cfg)
     (t0, t1), (v0, v1) = ds.train[0], ds.validation[0]
     assert t0 == 0 and t1 == ds.segments[0][1] and v1 - v0 == ds.segments[1][1] - v0
@@ -241,16 +271,41 @@ def test_validation_by_whole_files(tmp_path):
 def test_score_command(tmp_path, capsys):
     from gpquad.study.runner import run_experiment
 
-    evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_s": 4.0, "finish": ["repair"]}
-    cfg = config_from_dict({"seed": 1, "preset": "paper", "vehicle": {"symmetric": True},
-                            "data": {"files": [str(reset_log())], "format": "px4-csv"},
-                            "evolution": evo, "output": {"progress": False}})
+    evo = {
+        "targets": ["p_dot"],
+        "iterations": 1,
+        "model_generations": 5,
+        "test_generations": 2,
+        "window_s": 4.0,
+        "finish": ["repair"],
+    }
+    cfg = config_from_dict(
+        {
+            "seed": 1,
+            "preset": "paper",
+            "vehicle": {"symmetric": True},
+            "data": {"files": [str(reset_log())], "format": "px4-csv"},
+            "evolution": evo,
+            "output": {"progress": False},
+        }
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run_experiment(cfg, tmp_path / "run", progress=False)
-    assert main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--json",
-                 "--horizon-s", "2"]) == 0
+    assert (
+        main(
+            [
+                "score",
+                str(tmp_path / "run"),
+                "--data",
+                str(reset_log()),
+                "--json",
+                "--horizon-s",
+                "2",
+            ]
+        )
+        == 0
+    )
     res = json.loads(capsys.readouterr().out)
     assert res["part"] == "validation" and res["steps"] == 50 and res["windows"] >= 1
     assert np.isnan(res["rse"]["u"]) and 0 <= res["rse"]["p"] < np.inf and res["diverged"] == 0
@@ -258,8 +313,21 @@ def test_score_command(tmp_path, capsys):
     # the zero and the set-point model (a rate-level log) flown beside, on the same windows
     assert set(res["baselines"]) == {"zero", "set-point"}
     assert np.isnan(res["baselines"]["zero"]["u"]) and res["baselines"]["zero"]["p"] > 0
-    assert main(["score", str(tmp_path / "run"), "--data", str(reset_log()), "--part", "all",
-                 "--horizon-s", "2"]) == 0
+    assert (
+        main(
+            [
+                "score",
+                str(tmp_path / "run"),
+                "--data",
+                str(reset_log()),
+                "--part",
+                "all",
+                "--horizon-s",
+                "2",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "RSE of the integrated states over" in out
     assert "\nzero " in out and "\nset-point " in out and "\nmodel " in out

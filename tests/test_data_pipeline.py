@@ -28,8 +28,9 @@ def test_fir_has_no_phase_lag(taps):
     assert np.abs(y - expected).max() < 1e-9  # exact: symmetric taps, centred time stamps
     # the lag estimated from the zero crossings is below a microsecond (a causal filter: ~1 s)
     causal_lag = (taps - 1) / 2 / rate
-    lag = np.angle(np.sum(y * np.exp(-2j * np.pi * t_out)) /
-                   np.sum(expected * np.exp(-2j * np.pi * t_out))) / (2 * np.pi)
+    lag = np.angle(
+        np.sum(y * np.exp(-2j * np.pi * t_out)) / np.sum(expected * np.exp(-2j * np.pi * t_out))
+    ) / (2 * np.pi)
     assert abs(lag) < 1e-6 < causal_lag
 
 
@@ -44,8 +45,16 @@ def test_fir_attenuates_above_cutoff():
 
 
 def _stream(name, t, values, cols, kind, required=True):
-    return Stream(name, np.asarray(t, float), np.asarray(values, float).reshape(len(t), -1),
-                  tuple(cols), kind, f"{name}.csv", "timestamp", required)
+    return Stream(
+        name,
+        np.asarray(t, float),
+        np.asarray(values, float).reshape(len(t), -1),
+        tuple(cols),
+        kind,
+        f"{name}.csv",
+        "timestamp",
+        required,
+    )
 
 
 def test_resample_interpolates_states_holds_inputs_and_marks_gaps():
@@ -84,16 +93,16 @@ def test_quaternion_sign_flips_are_made_continuous():
     ang = 0.5 * t
     q = np.column_stack([np.cos(ang / 2), np.sin(ang / 2), 0 * t, 0 * t])
     q[1::2] *= -1  # same rotations, alternating sign as some logs store them
-    table, valid, _ = resample([_stream("att", t, q, ["qw", "qx", "qy", "qz"], "quat")],
-                               50.0, 0.2)
+    table, valid, _ = resample([_stream("att", t, q, ["qw", "qx", "qy", "qz"], "quat")], 50.0, 0.2)
     g = table["t"].to_numpy()
     out = table[["qw", "qx", "qy", "qz"]].to_numpy()
     assert np.allclose(np.abs(out[:, 0]), np.cos(0.25 * g), atol=1e-4)
     assert np.allclose(np.linalg.norm(out, axis=1), 1.0)
 
 
-@pytest.mark.parametrize("t, word", [([0.0, 0.1, 0.1, 0.2], "duplicate"),
-                                     ([0.0, 0.2, 0.1, 0.3], "backwards")])
+@pytest.mark.parametrize(
+    "t, word", [([0.0, 0.1, 0.1, 0.2], "duplicate"), ([0.0, 0.2, 0.1, 0.3], "backwards")]
+)
 def test_bad_timestamps_are_one_line_errors(t, word):
     with pytest.raises(GpquadError) as err:
         check_stream_time(np.array(t), "log.csv", "timestamp")
@@ -122,8 +131,9 @@ def test_in_flight_mask_modes_and_dip_bridging():
     assert runs(m) == [(201, 1800)]
     m = in_flight_mask(t, armed, thrust, dataclasses.replace(base, segment="armed"), "x")
     assert m.sum() == (t > 1).sum()
-    m = in_flight_mask(t, armed, thrust, dataclasses.replace(base, segment="range",
-                                                            time_range=(5.0, 6.0)), "x")
+    m = in_flight_mask(
+        t, armed, thrust, dataclasses.replace(base, segment="range", time_range=(5.0, 6.0)), "x"
+    )
     assert t[m][0] == pytest.approx(5.0) and t[m][-1] == pytest.approx(6.0)
     with pytest.raises(GpquadError, match="no arming state"):
         in_flight_mask(t, None, thrust, dataclasses.replace(base, segment="armed"), "x")
@@ -146,13 +156,27 @@ def _log_table(n_s=40.0, rate=100.0, omega=0.8):
     """A LogTable of a craft yawing at a constant rate with a world velocity, all measured."""
     t = np.arange(0.0, n_s, 1.0 / rate)
     psi = omega * t
-    table = pd.DataFrame({"t": t, "qw": np.cos(psi / 2), "qx": 0.0, "qy": 0.0,
-                          "qz": np.sin(psi / 2), "p": 0.0, "q": 0.0, "r": omega,
-                          "vx": 1.0, "vy": 0.0, "vz": -0.5, "u_T": 0.5})
+    table = pd.DataFrame(
+        {
+            "t": t,
+            "qw": np.cos(psi / 2),
+            "qx": 0.0,
+            "qy": 0.0,
+            "qz": np.sin(psi / 2),
+            "p": 0.0,
+            "q": 0.0,
+            "r": omega,
+            "vx": 1.0,
+            "vy": 0.0,
+            "vz": -0.5,
+            "u_T": 0.5,
+        }
+    )
     ones = np.ones(len(t), bool)
     measured = {k: "measured (test)" for k in ("phi", "theta", "psi", "u", "v", "w", "p", "q", "r")}
-    return LogTable("synthetic", "synthetic.csv", table, ones, ones.copy(), rate, ("u_T",),
-                    measured)
+    return LogTable(
+        "synthetic", "synthetic.csv", table, ones, ones.copy(), rate, ("u_T",), measured
+    )
 
 
 def test_pipeline_derives_exact_rates_and_body_velocity():

@@ -55,13 +55,16 @@ def frozen_inputs(df):
         df[c] = 0.1
 
 
-@pytest.mark.parametrize("edit,field,words", [
-    (xyzw, "qw", "x, y, z, w"),
-    (micro, "t", "microseconds"),
-    (flip_qr, "q", "opposite sign"),
-    (still, "p", "does not move"),
-    (frozen_inputs, "u_P", "never change"),
-])
+@pytest.mark.parametrize(
+    "edit,field,words",
+    [
+        (xyzw, "qw", "x, y, z, w"),
+        (micro, "t", "microseconds"),
+        (flip_qr, "q", "opposite sign"),
+        (still, "p", "does not move"),
+        (frozen_inputs, "u_P", "never change"),
+    ],
+)
 def test_bad_generic_files_are_refused(tmp_path, flight_csv, edit, field, words):
     path = broken(tmp_path, flight_csv, edit)
     with pytest.raises(GpquadError) as err:

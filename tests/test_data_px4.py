@@ -22,15 +22,20 @@ from gpquad.study.config import DataConfig, config_from_dict
 FIXTURES = Path(__file__).parent / "fixtures"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 S250 = SHARED / "px4" / "S250AQ_2016-12-13"
-needs_shared = pytest.mark.skipif(not S250.is_dir(),
-                                  reason="../shared/data (real PX4 logs) is not present")
+needs_shared = pytest.mark.skipif(
+    not S250.is_dir(), reason="../shared/data (real PX4 logs) is not present"
+)
 
 
 def true_rates(t):
     """Smooth body rates (rad/s) well below the 5 Hz cutoff."""
-    return np.column_stack([0.6 * np.sin(2 * np.pi * 0.4 * t), 0.5 * np.sin(2 * np.pi * 0.25 * t
-                                                                              + 1.0),
-                            0.3 + 0.2 * np.cos(2 * np.pi * 0.1 * t)])
+    return np.column_stack(
+        [
+            0.6 * np.sin(2 * np.pi * 0.4 * t),
+            0.5 * np.sin(2 * np.pi * 0.25 * t + 1.0),
+            0.3 + 0.2 * np.cos(2 * np.pi * 0.1 * t),
+        ]
+    )
 
 
 def make_folder(root: Path, duration=50.0, xy_valid=0, edit=None) -> Path:
@@ -40,8 +45,9 @@ def make_folder(root: Path, duration=50.0, xy_valid=0, edit=None) -> Path:
     fine = np.arange(0.0, duration, 0.001)
     w = true_rates(fine)
     alpha = body_accelerations(np.zeros_like(w), np.ascontiguousarray(w), 0.001)
-    q, _, _, _ = integrate(np.array([1.0, 0, 0, 0]), np.zeros(3), w[0].copy(), np.zeros(3),
-                           alpha, 0.001)
+    q, _, _, _ = integrate(
+        np.array([1.0, 0, 0, 0]), np.zeros(3), w[0].copy(), np.zeros(3), alpha, 0.001
+    )
     t0 = 20.0
 
     def at(period):
@@ -49,23 +55,51 @@ def make_folder(root: Path, duration=50.0, xy_valid=0, edit=None) -> Path:
         return idx, ((fine[idx] + t0) * 1e6).astype(np.int64)
 
     i, ts = at(0.012)
-    att = pd.DataFrame({"timestamp": ts, "rollspeed": w[i, 0], "pitchspeed": w[i, 1],
-                        "yawspeed": w[i, 2], **{f"q[{k}]": q[i, k] for k in range(4)}})
+    att = pd.DataFrame(
+        {
+            "timestamp": ts,
+            "rollspeed": w[i, 0],
+            "pitchspeed": w[i, 1],
+            "yawspeed": w[i, 2],
+            **{f"q[{k}]": q[i, k] for k in range(4)},
+        }
+    )
     i, ts = at(0.1)
     vz = 0.3 * np.sin(2 * np.pi * 0.2 * fine[i])
-    pos = pd.DataFrame({"timestamp": ts, "x": 0.0, "y": 0.0, "z": 0.0,
-                        "vx": 0.0 if not xy_valid else 0.5, "vy": 0.0, "vz": vz,
-                        "xy_valid": xy_valid, "v_xy_valid": xy_valid, "v_z_valid": 1})
+    pos = pd.DataFrame(
+        {
+            "timestamp": ts,
+            "x": 0.0,
+            "y": 0.0,
+            "z": 0.0,
+            "vx": 0.0 if not xy_valid else 0.5,
+            "vy": 0.0,
+            "vz": vz,
+            "xy_valid": xy_valid,
+            "v_xy_valid": xy_valid,
+            "v_z_valid": 1,
+        }
+    )
     i, ts = at(0.02)
     tt = fine[i]
     thrust = np.where((tt > 3) & (tt < duration - 3), 0.45, 0.0)
-    ctl = pd.DataFrame({"timestamp": ts, "control[0]": 0.1 * np.sin(tt),
-                        "control[1]": 0.1 * np.cos(tt), "control[2]": 0.0,
-                        "control[3]": thrust})
+    ctl = pd.DataFrame(
+        {
+            "timestamp": ts,
+            "control[0]": 0.1 * np.sin(tt),
+            "control[1]": 0.1 * np.cos(tt),
+            "control[2]": 0.0,
+            "control[3]": thrust,
+        }
+    )
     i, ts = at(0.25)
     status = pd.DataFrame({"timestamp": ts, "arming_state": 2, "nav_state": 0})
-    tables = {"vehicle_attitude_0": att, "vehicle_local_position_0": pos,
-              "actuator_controls_0_0": ctl, "vehicle_status_0": status}
+    tables = {
+        "vehicle_attitude_0": att,
+        "vehicle_local_position_0": pos,
+        "actuator_controls_0_0": ctl,
+        "vehicle_status_0": status,
+    }
     if edit:
         edit(tables)
     for name, df in tables.items():
@@ -115,12 +149,17 @@ def test_inputs_can_be_mapped_to_other_signals(tmp_path):
 def test_gap_in_an_optional_topic_mapped_to_an_input_splits_the_flight(tmp_path):
     """actuator_outputs is optional, but once u_T reads motor_0 its 1 s hole is a gap, not a
     held value; unmapped, the same hole is held over (the flight stays whole)."""
+
     def motors(tables):
         ts = np.arange(20.0, 70.0, 0.05)
         ts = ts[(ts < 45.0) | (ts > 46.0)]
         tables["actuator_outputs_0"] = pd.DataFrame(
-            {"timestamp": (ts * 1e6).astype(np.int64),
-             **{f"output[{i}]": 1450.0 + 10 * i for i in range(4)}})
+            {
+                "timestamp": (ts * 1e6).astype(np.int64),
+                **{f"output[{i}]": 1450.0 + 10 * i for i in range(4)},
+            }
+        )
+
     folder = make_folder(tmp_path, duration=50.0, edit=motors)
     (whole,) = read_px4_csv(folder, DATA)
     mapped = dataclasses.replace(DATA, columns={"u_T": "motor_0"})
@@ -157,6 +196,7 @@ def test_nan_run_splits_the_flight(tmp_path):
         att = tables["vehicle_attitude_0"]
         rows = (att.timestamp > 45e6) & (att.timestamp < 46e6)
         att.loc[rows, ["q[0]", "q[1]"]] = np.nan
+
     flights = read_px4_csv(make_folder(tmp_path, duration=60.0, edit=nan_run), DATA)
     assert len(flights) == 2
     assert flights[0].t[-1] < 45.0 and flights[1].t[0] > 46.0
@@ -165,6 +205,7 @@ def test_nan_run_splits_the_flight(tmp_path):
 def test_all_nan_column(tmp_path):
     def blank(tables):
         tables["vehicle_local_position_0"]["vz"] = np.nan
+
     with pytest.raises(GpquadError) as err:
         read_px4_csv(make_folder(tmp_path, edit=blank), DATA)
     msg = _one_line(err)
@@ -177,6 +218,7 @@ def test_bad_timestamps(tmp_path, kind):
         ts = tables["vehicle_attitude_0"]["timestamp"].to_numpy().copy()
         ts[100] = ts[99] if kind == "duplicate" else ts[99] - 5000
         tables["vehicle_attitude_0"]["timestamp"] = ts
+
     with pytest.raises(GpquadError) as err:
         read_px4_csv(make_folder(tmp_path, edit=damage), DATA)
     msg = _one_line(err)
@@ -187,6 +229,7 @@ def test_degrees_instead_of_radians(tmp_path):
     def degrees(tables):
         for c in ("rollspeed", "pitchspeed", "yawspeed"):
             tables["vehicle_attitude_0"][c] = np.degrees(tables["vehicle_attitude_0"][c]) * 60
+
     with pytest.raises(GpquadError) as err:
         read_px4_csv(make_folder(tmp_path, edit=degrees), DATA)
     msg = _one_line(err)
@@ -195,9 +238,11 @@ def test_degrees_instead_of_radians(tmp_path):
 
 def test_calm_flight_logged_in_degrees_is_caught_by_the_quaternion(tmp_path):
     """Peak rates of 34 deg/s look plausible in rad/s; the attitude says they are 57x too big."""
+
     def degrees(tables):
         for c in ("rollspeed", "pitchspeed", "yawspeed"):
             tables["vehicle_attitude_0"][c] = np.degrees(tables["vehicle_attitude_0"][c])
+
     with pytest.raises(GpquadError) as err:
         read_px4_csv(make_folder(tmp_path, edit=degrees), DATA)
     msg = _one_line(err)
@@ -207,6 +252,7 @@ def test_calm_flight_logged_in_degrees_is_caught_by_the_quaternion(tmp_path):
 def test_rates_in_another_frame_are_caught(tmp_path):
     def flu(tables):
         tables["vehicle_attitude_0"]["pitchspeed"] *= -1  # FLU pitch rate with an FRD attitude
+
     with pytest.raises(GpquadError) as err:
         read_px4_csv(make_folder(tmp_path, edit=flu), DATA)
     msg = _one_line(err)
@@ -216,6 +262,7 @@ def test_rates_in_another_frame_are_caught(tmp_path):
 def test_no_flight_in_log(tmp_path):
     def grounded(tables):
         tables["actuator_controls_0_0"]["control[3]"] = 0.05
+
     folder = make_folder(tmp_path, edit=grounded)
     with pytest.raises(GpquadError) as err:
         read_px4_csv(folder, DATA)

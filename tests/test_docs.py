@@ -12,8 +12,9 @@ def test_configuration_page_is_what_the_dataclasses_say():
 
     page = (ROOT / "docs" / "configuration.md").read_text()
     assert page == markdown(), (
-        "docs/configuration.md is stale: python -c \"from gpquad.study.config_reference import "
-        "markdown; open('docs/configuration.md', 'w').write(markdown())\"")
+        'docs/configuration.md is stale: python -c "from gpquad.study.config_reference import '
+        "markdown; open('docs/configuration.md', 'w').write(markdown())\""
+    )
 
 
 def test_every_option_is_on_the_page():
@@ -22,8 +23,11 @@ def test_every_option_is_on_the_page():
     from gpquad.study.config import EvolutionConfig
 
     page = (ROOT / "docs" / "configuration.md").read_text()
-    missing = [f.name for f in dataclasses.fields(EvolutionConfig)
-               if f.name != "gp" and f"`{f.name}`" not in page]
+    missing = [
+        f.name
+        for f in dataclasses.fields(EvolutionConfig)
+        if f.name != "gp" and f"`{f.name}`" not in page
+    ]
     assert missing == []
 
 

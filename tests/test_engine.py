@@ -166,7 +166,7 @@ def test_model_simulate_reproduces_the_data_with_the_true_equations(short_datase
 def test_cli_run_and_errors(tmp_path, capsys):
     cfg = tmp_path / "exp.toml"
     cfg.write_text(
-        "seed = 2\npreset = \"paper\"\n[simulator]\nduration_s = 40.0\n[evolution]\n"
+        'seed = 2\npreset = "paper"\n[simulator]\nduration_s = 40.0\n[evolution]\n'
         'targets = ["r_dot"]\niterations = 1\nmodel_generations = 5\n'
         "test_generations = 2\nwindow_s = 2.4\n"
         "simplify_generations = 2\n"
@@ -225,7 +225,7 @@ def test_interrupt_writes_partial_results_and_the_same_command_resumes(tmp_path,
 def test_cli_simulate_then_run_on_the_file(tmp_path, capsys):
     cfg = tmp_path / "exp.toml"
     cfg.write_text(
-        "seed = 5\npreset = \"paper\"\n[simulator]\nduration_s = 40.0\n[evolution]\n"
+        'seed = 5\npreset = "paper"\n[simulator]\nduration_s = 40.0\n[evolution]\n'
         'targets = ["q_dot"]\niterations = 1\nmodel_generations = 5\n'
         "test_generations = 2\nwindow_s = 2.4\n"
         "simplify_generations = 2\n"

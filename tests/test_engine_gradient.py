@@ -34,8 +34,9 @@ def rigid_dataset():
     """60 s of the rigid-body truth (experiments/rigid_body.toml): p_dot has 0.9 q r."""
     sim = load_config(EXPERIMENTS / "rigid_body.toml").simulator
     sim = dataclasses.replace(sim, duration_s=80.0, seed=5)
-    return build_dataset([simulate(sim, ("u_P", "u_R", "u_Y", "u_T"))],
-                         validation_fraction=0.25, trim="none")
+    return build_dataset(
+        [simulate(sim, ("u_P", "u_R", "u_Y", "u_T"))], validation_fraction=0.25, trim="none"
+    )
 
 
 def _tree(text, dataset):
@@ -45,8 +46,10 @@ def _tree(text, dataset):
 
 def _fit(ev):
     def fit(tree, err, starts, n_steps):
-        return gauss_newton_constants(ev, tree, err, starts, n_steps,
-                                      lambda t: mse_of(ev, t, starts, n_steps), 20)
+        return gauss_newton_constants(
+            ev, tree, err, starts, n_steps, lambda t: mse_of(ev, t, starts, n_steps), 20
+        )
+
     return fit
 
 
@@ -71,7 +74,8 @@ def test_bic_pruning_removes_bloat_and_keeps_a_small_coupling(rigid_dataset):
 
     pruned = prune_by_bic(ev, bloated, STARTS, 250, const, _fit(ev))
     assert sorted(map(str, parse_equation(truth, ds.input_names)[0].free_symbols)) == sorted(
-        str(s) for s in _sym(pruned, ds).free_symbols)
+        str(s) for s in _sym(pruned, ds).free_symbols
+    )
     assert mse_of(ev, pruned, STARTS, 250) < 1e-10
 
 
@@ -122,15 +126,28 @@ def test_a_full_tree_exchanges_a_substitute_for_the_coupling(rigid_dataset, monk
     var = {n: VAR_BASE + i for i, n in enumerate(names)}
 
     def term(c, *xs):
-        body = [(var[xs[0]], 0.0)] if len(xs) == 1 else [(MUL, 0.0), (var[xs[0]], 0.0),
-                                                         (var[xs[1]], 0.0)]
+        body = (
+            [(var[xs[0]], 0.0)]
+            if len(xs) == 1
+            else [(MUL, 0.0), (var[xs[0]], 0.0), (var[xs[1]], 0.0)]
+        )
         return [(MUL, 0.0), (CONST, c)] + body
 
     # six products and four linear terms fill a depth-5 sum exactly (Kraft: 6/8 + 4/16 = 1)
-    prefix = shallow_sum([term(0.454, "q", "u_Y"), term(1.42, "r", "u_P"), term(-4.0, "p"),
-                          term(0.01, "phi", "theta"), term(8.97, "u_R"), term(-0.005, "v", "w"),
-                          term(0.002, "u", "phi"), term(0.003, "theta", "w"),
-                          term(-0.047, "phi"), term(0.01, "theta")])
+    prefix = shallow_sum(
+        [
+            term(0.454, "q", "u_Y"),
+            term(1.42, "r", "u_P"),
+            term(-4.0, "p"),
+            term(0.01, "phi", "theta"),
+            term(8.97, "u_R"),
+            term(-0.005, "v", "w"),
+            term(0.002, "u", "phi"),
+            term(0.003, "theta", "w"),
+            term(-0.047, "phi"),
+            term(0.01, "theta"),
+        ]
+    )
     model = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], [5, 2, 5, 0])
     with_coupling = shallow_sum(gained_terms(model) + [term(1.0, "q", "r")])
     assert tree_depth([c for c, _ in with_coupling]) == 6
@@ -163,8 +180,16 @@ def test_a_product_of_sums_is_multiplied_out_to_make_room(rigid_dataset, monkeyp
         return [(MUL, 0.0), (CONST, c), (VAR_BASE + names.index(x), 0.0)]
 
     # (9 u_R(t-2) - 4 p + 0.001 (phi + theta + r + u)) * (1 + 0.001 (v + w))
-    first = shallow_sum([term(9.0, "u_R"), term(-4.0, "p"), term(0.001, "phi"),
-                         term(0.001, "theta"), term(0.001, "r"), term(0.001, "u")])
+    first = shallow_sum(
+        [
+            term(9.0, "u_R"),
+            term(-4.0, "p"),
+            term(0.001, "phi"),
+            term(0.001, "theta"),
+            term(0.001, "r"),
+            term(0.001, "u"),
+        ]
+    )
     second = shallow_sum([[(CONST, 1.0)], term(0.001, "v"), term(0.001, "w")])
     prefix = [(MUL, 0.0)] + first + second
     model = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], [5, 2, 5, 0])
@@ -184,20 +209,27 @@ def test_a_product_of_sums_is_multiplied_out_to_make_room(rigid_dataset, monkeyp
 def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
     cfg = tiny_config(**NEW)
     # Two invocations (fresh processes, as `gpquad run` is used) give the same bytes.
-    script = ("import sys; sys.path.insert(0, sys.argv[1]); from test_engine import tiny_config; "
-              "from gpquad.study.runner import run_experiment; "
-              f"run_experiment(tiny_config(**{NEW!r}), sys.argv[2], progress=False)")
+    script = (
+        "import sys; sys.path.insert(0, sys.argv[1]); from test_engine import tiny_config; "
+        "from gpquad.study.runner import run_experiment; "
+        f"run_experiment(tiny_config(**{NEW!r}), sys.argv[2], progress=False)"
+    )
     for name in ("a", "b"):
-        subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent),
-                        str(tmp_path / name)], check=True, capture_output=True)
-    assert (tmp_path / "a" / "model.json").read_bytes() == \
-        (tmp_path / "b" / "model.json").read_bytes()
+        subprocess.run(
+            [sys.executable, "-c", script, str(Path(__file__).parent), str(tmp_path / name)],
+            check=True,
+            capture_output=True,
+        )
+    assert (tmp_path / "a" / "model.json").read_bytes() == (
+        tmp_path / "b" / "model.json"
+    ).read_bytes()
     # Within one long-lived process (after whatever tests ran before) the bytes are the same
     # too. They were not while LM could drift along constants that only act together
     # (gradient_fit.identifiable): round-off decided where they ended.
     run_experiment(cfg, tmp_path / "c", progress=False)
-    assert (tmp_path / "c" / "model.json").read_bytes() == \
-        (tmp_path / "a" / "model.json").read_bytes()
+    assert (tmp_path / "c" / "model.json").read_bytes() == (
+        tmp_path / "a" / "model.json"
+    ).read_bytes()
     dataset = load_dataset(cfg)
     engine = Coevolution(dataset, "p_dot", cfg.evolution)
     state = engine.init_state(np.random.SeedSequence(3))
@@ -213,21 +245,30 @@ def test_new_features_are_deterministic_and_resume_exactly(tmp_path):
 
 def test_paper_config_leaves_the_new_features_off():
     ev = load_config(EXPERIMENTS / "paper.toml").evolution
-    assert (ev.constant_fit, ev.selection, ev.term_search, ev.finish) == ("none", "prune",
-                                                                          False, ())
+    assert (ev.constant_fit, ev.selection, ev.term_search, ev.finish) == (
+        "none",
+        "prune",
+        False,
+        (),
+    )
 
 
-@pytest.mark.parametrize("field, value", [
-    ("constant_fit", "newton"), ("selection", "aic"), ("term_min_gain", 1.5),
-    ("gradient_steps", -1), ("finish", ("repair", "repair"))])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("constant_fit", "newton"),
+        ("selection", "aic"),
+        ("term_min_gain", 1.5),
+        ("gradient_steps", -1),
+        ("finish", ("repair", "repair")),
+    ],
+)
 def test_bad_engine_settings_name_their_field(field, value):
     cfg = tiny_config()
-    bad = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
-                                                                 **{field: value}))
+    bad = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution, **{field: value}))
     with pytest.raises(GpquadError) as err:
         override(bad)
     assert err.value.field == f"evolution.{field}"
-
 
 
 def test_constants_that_only_act_together_are_held_fixed():
@@ -248,7 +289,7 @@ def test_constants_that_only_act_together_are_held_fixed():
 
 
 @settings(max_examples=60)
-@given(st.integers(0, 2 ** 31 - 1), st.integers(1, 9), st.floats(-16, 0))
+@given(st.integers(0, 2**31 - 1), st.integers(1, 9), st.floats(-16, 0))
 def test_identifiable_shortcut_gives_the_pivoted_qr_answer(seed, n, log_gap):
     """The Gram-matrix shortcut of `identifiable` (well-conditioned: every column) against
     the pivoted QR alone, on random Jacobians with a column made nearly dependent by
@@ -260,7 +301,7 @@ def test_identifiable_shortcut_gives_the_pivoted_qr_answer(seed, n, log_gap):
     rng = np.random.default_rng(seed)
     jac = rng.standard_normal((200, n)) * rng.uniform(0.1, 10.0, n)
     if n > 1:
-        jac[:, -1] = jac[:, 0] * 3.0 + 10.0 ** log_gap * rng.standard_normal(200)
+        jac[:, -1] = jac[:, 0] * 3.0 + 10.0**log_gap * rng.standard_normal(200)
     unit = jac / np.sqrt((jac * jac).sum(axis=0))
     _, r, piv = qr(unit, mode="economic", pivoting=True)
     diag = np.abs(np.diag(r))

@@ -114,8 +114,6 @@ def test_linear_tree_round_trips_its_coefficients():
     assert tree.depth == 3  # 4 summands need two levels of + (root depth 0)
 
 
-
-
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_one_gain_per_term_is_the_same_function(seed):

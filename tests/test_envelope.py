@@ -38,17 +38,40 @@ def test_a_shifted_signal_is_reported_with_its_ranges(dataset):
     assert report[0]["fraction"] > REPORT_FRACTION
     assert report[0]["training"] == env["r"]
     assert report[0]["seen"][1] == pytest.approx(states[:, 8].max())
-    line = format_score({"run": "RUN", "data": "LOG", "part": "all", "segments": ["a"],
-                         "input_names": ["u_R"], "windows": 1, "steps": 2, "horizon_s": 0.08,
-                         "diverged": 0, "rse": {"p": 0.1}, "dropped": [],
-                         "outside_training": report})
+    line = format_score(
+        {
+            "run": "RUN",
+            "data": "LOG",
+            "part": "all",
+            "segments": ["a"],
+            "input_names": ["u_R"],
+            "windows": 1,
+            "steps": 2,
+            "horizon_s": 0.08,
+            "diverged": 0,
+            "rse": {"p": 0.1},
+            "dropped": [],
+            "outside_training": report,
+        }
+    )
     assert "note: r leaves the training range on" in line
-    flagged = format_score({"run": "RUN", "data": "LOG", "part": "all", "segments": ["a"],
-                            "input_names": ["u_R"], "windows": 1, "steps": 2,
-                            "horizon_s": 0.08, "diverged": 0,
-                            "rse": {"u": float("nan"), "p": 1.7, "q": 0.2}, "dropped": [],
-                            "outside_training": [],
-                            "baselines": {"zero": {"u": float("nan"), "p": 2.0, "q": 0.9}}})
+    flagged = format_score(
+        {
+            "run": "RUN",
+            "data": "LOG",
+            "part": "all",
+            "segments": ["a"],
+            "input_names": ["u_R"],
+            "windows": 1,
+            "steps": 2,
+            "horizon_s": 0.08,
+            "diverged": 0,
+            "rse": {"u": float("nan"), "p": 1.7, "q": 0.2},
+            "dropped": [],
+            "outside_training": [],
+            "baselines": {"zero": {"u": float("nan"), "p": 2.0, "q": 0.9}},
+        }
+    )
     model_row = next(r for r in flagged.splitlines() if r.startswith("model"))
     zero_row = next(r for r in flagged.splitlines() if r.startswith("zero"))
     assert "1.7!" in model_row and "0.2 " in model_row and "nan" not in flagged.lower()
@@ -57,8 +80,7 @@ def test_a_shifted_signal_is_reported_with_its_ranges(dataset):
 
 def test_model_json_keeps_the_envelope_and_reads_old_files(dataset):
     env = training_envelope(dataset)
-    model = DiscoveredModel({}, dataset.input_names, dataset.trim, dataset.dt, 1, {},
-                            envelope=env)
+    model = DiscoveredModel({}, dataset.input_names, dataset.trim, dataset.dt, 1, {}, envelope=env)
     assert DiscoveredModel.from_dict(model.to_dict()).envelope == env
     old = model.to_dict()
     del old["envelope"]

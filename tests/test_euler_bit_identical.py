@@ -17,8 +17,9 @@ from gpquad.control.pid import fly, make_controller
 from gpquad.control.plant import design_point, truth_plant
 from gpquad.data.dataset import build_dataset
 from gpquad.data.simulator import simulate
-from gpquad.engine.kernels.fitness import rollout, tree_window_errors
+from gpquad.engine.kernels.fitness import tree_window_errors
 from gpquad.engine.kernels.integrator import integrate
+from gpquad.engine.kernels.rollout import rollout
 from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
 from gpquad.engine.kernels.step import EULER
 from gpquad.engine.tree.operators import CONST
@@ -31,8 +32,12 @@ RECORDED = Path(__file__).parent / "fixtures" / "euler_outputs.json"
 
 def euler_outputs() -> dict[str, np.ndarray]:
     """The recorded cases, in the order (and with the draws) they were recorded."""
-    cfg = dataclasses.replace(SimulatorConfig(), duration_s=40.0, seed=7,
-                              stick_sd={"u_P": 0.2, "u_R": 0.2, "u_Y": 0.2, "u_T": 0.05})
+    cfg = dataclasses.replace(
+        SimulatorConfig(),
+        duration_s=40.0,
+        seed=7,
+        stick_sd={"u_P": 0.2, "u_R": 0.2, "u_Y": 0.2, "u_T": 0.05},
+    )
     arrays = build_dataset([simulate(cfg, INPUTS)], validation_fraction=0.2, trim="mean").arrays
     rng = np.random.default_rng(11)
     params = VariationParams(n_variables=13, n_inputs=4, max_depth=4)
@@ -43,15 +48,45 @@ def euler_outputs() -> dict[str, np.ndarray]:
         target = i % 6
         for squared, attw, alpha in ((False, 0.0, 1.0), (True, 0.7, 0.4), (False, 1.3, 1.0)):
             out = np.empty(len(starts))
-            tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays,
-                               starts, 60, squared, attw, alpha, np.inf, out, EULER, 1)
+            tree_window_errors(
+                tree.codes,
+                tree.values,
+                tree.size,
+                tree.delays,
+                target,
+                arrays,
+                starts,
+                60,
+                squared,
+                attw,
+                alpha,
+                np.inf,
+                out,
+                EULER,
+                1,
+            )
             rec[f"fit{i}_{squared}_{attw}_{alpha}"] = out
             for angle_t in (False, True):
                 n_c = int(np.count_nonzero(tree.codes == CONST))
                 rows = len(starts) * 60 * residual_rows(target, attw)
                 res, jac = np.empty(rows), np.empty((rows, n_c))
-                window_residuals(tree.codes, tree.values, tree.size, tree.delays, target, arrays,
-                                 starts, 60, attw, angle_t, alpha, res, jac, EULER, 1)
+                window_residuals(
+                    tree.codes,
+                    tree.values,
+                    tree.size,
+                    tree.delays,
+                    target,
+                    arrays,
+                    starts,
+                    60,
+                    attw,
+                    angle_t,
+                    alpha,
+                    res,
+                    jac,
+                    EULER,
+                    1,
+                )
                 rec[f"sens{i}_{attw}_{alpha}_{angle_t}"] = np.concatenate([res, jac.ravel()])
     for m in range(4):
         trees = [random_tree(rng, params) for _ in range(6)]
@@ -61,17 +96,20 @@ def euler_outputs() -> dict[str, np.ndarray]:
         sizes = np.empty(6, dtype=np.int64)
         delays = np.zeros((6, 4), dtype=np.int64)
         for t, tr in enumerate(trees):
-            codes[t, :tr.size], values[t, :tr.size] = tr.codes, tr.values
+            codes[t, : tr.size], values[t, : tr.size] = tr.codes, tr.values
             sizes[t], delays[t] = tr.size, tr.delays
         modelled = rng.random(6) < 0.7
         alphas = np.where(rng.random(6) < 0.5, 0.45, 1.0)
         noise = rng.normal(0, 0.01, (len(starts), 60, 4)) if m % 2 else np.zeros((0, 0, 0))
-        rec[f"roll{m}"] = rollout(codes, values, sizes, delays, modelled, alphas, arrays, starts,
-                                  60, noise, EULER, 1)
+        rec[f"roll{m}"] = rollout(
+            codes, values, sizes, delays, modelled, alphas, arrays, starts, 60, noise, EULER, 1
+        )
     acc = rng.normal(0, 2, (300, 6))
     q0 = np.array([0.9, 0.1, -0.2, 0.3])
     q0 /= np.linalg.norm(q0)
-    flown = integrate(q0, np.array([1., -2, .5]), np.array([.3, -.2, 1.]), np.zeros(3), acc, 0.04)
+    flown = integrate(
+        q0, np.array([1.0, -2, 0.5]), np.array([0.3, -0.2, 1.0]), np.zeros(3), acc, 0.04
+    )
     for k, a in zip("qvwx", flown, strict=True):
         rec[f"integ_{k}"] = a
     plant = truth_plant(MEDIAN_MODEL, INPUTS, 0.04)
@@ -80,12 +118,17 @@ def euler_outputs() -> dict[str, np.ndarray]:
     controller = make_controller(pid.nominal_gains, design, -np.ones(4), np.ones(4), pid)
     for lag in (1.0, 0.5):
         plant.alphas[:] = lag
-        f = fly(plant, controller, np.array([[5.0, 0.0, -1.0], [5.0, 4.0, -2.0]]),
-                rng.normal(0, 0.02, (400, 4)))
+        f = fly(
+            plant,
+            controller,
+            np.array([[5.0, 0.0, -1.0], [5.0, 4.0, -2.0]]),
+            rng.normal(0, 0.02, (400, 4)),
+        )
         rec[f"pid_pos_{lag}"], rec[f"pid_states_{lag}"] = f.pos, f.states
     weights = rng.normal(0, 0.3, (9 + 4 * 6, 6))
-    rec["peer"] = peer_fly(lambda features, idx: np.tanh(features @ weights) * 3.0, arrays,
-                           starts, 80)
+    rec["peer"] = peer_fly(
+        lambda features, idx: np.tanh(features @ weights) * 3.0, arrays, starts, 80
+    )
     return rec
 
 

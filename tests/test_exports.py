@@ -31,9 +31,12 @@ X0 = np.array([0.05, -0.1, 3.0, 1.0, -0.5, 0.2, 0.1, -0.2, 0.3])
 
 
 def _models():
-    return {"hand": hand_model(), "median": median_model(),
-            "px4_s250": fixture_model("px4_s250_model.json"),
-            "betaflight_gecko": fixture_model("betaflight_gecko_model.json")}
+    return {
+        "hand": hand_model(),
+        "median": median_model(),
+        "px4_s250": fixture_model("px4_s250_model.json"),
+        "betaflight_gecko": fixture_model("betaflight_gecko_model.json"),
+    }
 
 
 MODELS = _models()
@@ -58,8 +61,9 @@ def _kernel_commanded(model, states, inputs) -> np.ndarray:
     for i, t in enumerate(spec.targets):
         n_slots = len(t.tree.delays)
         taps = np.ascontiguousarray(np.tile(padded, (1, n_slots // padded.shape[1])))
-        out[:, i] = eval_on_samples(t.tree.codes, t.tree.values, t.tree.size, t.tree.delays,
-                                    padded_states, taps, rows)
+        out[:, i] = eval_on_samples(
+            t.tree.codes, t.tree.values, t.tree.size, t.tree.delays, padded_states, taps, rows
+        )
     return out
 
 
@@ -90,8 +94,9 @@ def test_hand_model_hits_the_protected_division(tmp_path):
     states = model.fly_states(inputs, X0)
     kernel = _kernel_commanded(model, states, inputs)
     q = TARGET_NAMES.index("q_dot")
-    np.testing.assert_allclose(kernel[[10, 13, 40, 42], q] + 3.0 * states[[10, 13, 40, 42], 7],
-                               1.0, rtol=1e-12)
+    np.testing.assert_allclose(
+        kernel[[10, 13, 40, 42], q] + 3.0 * states[[10, 13, 40, 42], 7], 1.0, rtol=1e-12
+    )
     module, lib = python_and_c(model, tmp_path)
     for k in (10, 40):
         hist = _history(inputs, k, module.HISTORY)
@@ -121,8 +126,9 @@ def test_one_step_accelerations_match_the_kernel(name, tmp_path):
         want = np.where(alpha < 1.0, previous + alpha * (kernel[k] - previous), kernel[k])
         np.testing.assert_array_equal(module.accel(states[k], hist, previous), want)
         np.testing.assert_array_equal(c_step(lib, "accel", states[k], hist, previous), want)
-        args = list(states[k]) + [inputs[max(k - d, 0), model.input_names.index(n)]
-                                  for n, d in form.inputs.values()]
+        args = list(states[k]) + [
+            inputs[max(k - d, 0), model.input_names.index(n)] for n, d in form.inputs.values()
+        ]
         for t, f in lambdas.items():
             i = TARGET_NAMES.index(t)
             assert float(f(*args)) == pytest.approx(kernel[k, i], rel=1e-9, abs=1e-12)
@@ -150,7 +156,8 @@ def test_sympy_form_carries_delays_lags_trim_and_dt():
     at = {u_p: 0.4, q: 0.5}
     assert float(form.rhs["q_dot"].subs(at)) == pytest.approx(0.3 / (0.4 - 0.5) - 1.5)
     assert float(raw.rhs["q_dot"].subs({u_p: 0.4 + 0.25, q: 0.5})) == pytest.approx(
-        float(form.rhs["q_dot"].subs(at)))
+        float(form.rhs["q_dot"].subs(at))
+    )
 
 
 def test_the_comparison_catches_a_perturbed_constant(tmp_path):
@@ -167,8 +174,9 @@ def test_the_comparison_catches_a_perturbed_constant(tmp_path):
     with pytest.raises(AssertionError, match="largest difference"):
         assert_flies_like(module.fly(inputs, X0), reference)
     files = export(model, "c", name="bad_export")
-    files["bad_export.c"] = files["bad_export.c"].replace("(20.0 * h[", f"({20.0 * (1 + 1e-7)!r}"
-                                                          " * h[", 1)
+    files["bad_export.c"] = files["bad_export.c"].replace(
+        "(20.0 * h[", f"({20.0 * (1 + 1e-7)!r} * h[", 1
+    )
     lib = compile_c(files, tmp_path)
     with pytest.raises(AssertionError, match="largest difference"):
         assert_flies_like(fly_c(lib, inputs, X0)[1], reference)
@@ -206,8 +214,9 @@ def test_c_prefix_lets_two_models_share_a_program(tmp_path):
 
 
 def test_casadi_functions_match_the_python_accel(tmp_path):
-    casadi = pytest.importorskip("casadi", reason="casadi is not installed (the [casadi] "
-                                 "extra); its export is optional")
+    casadi = pytest.importorskip(
+        "casadi", reason="casadi is not installed (the [casadi] extra); its export is optional"
+    )
     from gpquad.models.exports import casadi_functions
 
     model = hand_model()
@@ -227,12 +236,16 @@ def test_casadi_functions_match_the_python_accel(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     (run / "model.json").write_text(export(model, "json"))
-    assert main(["export", str(run), "--format", "casadi",
-                 "--out", str(tmp_path / "m.casadi")]) == 0
+    assert (
+        main(["export", str(run), "--format", "casadi", "--out", str(tmp_path / "m.casadi")]) == 0
+    )
     saved = casadi.Function.load(str(tmp_path / "m.casadi"))
     hist = _history(inputs, 40, module.HISTORY)
-    np.testing.assert_allclose(np.array(saved(states[40], hist, previous)).ravel(),
-                               module.accel(states[40], hist, previous), rtol=1e-12)
+    np.testing.assert_allclose(
+        np.array(saved(states[40], hist, previous)).ravel(),
+        module.accel(states[40], hist, previous),
+        rtol=1e-12,
+    )
 
 
 #: A number with 10 or more significant digits (float noise such as 0.30000000000000004).
@@ -249,8 +262,9 @@ def test_printed_forms_state_dt_without_float_noise(fmt):
         assert "delays in samples" in out
         assert not _NOISE.search(out), _NOISE.search(out)
     assert "0.3*u_Y" not in export(hand_model(), "text")  # 0.1 + 0.2 folded into -2.34
-    assert "inputs minus their trim (u_P 0.25, u_R -0.05, u_Y 0.1, u_T 0.5)" in \
-        export(hand_model(), "text")
+    assert "inputs minus their trim (u_P 0.25, u_R -0.05, u_Y 0.1, u_T 0.5)" in export(
+        hand_model(), "text"
+    )
 
 
 def test_the_noise_pattern_catches_noise():

@@ -19,24 +19,31 @@ leaf = st.one_of(
     st.sampled_from(STATE_NAMES),
     st.tuples(st.just("in"), st.integers(0, N_SLOTS - 1)),
 )
-trees = st.recursive(leaf, lambda sub: st.tuples(st.sampled_from("+-*/"), sub, sub),
-                     max_leaves=12)
+trees = st.recursive(leaf, lambda sub: st.tuples(st.sampled_from("+-*/"), sub, sub), max_leaves=12)
 
 
 @st.composite
 def models(draw):
     delays = draw(st.lists(st.integers(0, 5), min_size=N_SLOTS, max_size=N_SLOTS))
-    trim = dict(zip(INPUTS, draw(st.lists(st.sampled_from([0.0, 0.1, -0.25, 0.5]),
-                                          min_size=4, max_size=4)), strict=True))
-    targets = draw(st.lists(st.sampled_from(TARGET_NAMES), min_size=1, max_size=6,
-                            unique=True))
-    eqs = {t: equation(t, draw(trees), delays, trim, lag=draw(st.sampled_from([0.0, 0.03, 0.2])))
-           for t in targets}
+    trim = dict(
+        zip(
+            INPUTS,
+            draw(st.lists(st.sampled_from([0.0, 0.1, -0.25, 0.5]), min_size=4, max_size=4)),
+            strict=True,
+        )
+    )
+    targets = draw(st.lists(st.sampled_from(TARGET_NAMES), min_size=1, max_size=6, unique=True))
+    eqs = {
+        t: equation(t, draw(trees), delays, trim, lag=draw(st.sampled_from([0.0, 0.03, 0.2])))
+        for t in targets
+    }
     return DiscoveredModel(eqs, INPUTS, trim, 0.04, 1, {})
 
 
-@settings(max_examples=40, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                   HealthCheck.too_slow])
+@settings(
+    max_examples=40,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 @given(model=models(), seed=st.integers(0, 2**16))
 def test_python_export_flies_random_models_as_fly_states(model, seed, tmp_path):
     rng = np.random.default_rng(seed)

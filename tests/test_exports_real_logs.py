@@ -24,8 +24,13 @@ SHARED = Path(os.environ.get("GPQUAD_SHARED_DATA") or REPO.parent / "shared" / "
 #: px4-s250 holds out the last 30 % of each segment; betaflight-gecko another flight.
 CASES = {
     "px4_s250": ("px4_s250_model.json", "px4/S250AQ_2016-12-13", "px4_s250.toml", 0, 0.7),
-    "betaflight_gecko": ("betaflight_gecko_model.json", "betaflight/btfl_all.bbl",
-                         "betaflight_gecko.toml", 2, None),
+    "betaflight_gecko": (
+        "betaflight_gecko_model.json",
+        "betaflight/btfl_all.bbl",
+        "betaflight_gecko.toml",
+        2,
+        None,
+    ),
 }
 
 
@@ -36,14 +41,15 @@ def _held_out(case: str):
 
     model_file, log, config, segment, start_fraction = CASES[case]
     if not (SHARED / log).exists():
-        pytest.skip(f"{SHARED / log} is not present (set GPQUAD_SHARED_DATA to the shared "
-                    "data folder)")
+        pytest.skip(
+            f"{SHARED / log} is not present (set GPQUAD_SHARED_DATA to the shared data folder)"
+        )
     with warnings.catch_warnings():  # the betaflight reader's notes on undecodable logs
         warnings.simplefilter("ignore", UserWarning)
         flights, _ = export_flights(SHARED / log, None, REPO / "experiments" / config)
     flight = flights[segment]
     first = int(start_fraction * len(flight)) if start_fraction else 0
-    euler = euler_array(np.ascontiguousarray(flight.quat[first:first + 1]))[0]
+    euler = euler_array(np.ascontiguousarray(flight.quat[first : first + 1]))[0]
     x0 = np.concatenate([euler, flight.vel[first], flight.rates[first]])
     return fixture_model(model_file), flight.inputs[first:], x0, flight.dt
 

@@ -42,16 +42,18 @@ def _broken(tmp_path, flight_csv, edit):
     return path
 
 
-@pytest.mark.parametrize("edit, field, message", [
-    (lambda df: df.drop(columns=["u_T"], inplace=True), "u_T", "missing column"),
-    (lambda df: df.loc.__setitem__((5, "p"), np.nan), "p", "NaN"),
-    (lambda df: df.loc.__setitem__((10, "t"), df.loc[9, "t"]), "t", "not increasing"),
-    (lambda df: df.loc.__setitem__((slice(None), "t"), df["t"] ** 1.2), "t", "not uniform"),
-    (lambda df: df.loc.__setitem__((slice(None), "q"), np.degrees(df["q"]) * 10), "q",
-     "deg/s"),
-    (lambda df: df.drop(columns=["u", "v", "w"], inplace=True), "u", "velocity"),
-    (lambda df: df.loc.__setitem__((slice(None), "qw"), 3.0), "qw", "norm"),
-])
+@pytest.mark.parametrize(
+    "edit, field, message",
+    [
+        (lambda df: df.drop(columns=["u_T"], inplace=True), "u_T", "missing column"),
+        (lambda df: df.loc.__setitem__((5, "p"), np.nan), "p", "NaN"),
+        (lambda df: df.loc.__setitem__((10, "t"), df.loc[9, "t"]), "t", "not increasing"),
+        (lambda df: df.loc.__setitem__((slice(None), "t"), df["t"] ** 1.2), "t", "not uniform"),
+        (lambda df: df.loc.__setitem__((slice(None), "q"), np.degrees(df["q"]) * 10), "q", "deg/s"),
+        (lambda df: df.drop(columns=["u", "v", "w"], inplace=True), "u", "velocity"),
+        (lambda df: df.loc.__setitem__((slice(None), "qw"), 3.0), "qw", "norm"),
+    ],
+)
 def test_bad_files_name_file_and_field(tmp_path, flight_csv, edit, field, message):
     path = _broken(tmp_path, flight_csv, edit)
     with pytest.raises(GpquadError, match=message) as info:

@@ -21,10 +21,12 @@ from gpquad.study.config import MEDIAN_MODEL
 from gpquad.study.store import write_json
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
-QUICK = ('preset = "paper"\n[evolution]\ntargets = ["p_dot"]\niterations = 1\n'
-         'model_generations = 2\n'
-         'test_generations = 2\nwindow_s = 2.4\n'
-         'simplify_generations = 2\n[simulator]\nduration_s = 40.0\n')
+QUICK = (
+    'preset = "paper"\n[evolution]\ntargets = ["p_dot"]\niterations = 1\n'
+    "model_generations = 2\n"
+    "test_generations = 2\nwindow_s = 2.4\n"
+    "simplify_generations = 2\n[simulator]\nduration_s = 40.0\n"
+)
 
 
 def write_run(folder: Path, targets=tuple(MEDIAN_MODEL)) -> Path:
@@ -58,26 +60,50 @@ def case_truncated_model(tmp):
 def case_model_not_a_model(tmp):
     (tmp / "run").mkdir()
     (tmp / "run" / "model.json").write_text('{"targets": 3}')
-    return ["fly", str(tmp / "run"), "--inputs", str(write_inputs(tmp / "in.csv")), "--out",
-            str(tmp / "o.csv")], ["model.json", "not a gpquad model"]
+    return [
+        "fly",
+        str(tmp / "run"),
+        "--inputs",
+        str(write_inputs(tmp / "in.csv")),
+        "--out",
+        str(tmp / "o.csv"),
+    ], ["model.json", "not a gpquad model"]
 
 
 def case_fly_missing_equation(tmp):
     write_run(tmp / "run", targets=("p_dot",))
-    return ["fly", str(tmp / "run"), "--inputs", str(write_inputs(tmp / "in.csv")), "--out",
-            str(tmp / "o.csv")], ["no equation", "--zero-missing"]
+    return [
+        "fly",
+        str(tmp / "run"),
+        "--inputs",
+        str(write_inputs(tmp / "in.csv")),
+        "--out",
+        str(tmp / "o.csv"),
+    ], ["no equation", "--zero-missing"]
 
 
 def case_fly_wrong_clock(tmp):
     write_run(tmp / "run")
-    return ["fly", str(tmp / "run"), "--inputs", str(write_inputs(tmp / "in.csv", dt=0.01)),
-            "--out", str(tmp / "o.csv")], ["field 't'", "0.04"]
+    return [
+        "fly",
+        str(tmp / "run"),
+        "--inputs",
+        str(write_inputs(tmp / "in.csv", dt=0.01)),
+        "--out",
+        str(tmp / "o.csv"),
+    ], ["field 't'", "0.04"]
 
 
 def case_fly_out_suffix(tmp):
     write_run(tmp / "run")
-    return ["fly", str(tmp / "run"), "--inputs", str(write_inputs(tmp / "in.csv")), "--out",
-            str(tmp / "o.txt")], ["--out", ".csv or .parquet"]
+    return [
+        "fly",
+        str(tmp / "run"),
+        "--inputs",
+        str(write_inputs(tmp / "in.csv")),
+        "--out",
+        str(tmp / "o.txt"),
+    ], ["--out", ".csv or .parquet"]
 
 
 def case_out_under_a_file(tmp):
@@ -92,15 +118,31 @@ def case_negative_seed(tmp):
 
 def case_duplicate_target(tmp):
     (tmp / "c.toml").write_text(QUICK)
-    return ["run", str(tmp / "c.toml"), "--target", "p_dot", "--target", "p_dot", "--out",
-            str(tmp / "r")], ["evolution.targets", "twice"]
+    return [
+        "run",
+        str(tmp / "c.toml"),
+        "--target",
+        "p_dot",
+        "--target",
+        "p_dot",
+        "--out",
+        str(tmp / "r"),
+    ], ["evolution.targets", "twice"]
 
 
 def case_duplicate_data(tmp):
     (tmp / "c.toml").write_text(QUICK)
     assert main(["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")]) == 0
-    return ["run", str(tmp / "c.toml"), "--data", str(tmp / "f.csv"), "--data",
-            str(tmp / "f.csv"), "--out", str(tmp / "r")], ["data.files", "twice"]
+    return [
+        "run",
+        str(tmp / "c.toml"),
+        "--data",
+        str(tmp / "f.csv"),
+        "--data",
+        str(tmp / "f.csv"),
+        "--out",
+        str(tmp / "r"),
+    ], ["data.files", "twice"]
 
 
 def case_empty_files(tmp):
@@ -118,28 +160,36 @@ def test_sympy_names_are_refused_as_inputs(tmp_path, capsys, name):
 
 def case_function_in_truth(tmp):
     (tmp / "c.toml").write_text('[simulator.equations]\np_dot = "sin(p) - u_R"\n')
-    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], \
-        ["simulator.equations.p_dot", "no functions"]
+    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], [
+        "simulator.equations.p_dot",
+        "no functions",
+    ]
 
 
 def case_exp_in_truth(tmp):
     (tmp / "c.toml").write_text('[simulator.equations]\na_z = "exp(u_T)"\n')
-    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], \
-        ["simulator.equations.a_z", "no functions"]
+    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], [
+        "simulator.equations.a_z",
+        "no functions",
+    ]
 
 
 def case_too_short_simulation(tmp):
     (tmp / "c.toml").write_text("[simulator]\nduration_s = 0.01\n")
-    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], \
-        ["simulator.duration_s", "c.toml"]
+    return ["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")], [
+        "simulator.duration_s",
+        "c.toml",
+    ]
 
 
 def case_corrupt_config_json(tmp):
     (tmp / "c.toml").write_text(QUICK)
     (tmp / "r").mkdir()
     (tmp / "r" / "config.json").write_text("garbage")
-    return ["run", str(tmp / "c.toml"), "--out", str(tmp / "r"), "--quiet"], \
-        ["config.json", "damaged"]
+    return ["run", str(tmp / "c.toml"), "--out", str(tmp / "r"), "--quiet"], [
+        "config.json",
+        "damaged",
+    ]
 
 
 def case_compare_of_damaged_run_json(tmp):
@@ -152,11 +202,15 @@ def case_table_time_in_microseconds(tmp):
     (tmp / "c.toml").write_text(QUICK)
     assert main(["simulate", str(tmp / "c.toml"), "--out", str(tmp / "f.csv")]) == 0
     text = (tmp / "f.csv").read_text().splitlines()
-    rows = [text[0]] + [",".join([repr(float(r.split(",")[0]) * 1e6)] + r.split(",")[1:])
-                        for r in text[1:]]
+    rows = [text[0]] + [
+        ",".join([repr(float(r.split(",")[0]) * 1e6)] + r.split(",")[1:]) for r in text[1:]
+    ]
     (tmp / "us.csv").write_text("\n".join(rows) + "\n")
-    return ["data", "check", str(tmp / "us.csv"), "--format", "table"], \
-        ["us.csv", "field 't'", "microseconds"]
+    return ["data", "check", str(tmp / "us.csv"), "--format", "table"], [
+        "us.csv",
+        "field 't'",
+        "microseconds",
+    ]
 
 
 def case_px4_topic_with_only_a_header(tmp):
@@ -175,8 +229,10 @@ def case_pem_unseen_as_short_as_its_windows(tmp):
     text = text.replace("unseen_s = [120.0, 120.0]", "unseen_s = [10.0, 10.0]")
     assert "unseen_s = [10.0, 10.0]" in text
     (tmp / "pem.toml").write_text(text)
-    return ["baseline", "pem", str(tmp / "pem.toml"), "--out", str(tmp / "o")], \
-        ["simulator.unseen_s", "pem.toml"]
+    return ["baseline", "pem", str(tmp / "pem.toml"), "--out", str(tmp / "o")], [
+        "simulator.unseen_s",
+        "pem.toml",
+    ]
 
 
 CASES = [v for k, v in sorted(globals().items()) if k.startswith("case_")]
@@ -212,8 +268,15 @@ def test_a_damaged_finished_record_is_identified_again(tmp_path, capsys):
 def test_closed_pipe_is_quiet(tmp_path):
     """`gpquad export RUN | head -1`: no traceback when the reader stops early."""
     write_run(tmp_path / "run")
-    proc = subprocess.run(f"{sys.executable} -m gpquad export {tmp_path / 'run'} --format json "
-                          "| head -c 10", shell=True, capture_output=True, text=True, timeout=120)
-    assert proc.stdout == json.dumps(json.loads((tmp_path / "run" / "model.json").read_text()),
-                                     indent=2)[:10]
+    proc = subprocess.run(
+        f"{sys.executable} -m gpquad export {tmp_path / 'run'} --format json | head -c 10",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert (
+        proc.stdout
+        == json.dumps(json.loads((tmp_path / "run" / "model.json").read_text()), indent=2)[:10]
+    )
     assert "Traceback" not in proc.stderr and proc.stderr == ""

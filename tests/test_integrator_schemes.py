@@ -14,8 +14,9 @@ import naive
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
 from gpquad.engine.kernels import step as ks
-from gpquad.engine.kernels.fitness import rollout, tree_window_errors
+from gpquad.engine.kernels.fitness import tree_window_errors
 from gpquad.engine.kernels.flight_arrays import FlightArrays
+from gpquad.engine.kernels.rollout import rollout
 from gpquad.engine.kernels.sensitivity import DIVERGED_RESIDUAL
 from gpquad.engine.tree.encoding import Tree, stack_rows
 from gpquad.engine.tree.export import from_sympy, parse_equation
@@ -43,8 +44,7 @@ def test_euler_step_matches_scipy(quat, vel, rates, acc, dt):
 
 
 @settings(max_examples=60, deadline=None)
-@given(unit_quaternions(), vectors, vectors, vectors, accelerations,
-       st.sampled_from([0.01, 0.04]))
+@given(unit_quaternions(), vectors, vectors, vectors, accelerations, st.sampled_from([0.01, 0.04]))
 def test_rk4_stages_match_the_numpy_rk4(quat, vel, rates, pos, acc, h):
     """One RK4 step through the shared stage functions (as every kernel loops them) equals
     the plain-numpy RK4 of the rigid body with position."""
@@ -55,8 +55,9 @@ def test_rk4_stages_match_the_numpy_rk4(quat, vel, rates, pos, acc, h):
         ks.body_derivative(ys, 0, *acc, True, slope)
         ks.accumulate(total, slope, ks.WEIGHTS[stage], stage, 0, ks.PLANT_ROWS)
     ks.finish_step(y, total, h, 0, ks.PLANT_ROWS)
-    ref = naive.rk4_step(lambda s: naive.rigid_body_derivative(s, acc),
-                         np.concatenate([quat, vel, rates, pos]), h)
+    ref = naive.rk4_step(
+        lambda s: naive.rigid_body_derivative(s, acc), np.concatenate([quat, vel, rates, pos]), h
+    )
     np.testing.assert_allclose(y[:, 0], ref, rtol=1e-12, atol=1e-12)
 
 
@@ -89,15 +90,26 @@ def test_rk4_converges_at_fourth_order_and_euler_gives_its_discrete_factor():
     t = dt * np.arange(n + 1)
 
     def fly(scheme, substeps):
-        return rollout(codes, values, sizes, delays, modelled, np.ones(6), arrays,
-                       np.array([0]), n, np.zeros((0, 0, 0)), scheme, substeps)[0, :, 6]
+        return rollout(
+            codes,
+            values,
+            sizes,
+            delays,
+            modelled,
+            np.ones(6),
+            arrays,
+            np.array([0]),
+            n,
+            np.zeros((0, 0, 0)),
+            scheme,
+            substeps,
+        )[0, :, 6]
 
-    np.testing.assert_allclose(fly(ks.EULER, 1), (1.0 - 4.0 * dt) ** np.arange(n + 1),
-                               rtol=1e-12)
+    np.testing.assert_allclose(fly(ks.EULER, 1), (1.0 - 4.0 * dt) ** np.arange(n + 1), rtol=1e-12)
     errors = []
     for m in (1, 2, 4, 8):
         z = 4.0 * dt / m
-        factor = 1.0 - z + z * z / 2 - z ** 3 / 6 + z ** 4 / 24
+        factor = 1.0 - z + z * z / 2 - z**3 / 6 + z**4 / 24
         p = fly(ks.RK4, m)
         np.testing.assert_allclose(p, factor ** (m * np.arange(n + 1)), rtol=1e-12)
         errors.append(np.abs(p - np.exp(-4.0 * t)).max())
@@ -108,20 +120,49 @@ def test_rk4_converges_at_fourth_order_and_euler_gives_its_discrete_factor():
     assert errors[0] < 1e-4 and np.abs(fly(ks.EULER, 1) - np.exp(-4.0 * t)).max() > 1e-2
 
 
-@settings(max_examples=15, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
-       st.booleans(), st.sampled_from([0.0, 0.7]), st.sampled_from([1.0, 0.35]),
-       st.sampled_from([1, 2]))
-def test_rk4_fitness_matches_the_numpy_rk4(short_dataset, nodes, target, delays, squared,
-                                           att_weight, alpha, substeps):
+@settings(
+    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    smooth_trees,
+    st.integers(0, 5),
+    st.lists(st.integers(0, 5), min_size=4, max_size=4),
+    st.booleans(),
+    st.sampled_from([0.0, 0.7]),
+    st.sampled_from([1.0, 0.35]),
+    st.sampled_from([1, 2]),
+)
+def test_rk4_fitness_matches_the_numpy_rk4(
+    short_dataset, nodes, target, delays, squared, att_weight, alpha, substeps
+):
     tree = as_tree(nodes, delays)
     arrays = short_dataset.arrays
     out = np.empty(3)
-    tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, STARTS,
-                       40, squared, att_weight, alpha, np.inf, out, ks.RK4, substeps)
-    ref = np.array([naive.rk4_window_error(tree, target, arrays, s, 40, substeps, squared,
-                                           att_weight, alpha) for s in STARTS])
+    tree_window_errors(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        target,
+        arrays,
+        STARTS,
+        40,
+        squared,
+        att_weight,
+        alpha,
+        np.inf,
+        out,
+        ks.RK4,
+        substeps,
+    )
+    ref = np.array(
+        [
+            naive.rk4_window_error(
+                tree, target, arrays, s, 40, substeps, squared, att_weight, alpha
+            )
+            for s in STARTS
+        ]
+    )
     both_inf = np.isinf(out) & np.isinf(ref)
     tame = ~both_inf & (ref < 1e3)  # runaway windows: round-off grows with the state
     np.testing.assert_allclose(out[tame], ref[tame], rtol=1e-7, atol=1e-9)
@@ -139,17 +180,45 @@ def test_rk4_rollout_equals_the_fitness_path(short_dataset):
     for target, alpha in zip(range(6), (1.0, 0.4, 1.0, 0.6, 0.3, 1.0), strict=True):
         tree = random_tree(rng, params)
         out = np.empty(3)
-        tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays,
-                           STARTS, 30, False, 0.0, alpha, np.inf, out, ks.RK4, 2)
+        tree_window_errors(
+            tree.codes,
+            tree.values,
+            tree.size,
+            tree.delays,
+            target,
+            arrays,
+            STARTS,
+            30,
+            False,
+            0.0,
+            alpha,
+            np.inf,
+            out,
+            ks.RK4,
+            2,
+        )
         codes, values, sizes, delays = stack_rows({target: tree}, 6)
         modelled = np.arange(6) == target
-        states = rollout(codes, values, sizes, delays, modelled, np.where(modelled, alpha, 1.0),
-                         arrays, STARTS, 30, np.zeros((0, 0, 0)), ks.RK4, 2)
-        truth = np.stack([arrays.states[s:s + 31] for s in STARTS])
+        states = rollout(
+            codes,
+            values,
+            sizes,
+            delays,
+            modelled,
+            np.where(modelled, alpha, 1.0),
+            arrays,
+            STARTS,
+            30,
+            np.zeros((0, 0, 0)),
+            ks.RK4,
+            2,
+        )
+        truth = np.stack([arrays.states[s : s + 31] for s in STARTS])
         ref = np.abs(states[:, 1:, 3 + target] - truth[:, 1:, 3 + target]).mean(axis=1)
         ok = np.isfinite(out)
-        np.testing.assert_allclose(out[ok], ref[ok], rtol=1e-7, atol=1e-9,
-                                   err_msg=TARGET_NAMES[target])
+        np.testing.assert_allclose(
+            out[ok], ref[ok], rtol=1e-7, atol=1e-9, err_msg=TARGET_NAMES[target]
+        )
 
 
 RATE_LEAVES = [VAR_BASE + k for k in range(6, 13)]
@@ -175,50 +244,59 @@ def _fd_worst(ev, tree, n_steps, floor=0.0):
         up, down = x0.copy(), x0.copy()
         up[j] += h
         down[j] -= h
-        fd = (residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, n_steps)[0]
-              - residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, n_steps)[0]
-              ) / (2 * h)
+        fd = (
+            residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, n_steps)[0]
+            - residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, n_steps)[0]
+        ) / (2 * h)
         scale = max(np.abs(fd).max(), floor)
         if scale > 0:
             worst = max(worst, np.abs(jac[:, j] - fd).max() / scale)
     return worst
 
 
-@settings(max_examples=15, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(smooth_trees, st.integers(0, 5), st.sampled_from([0.0, 0.06]))
 def test_rk4_jacobian_matches_finite_differences(short_dataset, nodes, target, lag):
     """Exact where the eq. 2 kernel's is (linear targets; angular ones reading rates and
     inputs), with and without a lag, and the residuals are the fitness's errors."""
     if target >= 3:
-        nodes = [(RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v)
-                 for c, v in nodes]
+        nodes = [
+            (RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v) for c, v in nodes
+        ]
     tree = as_tree(nodes, (1, 0, 2, 3))
-    ev = Evaluator(short_dataset, TARGET_NAMES[target], 30, lag=lag, integrator="rk4",
-                   substeps=2)
+    ev = Evaluator(short_dataset, TARGET_NAMES[target], 30, lag=lag, integrator="rk4", substeps=2)
     res, _, diverged = residuals_and_jacobian(ev, tree, STARTS, 30)
     if not diverged:
-        np.testing.assert_allclose(np.abs(res.reshape(3, 30)).mean(axis=1),
-                                   ev.window_errors([tree], STARTS, n_steps=30)[0],
-                                   rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            np.abs(res.reshape(3, 30)).mean(axis=1),
+            ev.window_errors([tree], STARTS, n_steps=30)[0],
+            rtol=1e-9,
+            atol=1e-12,
+        )
     else:
         assert np.abs(res).max() >= DIVERGED_RESIDUAL
     worst = _fd_worst(ev, tree, 30, floor=1.0)
     assert worst is None or worst < 1e-4
 
 
-@pytest.mark.parametrize("target, text", [
-    ("p_dot", "54.4*(u_R - phi) - 4.66*p + 0.3*q*r"),
-    ("q_dot", "40.0*(u_P - theta) - 5.0*q + 2.0*phi*r"),
-])
+@pytest.mark.parametrize(
+    "target, text",
+    [
+        ("p_dot", "54.4*(u_R - phi) - 4.66*p + 0.3*q*r"),
+        ("q_dot", "40.0*(u_P - theta) - 5.0*q + 2.0*phi*r"),
+    ],
+)
 def test_rk4_attitude_jacobian_follows_finite_differences(short_dataset, target, text):
     """With angle tangents and the angle rows the RK4 Jacobian of trees reading Euler angles
     is within 1 % of central differences (the Euler kinematics' tangent integrated at the
     stages, against the quaternion flow); the eq. 2 kernel's is within 5 %."""
     expr, delays = parse_equation(text, short_dataset.input_names)
     tree = from_sympy(expr, delays, short_dataset.input_names)
-    ev = Evaluator(short_dataset, target, 50, attitude=1.0, angle_tangents=True,
-                   integrator="rk4", substeps=2)
+    ev = Evaluator(
+        short_dataset, target, 50, attitude=1.0, angle_tangents=True, integrator="rk4", substeps=2
+    )
     assert _fd_worst(ev, tree, 50) < 0.01
 
 
@@ -238,8 +316,12 @@ def test_pid_plant_flies_rk4_and_converges_with_substeps():
     c = make_controller(cfg.nominal_gains, d, -np.ones(4), np.ones(4), cfg)
     paths = {}
     for scheme, m in (("euler", 1), ("rk4", 1), ("rk4", 2), ("rk4", 4)):
-        f = fly(dataclasses.replace(plant, integrator=scheme, substeps=m), c,
-                np.array([[5.0, 0.0, -1.0]]), np.zeros((300, 4)))
+        f = fly(
+            dataclasses.replace(plant, integrator=scheme, substeps=m),
+            c,
+            np.array([[5.0, 0.0, -1.0]]),
+            np.zeros((300, 4)),
+        )
         assert f.score.completion == 1.0 and not f.score.diverged, (scheme, m)
         paths[scheme, m] = f.pos
     step_12 = np.abs(paths["rk4", 1] - paths["rk4", 2]).max()
@@ -254,16 +336,23 @@ def test_peer_rollout_rk4_equals_the_tree_rollout(short_dataset):
     from gpquad.benchmark.rollout import fly
 
     arrays = short_dataset.arrays
-    equations = {"a_x": "10.0*theta - 0.6*u + 0.2*q*r", "a_y": "-9.2*phi - 0.6*v",
-                 "a_z": "2.0*u_T - w", "p_dot": "10.3*u_R - 4.15*p",
-                 "q_dot": "-9.8*u_P - 3.3*q + 0.1*phi", "r_dot": "-7.8*u_Y - 1.9*r"}
+    equations = {
+        "a_x": "10.0*theta - 0.6*u + 0.2*q*r",
+        "a_y": "-9.2*phi - 0.6*v",
+        "a_z": "2.0*u_T - w",
+        "p_dot": "10.3*u_R - 4.15*p",
+        "q_dot": "-9.8*u_P - 3.3*q + 0.1*phi",
+        "r_dot": "-7.8*u_Y - 1.9*r",
+    }
     codes, values, sizes, delays = _model(equations)
-    coefficient = {"a_x": lambda s, u: 10.0 * s[:, 1] - 0.6 * s[:, 3] + 0.2 * s[:, 7] * s[:, 8],
-                   "a_y": lambda s, u: -9.2 * s[:, 0] - 0.6 * s[:, 4],
-                   "a_z": lambda s, u: 2.0 * u[:, 3] - s[:, 5],
-                   "p_dot": lambda s, u: 10.3 * u[:, 1] - 4.15 * s[:, 6],
-                   "q_dot": lambda s, u: -9.8 * u[:, 0] - 3.3 * s[:, 7] + 0.1 * s[:, 0],
-                   "r_dot": lambda s, u: -7.8 * u[:, 2] - 1.9 * s[:, 8]}
+    coefficient = {
+        "a_x": lambda s, u: 10.0 * s[:, 1] - 0.6 * s[:, 3] + 0.2 * s[:, 7] * s[:, 8],
+        "a_y": lambda s, u: -9.2 * s[:, 0] - 0.6 * s[:, 4],
+        "a_z": lambda s, u: 2.0 * u[:, 3] - s[:, 5],
+        "p_dot": lambda s, u: 10.3 * u[:, 1] - 4.15 * s[:, 6],
+        "q_dot": lambda s, u: -9.8 * u[:, 0] - 3.3 * s[:, 7] + 0.1 * s[:, 0],
+        "r_dot": lambda s, u: -7.8 * u[:, 2] - 1.9 * s[:, 8],
+    }
 
     def predict(features, idx):
         s, u = features[:, :9], features[:, 9::6]  # lag 0 of each input
@@ -271,8 +360,20 @@ def test_peer_rollout_rk4_equals_the_tree_rollout(short_dataset):
 
     starts = STARTS + 5
     got = fly(predict, arrays, starts, 40, integrator="rk4", substeps=2)
-    ref = rollout(codes, values, sizes, delays, np.ones(6, dtype=np.bool_), np.ones(6), arrays,
-                  starts, 40, np.zeros((0, 0, 0)), ks.RK4, 2)
+    ref = rollout(
+        codes,
+        values,
+        sizes,
+        delays,
+        np.ones(6, dtype=np.bool_),
+        np.ones(6),
+        arrays,
+        starts,
+        40,
+        np.zeros((0, 0, 0)),
+        ks.RK4,
+        2,
+    )
     np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-10)
 
 
@@ -288,11 +389,14 @@ def test_lag_rate_inverts_the_lag_factor():
         ks.scheme_code("rk5")
 
 
-@pytest.mark.parametrize("table, field, message", [
-    ({"evolution": {"integrator": "rk5"}}, "evolution.integrator", "choose one of"),
-    ({"evolution": {"integrator": "rk4", "substeps": 0}}, "evolution.substeps", "1 to 64"),
-    ({"evolution": {"substeps": 2}}, "evolution.substeps", "must be 1 for euler"),
-])
+@pytest.mark.parametrize(
+    "table, field, message",
+    [
+        ({"evolution": {"integrator": "rk5"}}, "evolution.integrator", "choose one of"),
+        ({"evolution": {"integrator": "rk4", "substeps": 0}}, "evolution.substeps", "1 to 64"),
+        ({"evolution": {"substeps": 2}}, "evolution.substeps", "must be 1 for euler"),
+    ],
+)
 def test_bad_scheme_is_one_line_naming_the_field(table, field, message):
     from gpquad.errors import GpquadError
     from gpquad.study.config import config_from_dict
@@ -320,8 +424,14 @@ def test_model_json_keeps_a_non_euler_scheme(tmp_path):
     from gpquad.cli.commands import main
     from gpquad.models.equations import DiscoveredModel
 
-    base = DiscoveredModel({}, ("u_P", "u_R", "u_Y", "u_T"), {}, 0.04, 1,
-                           {"evolution": {"integrator": "rk4", "substeps": 4}})
+    base = DiscoveredModel(
+        {},
+        ("u_P", "u_R", "u_Y", "u_T"),
+        {},
+        0.04,
+        1,
+        {"evolution": {"integrator": "rk4", "substeps": 4}},
+    )
     assert (base.integrator, base.substeps) == ("rk4", 4)
     d = base.to_dict()
     assert (d["integrator"], d["substeps"]) == ("rk4", 4)
@@ -348,13 +458,23 @@ def test_run_fitted_by_rk4_scores_with_its_own_scheme_and_by_rk4(tmp_path, capsy
     from gpquad.study.config import SimulatorConfig, config_from_dict
     from gpquad.study.runner import run_experiment
 
-    log = write_flight_file(simulate(SimulatorConfig(duration_s=60.0, seed=3),
-                                     ("u_P", "u_R", "u_Y", "u_T")), tmp_path / "flight.csv")
-    evo = {"targets": ["p_dot"], "iterations": 1, "model_generations": 5,
-           "test_generations": 2, "window_steps": 100, "test_offset_max": 20,
-           "integrator": "rk4", "substeps": 2}
-    cfg = config_from_dict({"seed": 1, "data": {"files": [str(log)]},
-                            "evolution": evo, "output": {"progress": False}})
+    log = write_flight_file(
+        simulate(SimulatorConfig(duration_s=60.0, seed=3), ("u_P", "u_R", "u_Y", "u_T")),
+        tmp_path / "flight.csv",
+    )
+    evo = {
+        "targets": ["p_dot"],
+        "iterations": 1,
+        "model_generations": 5,
+        "test_generations": 2,
+        "window_steps": 100,
+        "test_offset_max": 20,
+        "integrator": "rk4",
+        "substeps": 2,
+    }
+    cfg = config_from_dict(
+        {"seed": 1, "data": {"files": [str(log)]}, "evolution": evo, "output": {"progress": False}}
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run_experiment(cfg, tmp_path / "run", progress=False)

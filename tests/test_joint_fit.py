@@ -157,8 +157,9 @@ def test_sweep_full_models_are_refitted_when_configured(raw_dataset):
     cfg = Config(evolution=preset_evolution())
     plain = assembled(choice, runs, raw_dataset, cfg)
     assert plain.joint_fit is None and plain.equations == eqs
-    on = dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution,
-                                                                finish=("joint_fit",)))
+    on = dataclasses.replace(
+        cfg, evolution=dataclasses.replace(cfg.evolution, finish=("joint_fit",))
+    )
     refitted = assembled(choice, runs, raw_dataset, on)
     assert refitted.joint_fit["accepted"]
     np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=5e-3)

@@ -8,13 +8,14 @@ from hypothesis import strategies as st
 import naive
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.kernels import quaternion as kq
-from gpquad.engine.kernels.fitness import rollout, tree_window_errors
+from gpquad.engine.kernels.fitness import tree_window_errors
 from gpquad.engine.kernels.integrator import (
     body_accelerations,
     integrate,
     rates_from_quaternions,
     world_to_body,
 )
+from gpquad.engine.kernels.rollout import rollout
 from gpquad.engine.kernels.step import EULER
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.tree.encoding import Tree
@@ -26,8 +27,11 @@ finite = st.floats(-3, 3, allow_nan=False)
 
 
 def unit_quaternions():
-    return st.tuples(finite, finite, finite, finite).filter(
-        lambda v: np.linalg.norm(v) > 0.1).map(lambda v: np.array(v) / np.linalg.norm(v))
+    return (
+        st.tuples(finite, finite, finite, finite)
+        .filter(lambda v: np.linalg.norm(v) > 0.1)
+        .map(lambda v: np.array(v) / np.linalg.norm(v))
+    )
 
 
 # Random prefix trees built by hypothesis itself, independent of gpquad.engine.tree.variation.
@@ -36,13 +40,21 @@ _leaf = st.one_of(
     st.integers(0, N_VARS - 1).map(lambda k: [(VAR_BASE + k, 0.0)]),
 )
 prefix_trees = st.recursive(
-    _leaf, lambda kids: st.tuples(st.integers(0, 3), kids, kids).map(
-        lambda t: [(t[0], 0.0)] + t[1] + t[2]), max_leaves=16)
+    _leaf,
+    lambda kids: st.tuples(st.integers(0, 3), kids, kids).map(
+        lambda t: [(t[0], 0.0)] + t[1] + t[2]
+    ),
+    max_leaves=16,
+)
 # Without division: integrating 1/phi near phi = 0 is chaotic, and then two correct
 # integrators legitimately differ by more than round-off.
 smooth_trees = st.recursive(
-    _leaf, lambda kids: st.tuples(st.integers(0, 2), kids, kids).map(
-        lambda t: [(t[0], 0.0)] + t[1] + t[2]), max_leaves=16)
+    _leaf,
+    lambda kids: st.tuples(st.integers(0, 2), kids, kids).map(
+        lambda t: [(t[0], 0.0)] + t[1] + t[2]
+    ),
+    max_leaves=16,
+)
 
 
 def canonical(quat):
@@ -116,8 +128,9 @@ def test_rates_from_quaternions_round_trip():
     rates = rng.normal(size=(400, 3)) * 3
     acc = np.zeros((400, 6))
     acc[:, 3:] = np.diff(np.vstack([rates, rates[-1]]), axis=0) / 0.01
-    quat, _, w, _ = integrate(np.array([1.0, 0, 0, 0]), np.zeros(3), rates[0], np.zeros(3), acc,
-                              0.01)
+    quat, _, w, _ = integrate(
+        np.array([1.0, 0, 0, 0]), np.zeros(3), rates[0], np.zeros(3), acc, 0.01
+    )
     assert np.abs(rates_from_quaternions(quat, 0.01) - w[:-1]).max() < 1e-9
 
 
@@ -131,34 +144,70 @@ def test_world_to_body_inverts_attitude():
 
 
 @settings(max_examples=60, deadline=None)
-@given(prefix_trees, st.lists(st.lists(finite, min_size=N_VARS, max_size=N_VARS), min_size=1,
-                              max_size=7))
+@given(
+    prefix_trees,
+    st.lists(st.lists(finite, min_size=N_VARS, max_size=N_VARS), min_size=1, max_size=7),
+)
 def test_tree_evaluation_matches_recursive_reference(nodes, lanes):
     tree = as_tree(nodes)
     features = np.ascontiguousarray(np.array(lanes).T)
     out = np.empty(len(lanes))
-    eval_lanes(tree.codes, tree.values, tree.size, features, np.empty((STACK_ROWS, len(lanes))),
-               out, len(lanes))
+    eval_lanes(
+        tree.codes,
+        tree.values,
+        tree.size,
+        features,
+        np.empty((STACK_ROWS, len(lanes))),
+        out,
+        len(lanes),
+    )
     ref = [naive.eval_tree(tree.codes, tree.values, lane) for lane in lanes]
     np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12)
 
 
-@settings(max_examples=25, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
-       st.booleans(), st.sampled_from([0.0, 0.7]), st.sampled_from([1.0, 0.35]))
-def test_fitness_kernel_matches_full_integration(short_dataset, nodes, target, delays, squared,
-                                                 att_weight, alpha):
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    smooth_trees,
+    st.integers(0, 5),
+    st.lists(st.integers(0, 5), min_size=4, max_size=4),
+    st.booleans(),
+    st.sampled_from([0.0, 0.7]),
+    st.sampled_from([1.0, 0.35]),
+)
+def test_fitness_kernel_matches_full_integration(
+    short_dataset, nodes, target, delays, squared, att_weight, alpha
+):
     """The kernel's exact shortcuts equal a full-state integration of every window (with the
     attitude term of angular targets when att_weight > 0, and a lag when alpha < 1)."""
     tree = as_tree(nodes, delays)
     arrays = short_dataset.arrays
     starts = np.array([10, 400, 900], dtype=np.int64)
     out = np.empty(3)
-    tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                       60, squared, att_weight, alpha, np.inf, out, EULER, 1)
-    ref = np.array([naive.window_error(tree, target, arrays, s, 60, squared, att_weight, alpha)
-                    for s in starts])
+    tree_window_errors(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        target,
+        arrays,
+        starts,
+        60,
+        squared,
+        att_weight,
+        alpha,
+        np.inf,
+        out,
+        EULER,
+        1,
+    )
+    ref = np.array(
+        [
+            naive.window_error(tree, target, arrays, s, 60, squared, att_weight, alpha)
+            for s in starts
+        ]
+    )
     both_inf = np.isinf(out) & np.isinf(ref)
     # a runaway window (mean error above 1e3, states 1000x the data's) amplifies the two
     # integrators' round-off differences with the state: there both need only be large
@@ -194,7 +243,8 @@ def test_attitude_weight_scales_the_angle_like_the_rate(short_dataset):
 
     states = short_dataset.arrays.states
     assert attitude_weight(short_dataset, "q_dot", 2.0) == pytest.approx(
-        2.0 * states[:, 7].std() / states[:, 1].std(), rel=1e-12)
+        2.0 * states[:, 7].std() / states[:, 1].std(), rel=1e-12
+    )
     assert attitude_weight(short_dataset, "a_x", 1.0) == 0.0
     assert attitude_weight(short_dataset, "p_dot", 0.0) == 0.0
     info = [{**i, "measured": {"phi": "not measured (test)"}} for i in short_dataset.flight_info]
@@ -212,8 +262,9 @@ def test_attitude_weight_scales_the_angle_like_the_rate(short_dataset):
     expr = expr.subs({s: s + trim[str(s)] for s in expr.free_symbols if str(s) in trim})
     biased = from_sympy(expr, delays, short_dataset.input_names)
     plain = Evaluator(short_dataset, "p_dot", 300).mean_errors([biased], starts)[0]
-    with_angle = Evaluator(short_dataset, "p_dot", 300, attitude=1.0).mean_errors([biased],
-                                                                                  starts)[0]
+    with_angle = Evaluator(short_dataset, "p_dot", 300, attitude=1.0).mean_errors([biased], starts)[
+        0
+    ]
     assert plain > 0 and with_angle > 2.0 * plain
 
 
@@ -227,8 +278,23 @@ def test_rollout_equals_fast_path(short_dataset):
     for target, alpha in zip(range(6), (1.0, 0.4, 1.0, 0.6, 0.3, 1.0), strict=True):
         tree = random_tree(rng, params)
         out = np.empty(2)
-        tree_window_errors(tree.codes, tree.values, tree.size, tree.delays, target, arrays, starts,
-                           50, False, 0.0, alpha, np.inf, out, EULER, 1)
+        tree_window_errors(
+            tree.codes,
+            tree.values,
+            tree.size,
+            tree.delays,
+            target,
+            arrays,
+            starts,
+            50,
+            False,
+            0.0,
+            alpha,
+            np.inf,
+            out,
+            EULER,
+            1,
+        )
         codes = np.full((6, tree.size), CONST, dtype=np.int64)
         values = np.zeros((6, tree.size))
         codes[target], values[target] = tree.codes, tree.values
@@ -237,13 +303,26 @@ def test_rollout_equals_fast_path(short_dataset):
         modelled = np.arange(6) == target
         sizes = np.full(6, tree.size, dtype=np.int64)
         alphas = np.where(modelled, alpha, 1.0)
-        states = rollout(codes, values, sizes, delays, modelled, alphas, arrays, starts, 50,
-                         np.zeros((0, 0, 0)), EULER, 1)
-        truth = np.stack([arrays.states[s:s + 51] for s in starts])
+        states = rollout(
+            codes,
+            values,
+            sizes,
+            delays,
+            modelled,
+            alphas,
+            arrays,
+            starts,
+            50,
+            np.zeros((0, 0, 0)),
+            EULER,
+            1,
+        )
+        truth = np.stack([arrays.states[s : s + 51] for s in starts])
         ref = np.abs(states[:, 1:, 3 + target] - truth[:, 1:, 3 + target]).mean(axis=1)
         ok = np.isfinite(out)
-        np.testing.assert_allclose(out[ok], ref[ok], rtol=1e-7, atol=1e-9,
-                                   err_msg=TARGET_NAMES[target])
+        np.testing.assert_allclose(
+            out[ok], ref[ok], rtol=1e-7, atol=1e-9, err_msg=TARGET_NAMES[target]
+        )
 
 
 def test_bound_abandons_only_worse_trees(short_dataset):

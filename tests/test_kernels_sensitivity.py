@@ -39,19 +39,30 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
     n_c = _n_const(tree)
     slot_of = np.where(tree.codes == CONST, np.cumsum(tree.codes == CONST) - 1, -1)
     grad = np.empty(n_c)
-    value = eval_with_tangent(tree.codes, tree.values, tree.size, slot_of, np.array(leaves),
-                              np.zeros((13, n_c)), np.empty(STACK_ROWS),
-                              np.empty((STACK_ROWS, n_c)), grad)
-    assert value == pytest.approx(naive.eval_tree(tree.codes, tree.values, leaves), rel=1e-12,
-                                  abs=1e-12)
+    value = eval_with_tangent(
+        tree.codes,
+        tree.values,
+        tree.size,
+        slot_of,
+        np.array(leaves),
+        np.zeros((13, n_c)),
+        np.empty(STACK_ROWS),
+        np.empty((STACK_ROWS, n_c)),
+        grad,
+    )
+    assert value == pytest.approx(
+        naive.eval_tree(tree.codes, tree.values, leaves), rel=1e-12, abs=1e-12
+    )
     x0 = tree.values[tree.codes == CONST]
 
     def central(j, h):
         up, down = x0.copy(), x0.copy()
         up[j] += h
         down[j] -= h
-        return (naive.eval_tree(tree.codes, _with_constants(tree, up).values, leaves)
-                - naive.eval_tree(tree.codes, _with_constants(tree, down).values, leaves)) / (2 * h)
+        return (
+            naive.eval_tree(tree.codes, _with_constants(tree, up).values, leaves)
+            - naive.eval_tree(tree.codes, _with_constants(tree, down).values, leaves)
+        ) / (2 * h)
 
     for j in range(n_c):
         h = 1e-6 * max(1.0, abs(x0[j]))
@@ -61,10 +72,15 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
         assert grad[j] == pytest.approx(fd, rel=1e-4, abs=1e-5 * (1 + abs(value)))
 
 
-@settings(max_examples=20, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(smooth_trees, st.integers(0, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4),
-       st.sampled_from([0.0, 0.06]))
+@settings(
+    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    smooth_trees,
+    st.integers(0, 5),
+    st.lists(st.integers(0, 5), min_size=4, max_size=4),
+    st.sampled_from([0.0, 0.06]),
+)
 def test_residuals_match_the_plain_integration(short_dataset, nodes, target, delays, lag):
     """mean |residual| per window equals the plain-numpy window error (scipy rotations),
     with and without a lag."""
@@ -73,8 +89,12 @@ def test_residuals_match_the_plain_integration(short_dataset, nodes, target, del
     assert (ev.alpha < 1.0) == (lag > 0)
     res, _, _ = residuals_and_jacobian(ev, tree, STARTS, 60)
     got = np.abs(res.reshape(3, 60)).mean(axis=1)
-    ref = np.array([naive.window_error(tree, target, short_dataset.arrays, s, 60, alpha=ev.alpha)
-                    for s in STARTS])
+    ref = np.array(
+        [
+            naive.window_error(tree, target, short_dataset.arrays, s, 60, alpha=ev.alpha)
+            for s in STARTS
+        ]
+    )
     fine = np.isfinite(ref) & (got < DIVERGED_RESIDUAL / 2) & (ref < RUNAWAY)
     np.testing.assert_allclose(got[fine], ref[fine], rtol=1e-7, atol=1e-9)
     assert np.all(got[np.isfinite(ref) & (ref >= RUNAWAY)] > RUNAWAY / 10)
@@ -88,13 +108,15 @@ def test_residuals_match_the_plain_integration(short_dataset, nodes, target, del
 RATE_LEAVES = [VAR_BASE + k for k in range(6, 13)]
 
 
-@settings(max_examples=20, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(smooth_trees, st.integers(0, 5), st.sampled_from([0.0, 0.06]))
 def test_jacobian_matches_finite_differences(short_dataset, nodes, target, lag):
     if target >= 3:  # keep only leaves that are exact for angular targets
-        nodes = [(RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v)
-                 for c, v in nodes]
+        nodes = [
+            (RATE_LEAVES[c % len(RATE_LEAVES)], v) if c >= VAR_BASE else (c, v) for c, v in nodes
+        ]
     tree = as_tree(nodes, (1, 0, 2, 3))
     n_c = _n_const(tree)
     ev = Evaluator(short_dataset, TARGET_NAMES[target], 40, lag=lag)
@@ -110,8 +132,7 @@ def test_jacobian_matches_finite_differences(short_dataset, nodes, target, lag):
         r_up = residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, 40)[0]
         r_down = residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, 40)[0]
         fd = (r_up - r_down) / (2 * h)
-        np.testing.assert_allclose(jac[:, j], fd, rtol=1e-4,
-                                   atol=1e-6 * (1 + np.abs(fd).max()))
+        np.testing.assert_allclose(jac[:, j], fd, rtol=1e-4, atol=1e-6 * (1 + np.abs(fd).max()))
 
 
 def _tree(text, dataset):
@@ -121,10 +142,13 @@ def _tree(text, dataset):
     return from_sympy(expr, delays, dataset.input_names)
 
 
-@pytest.mark.parametrize("target, start_text, truth", [
-    ("a_z", "3.0*u_T(t-5) - w + 0.5", 28.2),
-    ("p_dot", "2.0*u_R(t-1) - 1.0*p + 0.1", 10.3),
-])
+@pytest.mark.parametrize(
+    "target, start_text, truth",
+    [
+        ("a_z", "3.0*u_T(t-5) - w + 0.5", 28.2),
+        ("p_dot", "2.0*u_R(t-1) - 1.0*p + 0.1", 10.3),
+    ],
+)
 def test_gauss_newton_reaches_far_coefficients(short_dataset, target, start_text, truth):
     """From constants of order one, LM on the integrated error finds 28.2 and 10.3."""
     ev = Evaluator(short_dataset, target, 250)
@@ -150,18 +174,21 @@ def test_gauss_newton_keeps_a_tree_it_cannot_improve(short_dataset):
     assert kept is no_constants and kept_err == err
     # A claimed error that no fit can beat (0) keeps the original tree.
     tree = _tree("2.0*u_R(t-1) - 1.0*p", short_dataset)
-    kept, kept_err = gauss_newton_constants(ev, tree, 0.0, starts, 100,
-                                            lambda t: ev.mean_errors([t], starts)[0], 20)
+    kept, kept_err = gauss_newton_constants(
+        ev, tree, 0.0, starts, 100, lambda t: ev.mean_errors([t], starts)[0], 20
+    )
     assert kept is tree and kept_err == 0.0
     # A diverging start (positive feedback of 1e4) is left alone rather than crashing.
     bad = _tree("10000.0*p", short_dataset)
-    kept, kept_err = gauss_newton_constants(ev, bad, np.inf, starts, 100,
-                                            lambda t: ev.mean_errors([t], starts)[0], 20)
+    kept, kept_err = gauss_newton_constants(
+        ev, bad, np.inf, starts, 100, lambda t: ev.mean_errors([t], starts)[0], 20
+    )
     assert kept is bad and kept_err == np.inf
 
 
-@settings(max_examples=15, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(smooth_trees, st.integers(3, 5), st.lists(st.integers(0, 5), min_size=4, max_size=4))
 def test_attitude_rows_match_the_plain_integration(short_dataset, nodes, target, delays):
     """With an attitude weight every step has a rate row and a weighted angle row whose
@@ -172,17 +199,24 @@ def test_attitude_rows_match_the_plain_integration(short_dataset, nodes, target,
     res, jac, _ = residuals_and_jacobian(ev, tree, STARTS, 60)
     assert res.shape == (3 * 60 * 2,) and jac.shape[0] == res.shape[0]
     got = np.abs(res.reshape(3, 60 * 2)).sum(axis=1) / 60
-    ref = np.array([naive.window_error(tree, target, short_dataset.arrays, s, 60,
-                                       att_weight=ev.att_weight) for s in STARTS])
+    ref = np.array(
+        [
+            naive.window_error(tree, target, short_dataset.arrays, s, 60, att_weight=ev.att_weight)
+            for s in STARTS
+        ]
+    )
     fine = np.isfinite(ref) & (got < DIVERGED_RESIDUAL / 2) & (ref < RUNAWAY)
     np.testing.assert_allclose(got[fine], ref[fine], rtol=1e-7, atol=1e-9)
 
 
-@pytest.mark.parametrize("target, text", [
-    ("p_dot", "54.4*(u_R - phi) - 4.66*p + 0.3*q*r"),
-    ("q_dot", "40.0*(u_P - theta) - 5.0*q + 2.0*phi*r"),
-    ("r_dot", "20.0*(u_Y - psi) - 3.0*r + 0.5*phi"),
-])
+@pytest.mark.parametrize(
+    "target, text",
+    [
+        ("p_dot", "54.4*(u_R - phi) - 4.66*p + 0.3*q*r"),
+        ("q_dot", "40.0*(u_P - theta) - 5.0*q + 2.0*phi*r"),
+        ("r_dot", "20.0*(u_Y - psi) - 3.0*r + 0.5*phi"),
+    ],
+)
 def test_attitude_jacobian_follows_finite_differences(short_dataset, target, text):
     """Trees that read Euler angles, with the angle rows: the attitude sensitivity
     (Euler kinematics linearised each step) is within 5 % of central differences (of the
@@ -201,12 +235,14 @@ def test_attitude_jacobian_follows_finite_differences(short_dataset, target, tex
             up, down = x0.copy(), x0.copy()
             up[j] += h
             down[j] -= h
-            fd = (residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, 50)[0]
-                  - residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, 50)[0]
-                  ) / (2 * h)
+            fd = (
+                residuals_and_jacobian(ev, _with_constants(tree, up), STARTS, 50)[0]
+                - residuals_and_jacobian(ev, _with_constants(tree, down), STARTS, 50)[0]
+            ) / (2 * h)
             worst = max(worst, np.abs(jac[:, j] - fd).max() / np.abs(fd).max())
         return worst
 
-    assert worst_error(Evaluator(short_dataset, target, 50, attitude=1.0,
-                                 angle_tangents=True)) < 0.05
+    assert (
+        worst_error(Evaluator(short_dataset, target, 50, attitude=1.0, angle_tangents=True)) < 0.05
+    )
     assert worst_error(Evaluator(short_dataset, target, 50, attitude=1.0)) > 0.5

@@ -15,8 +15,12 @@ def problem(seed: int, m: int, n: int, spread: float):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10_000), m=st.integers(1, 60), n=st.integers(1, 8),
-       spread=st.floats(0.0, 4.0))
+@given(
+    seed=st.integers(0, 10_000),
+    m=st.integers(1, 60),
+    n=st.integers(1, 8),
+    spread=st.floats(0.0, 4.0),
+)
 def test_triangularize_is_a_qr_of_the_jacobian(seed, m, n, spread):
     """For J = jac / scale: R^T R = J^T J and R^T (Q^T res) = J^T res, R upper triangular
     (signs may differ from numpy's QR, products do not)."""
@@ -35,8 +39,12 @@ def test_triangularize_is_a_qr_of_the_jacobian(seed, m, n, spread):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 10_000), n=st.integers(1, 8), mu=st.floats(1e-6, 1e3),
-       spread=st.floats(0.0, 2.0))
+@given(
+    seed=st.integers(0, 10_000),
+    n=st.integers(1, 8),
+    mu=st.floats(1e-6, 1e3),
+    spread=st.floats(0.0, 2.0),
+)
 def test_damped_step_solves_the_damped_normal_equations(seed, n, mu, spread):
     """h solves (J^T J + mu I) h = -J^T res; the returned value is h^T (J^T J + mu I)^-1 h;
     predicted_drop and gradient_norm are |res|^2 - |res + J h|^2, |J h|^2 and |J^T res|."""
@@ -49,11 +57,13 @@ def test_damped_step_solves_the_damped_normal_equations(seed, n, mu, spread):
     np.testing.assert_allclose(h, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
     np.testing.assert_allclose(z2, h @ np.linalg.solve(a, h), rtol=1e-7)
     drop, jh2 = kernels.predicted_drop(r, qtr, h)
-    np.testing.assert_allclose(drop, res @ res - np.sum((res + jac @ h) ** 2),
-                               rtol=1e-7, atol=1e-9 * (res @ res))
+    np.testing.assert_allclose(
+        drop, res @ res - np.sum((res + jac @ h) ** 2), rtol=1e-7, atol=1e-9 * (res @ res)
+    )
     np.testing.assert_allclose(jh2, np.sum((jac @ h) ** 2), rtol=1e-7)
-    np.testing.assert_allclose(kernels.gradient_norm(r, qtr), np.linalg.norm(jac.T @ res),
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        kernels.gradient_norm(r, qtr), np.linalg.norm(jac.T @ res), rtol=1e-9
+    )
 
 
 def test_damped_step_reports_a_singular_system():

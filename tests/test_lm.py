@@ -55,8 +55,12 @@ print(all(p == first for p in seen))
 
 
 def replay_is_stable(solver: str) -> bool:
-    out = subprocess.run([sys.executable, "-c", REPLAY, str(FIXTURE), solver],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", REPLAY, str(FIXTURE), solver],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return out.stdout.strip() == "True"
 
 
@@ -96,8 +100,9 @@ def test_forward_difference_matches_the_analytic_jacobian_and_remembers():
         return np.array([x[0] ** 2 - 3.0 * x[1], np.sin(x[1]) * x[2], 544.0 * x[2] - x[0]])
 
     def exact(x):
-        return np.array([[2 * x[0], -3.0, 0.0], [0.0, np.cos(x[1]) * x[2], np.sin(x[1])],
-                         [-1.0, 0.0, 544.0]])
+        return np.array(
+            [[2 * x[0], -3.0, 0.0], [0.0, np.cos(x[1]) * x[2], np.sin(x[1])], [-1.0, 0.0, 544.0]]
+        )
 
     value, jac = forward_difference(fun)
     x = np.array([-2.0, 0.3, 47.0])
@@ -135,8 +140,13 @@ def test_trust_region_fits_a_nonlinear_problem_the_same_way_every_time():
 
     def fit(wrap):
         value, jac = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
-        return trust_region(value, np.array([1.0, 0.5, 0.0]),
-                            (lambda x: np.array(jac(x))) if wrap else jac, 200, 1e-12)
+        return trust_region(
+            value,
+            np.array([1.0, 0.5, 0.0]),
+            (lambda x: np.array(jac(x))) if wrap else jac,
+            200,
+            1e-12,
+        )
 
     first = fit(False)
     np.testing.assert_allclose(first, truth, rtol=1e-6)
@@ -160,8 +170,7 @@ def test_lm_takes_the_gauss_newton_step_on_the_engines_linearised_problem():
 
     best = np.linalg.lstsq(j, -res, rcond=None)[0] + x0[free]
     x = levenberg_marquardt(fun, x0[free], lambda x: j, 1)
-    np.testing.assert_allclose(float(fun(x) @ fun(x)), float(fun(best) @ fun(best)),
-                               rtol=1e-8)
+    np.testing.assert_allclose(float(fun(x) @ fun(x)), float(fun(best) @ fun(best)), rtol=1e-8)
     assert float(res @ res) > 100.0 * float(fun(x) @ fun(x))
 
 
@@ -194,6 +203,7 @@ def test_lm_rejects_diverged_trials_and_stops_at_an_exact_fit():
     """A residual that is inf away from a region (a rollout that diverged): from x0 = -2
     the Gauss-Newton step of atan(x - 3) lands at 33.7, where it is inf; the LM shrinks
     its radius and reaches 3 instead of failing. An exact fit at the start returns it."""
+
     def fun(x):
         value = np.arctan(x[0] - 3.0)
         return np.array([value, 0.5 * value]) if abs(x[0]) < 5.0 else np.full(2, np.inf)

@@ -130,8 +130,9 @@ def test_finish_model_flies_the_mirror_only_when_asked_and_the_inputs_exist(turn
     assert "mirrored" not in plain.stability
     mirrored = finish.finish_model(model, ds, repair, VehicleConfig(mirror_inputs=FLIP))
     assert mirrored.stability["mirrored_diverged_after"] == 0
-    asymmetric = finish.finish_model(model, ds, repair,
-                                     VehicleConfig(symmetric=False, mirror_inputs=FLIP))
+    asymmetric = finish.finish_model(
+        model, ds, repair, VehicleConfig(symmetric=False, mirror_inputs=FLIP)
+    )
     assert "mirrored" not in asymmetric.stability
     assert VehicleConfig(mirror_inputs=("u_X",)).flipped(ds.input_names) == ()
     assert VehicleConfig(mirror_inputs=FLIP).flipped(ds.input_names) == FLIP

@@ -38,7 +38,7 @@ def test_rate_mix_scales_by_1000_limits_and_flips_yaw():
     np.testing.assert_allclose(mix[0], [-0.1, -0.1, 0.1, 0.1])
     # yaw changes sign unless yaw_motors_reversed: motor 1 has yaw column -1
     np.testing.assert_allclose(mix[1], [0.05, -0.05, -0.05, 0.05])
-    np.testing.assert_allclose(mix[2], [-0.5, -0.5, 0.5, 0.5])   # limited to 500
+    np.testing.assert_allclose(mix[2], [-0.5, -0.5, 0.5, 0.5])  # limited to 500
     rev = rate_mix(pid[1:2], QUADX, 500, 400, yaw_reversed=True)
     np.testing.assert_allclose(rev[0], -mix[1])
 
@@ -65,7 +65,7 @@ def test_mix_range_over_one_is_scaled_and_centred():
 
 
 def test_idle_and_dshot_scaling():
-    assert idle_value(0.055) == pytest.approx(157.945)      # thesis: 5.5 % idle -> 158
+    assert idle_value(0.055) == pytest.approx(157.945)  # thesis: 5.5 % idle -> 158
     out = dshot_output(np.array([[-0.2, 0.0, 0.5, 1.3]]), 157.945, 2047)
     np.testing.assert_array_equal(out[0], [157, 157, 1102, 2047])
 
@@ -84,20 +84,31 @@ def test_mixer_reproduces_logged_motors_of_a_real_log():
 
     log = load_mixer_log(GIMBAL, 1)
     res = check_log(log)
-    assert res["yaw_reversed"] is True          # props-out quad: the fit says so
+    assert res["yaw_reversed"] is True  # props-out quad: the fit says so
     rmse = [m["rmse"] for m in res["motors"]]
     # integer PID terms and truncation give a few DShot units; the range is 157..2047
     assert max(rmse) < 8.0
-    worse = check_log(log, yaw_reversed="no")   # the wrong yaw direction must be visible
+    worse = check_log(log, yaw_reversed="no")  # the wrong yaw direction must be visible
     assert min(m["rmse"] for m in worse["motors"]) > 1.5 * max(rmse)
     without = [m["rmse"] for m in res["without_airmode"]["motors"]]
-    assert min(without) > 2 * max(rmse)         # airmode handling matters on this log
+    assert min(without) > 2 * max(rmse)  # airmode handling matters on this log
 
 
 @needs_logs
 def test_cli_json_last_line(tmp_path, capsys):
-    code = main(["physics", "mixer", str(GIMBAL), "--log-index", "1", "--json",
-                 "--no-figures", "--out", str(tmp_path / "run")])
+    code = main(
+        [
+            "physics",
+            "mixer",
+            str(GIMBAL),
+            "--log-index",
+            "1",
+            "--json",
+            "--no-figures",
+            "--out",
+            str(tmp_path / "run"),
+        ]
+    )
     assert code == 0
     last = capsys.readouterr().out.strip().splitlines()[-1]
     obj = json.loads(last)
@@ -144,7 +155,7 @@ def test_log_without_pid_field(tmp_path, capsys):
 def test_truncated_log(tmp_path, capsys):
     data = GIMBAL.read_bytes()
     path = tmp_path / "cut.bbl"
-    start = data.index(b"H Product:", 10)     # second log starts here: cut inside the first
+    start = data.index(b"H Product:", 10)  # second log starts here: cut inside the first
     path.write_bytes(data[: start // 2])
     line = _one_line_error(capsys, ["physics", "mixer", str(path), "--log-index", "1"])
     assert "truncated" in line or "damaged" in line
@@ -176,12 +187,23 @@ def test_thrust_linearization_matches_betaflight_formula():
     out = thrust_linearization(m, 20)
     np.testing.assert_allclose(out[2:], np.sqrt(m[2:] / t + b * b) - b)
     assert out[0] == -0.1 and out[1] == 0.0 and out[-1] == pytest.approx(1.0)
-    assert out[3] > 0.5                     # raises mid throttle, keeps the ends
+    assert out[3] > 0.5  # raises mid throttle, keeps the ends
 
 
 def test_bad_thrust_linear_value_is_one_line(capsys):
     if not GIMBAL.is_file():
         pytest.skip("shared Betaflight logs absent")
-    line = _one_line_error(capsys, ["physics", "mixer", str(GIMBAL), "--log-index", "1",
-                                    "--thrust-linear", "lots", "--no-figures"])
+    line = _one_line_error(
+        capsys,
+        [
+            "physics",
+            "mixer",
+            str(GIMBAL),
+            "--log-index",
+            "1",
+            "--thrust-linear",
+            "lots",
+            "--no-figures",
+        ],
+    )
     assert "--thrust-linear" in line

@@ -31,8 +31,6 @@ def _as_tree(poly, delays):
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
 
 
-
-
 def test_a_product_of_sums_becomes_its_monomials():
     poly = expand(*_tree_arrays("(2*u_T + 3*w)*(1 + 0.5*phi)"))
     assert _named(poly) == {("u_T",): 2.0, ("w",): 3.0, ("phi", "u_T"): 1.0, ("phi", "w"): 1.5}

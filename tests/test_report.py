@@ -30,8 +30,9 @@ def test_terms_key_on_structure_and_delay():
     keys = [k for k, _ in terms(eq("10.3*u_R(t-1) - 4.15*p + 0.5"))]
     assert sorted(keys) == ["1", "p", "u_R(t-1)"]
     # the same structure with other constants, and a different delay
-    shares = structure_shares([eq("10.3*u_R(t-1) - 4.15*p"), eq("9.1*u_R(t-1) - 3*p + q"),
-                               eq("9.1*u_R(t-2) - 3*p")])
+    shares = structure_shares(
+        [eq("10.3*u_R(t-1) - 4.15*p"), eq("9.1*u_R(t-1) - 3*p + q"), eq("9.1*u_R(t-2) - 3*p")]
+    )
     assert shares["p"] == 1.0
     assert shares["u_R(t-1)"] == pytest.approx(2 / 3)
     assert shares["u_R(t-2)"] == pytest.approx(1 / 3) and shares["q"] == pytest.approx(1 / 3)
@@ -88,8 +89,9 @@ def test_report_writes_every_figure_and_table(sweep, capsys):
         assert (rep / f"{stem}.pdf").read_bytes()[:5] == b"%PDF-"
     assembly = json.loads((sweep / "assembly.json").read_text())
     metrics = (rep / "metrics.md").read_text()
-    rows = [line for line in metrics.splitlines() if line.startswith("| 1s") or
-            line.startswith("| 3s")]
+    rows = [
+        line for line in metrics.splitlines() if line.startswith("| 1s") or line.startswith("| 3s")
+    ]
     assert len(rows) == 2 * 3  # two horizons x (best, median, all full models)
     best_1s = assembly["best"]["metrics"]["1s"]
     best_row = next(r for r in rows if r.startswith("| 1s | best"))

@@ -50,31 +50,41 @@ def test_port_matches_rotorpy_derivative_low_level_laws_and_se3(vehicle):
         state = Multirotor._unpack_state(s.copy())
         state["q"] = state["q"] / np.linalg.norm(state["q"])
         s_unit = Multirotor._pack_state(state)
-        control = {"cmd_thrust": 0.7 * params["mass"] * 9.81,
-                   "cmd_q": Rotation.random(random_state=int(rng.integers(1000))).as_quat(),
-                   "cmd_w": rng.normal(size=3)}
-        for mode, name, key in ((model.CTATT, "cmd_ctatt", "cmd_q"),
-                                (model.CTBR, "cmd_ctbr", "cmd_w")):
+        control = {
+            "cmd_thrust": 0.7 * params["mass"] * 9.81,
+            "cmd_q": Rotation.random(random_state=int(rng.integers(1000))).as_quat(),
+            "cmd_w": rng.normal(size=3),
+        }
+        for mode, name, key in (
+            (model.CTATT, "cmd_ctatt", "cmd_q"),
+            (model.CTBR, "cmd_ctbr", "cmd_w"),
+        ):
             mr.control_abstraction = name
             want = np.clip(mr.get_cmd_motor_speeds(state, control), lo, hi)
             got = np.empty(4)
-            model.motor_commands(s_unit, control["cmd_thrust"], np.asarray(control[key]), mode,
-                                 veh, got)
+            model.motor_commands(
+                s_unit, control["cmd_thrust"], np.asarray(control[key]), mode, veh, got
+            )
             np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
-        flat = {"x": rng.normal(size=3), "x_dot": rng.normal(size=3),
-                "x_ddot": rng.normal(size=3), "yaw": 0.3, "yaw_dot": 0.0}
+        flat = {
+            "x": rng.normal(size=3),
+            "x_dot": rng.normal(size=3),
+            "x_ddot": rng.normal(size=3),
+            "yaw": 0.3,
+            "yaw_dot": 0.0,
+        }
         se3 = SE3Control(params).update(0.0, state, flat)
         r_des = np.empty((3, 3))
         ref10 = np.concatenate([flat["x"], flat["x_dot"], flat["x_ddot"], [0.3]])
         u1 = model.se3_setpoint(s_unit, ref10, params["mass"], r_des)
         assert u1 == pytest.approx(se3["cmd_thrust"], rel=1e-12)
-        np.testing.assert_allclose(r_des, Rotation.from_quat(se3["cmd_q"]).as_matrix(),
-                                   atol=1e-12)
+        np.testing.assert_allclose(r_des, Rotation.from_quat(se3["cmd_q"]).as_matrix(), atol=1e-12)
 
 
-@pytest.mark.parametrize("vehicle, mode", [("hummingbird", "cmd_ctatt"),
-                                           ("crazyflie", "cmd_ctbr"),
-                                           ("crazyfliebrushless", "cmd_ctatt")])
+@pytest.mark.parametrize(
+    "vehicle, mode",
+    [("hummingbird", "cmd_ctatt"), ("crazyflie", "cmd_ctbr"), ("crazyfliebrushless", "cmd_ctatt")],
+)
 def test_closed_loop_matches_rotorpy_step(vehicle, mode):
     """0.2 s of rotorpy's own Multirotor.step (solve_ivp, tight tolerances) at rotorpy's 2 ms
     step, set-points changing, the low-level law recomputed every step, against the kernels:
@@ -83,8 +93,12 @@ def test_closed_loop_matches_rotorpy_step(vehicle, mode):
     tolerance is rtol 1e-3)."""
     params, _ = rf.vehicle_params(vehicle)
     veh = model.vehicle_arrays(params)
-    mr = Multirotor(params, control_abstraction=mode, aero=True,
-                    integrator_kwargs={"method": "DOP853", "rtol": 1e-10, "atol": 1e-10})
+    mr = Multirotor(
+        params,
+        control_abstraction=mode,
+        aero=True,
+        integrator_kwargs={"method": "DOP853", "rtol": 1e-10, "atol": 1e-10},
+    )
     s = np.zeros(20)
     s[0:3], s[3:6], s[9] = (0.0, 0.0, 2.0), (1.0, -0.5, 0.2), 1.0
     s[16:] = model.hover_rotor_speed(params)
@@ -140,11 +154,16 @@ def sign_gains(ds):
     return g_y, g_x, k_t
 
 
-@pytest.mark.parametrize("mode, vehicle", [("angle", "hummingbird"), ("rate", "hummingbird"),
-                                           ("angle", "crazyfliebrushless"),
-                                           ("rate", "crazyfliebrushless")])
-def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_path, mode,
-                                                                           vehicle):
+@pytest.mark.parametrize(
+    "mode, vehicle",
+    [
+        ("angle", "hummingbird"),
+        ("rate", "hummingbird"),
+        ("angle", "crazyfliebrushless"),
+        ("rate", "crazyfliebrushless"),
+    ],
+)
+def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_path, mode, vehicle):
     _, frame, checks = short_flight(tmp_path, mode, vehicle)
     assert checks["min_altitude_m"] > 1.0 and checks["max_tilt_deg"] < 45.0
     flights, ds = pipeline_dataset(frame, tmp_path)
@@ -183,8 +202,12 @@ def test_crash_and_divergence_are_errors(monkeypatch):
     ref[:, 2] = 2.0
     limits = (0.0, 1500.0)
     assert rf.check_flight(spec, t, states, ref, 101, limits)["min_altitude_m"] == 2.0
-    bad_cases = {"hit the ground": (2, 0.1), "diverged": (3, np.nan), "tilted": (6, 0.9),
-                 "spun": (10, 20.0)}
+    bad_cases = {
+        "hit the ground": (2, 0.1),
+        "diverged": (3, np.nan),
+        "tilted": (6, 0.9),
+        "spun": (10, 20.0),
+    }
     for what, (col, value) in bad_cases.items():
         bad = states.copy()
         bad[50:, col] = value
@@ -202,13 +225,10 @@ def test_crash_and_divergence_are_errors(monkeypatch):
         rf.simulate_flight(dataclasses.replace(spec, duration_s=20.0))
 
 
-def test_ensure_flights_caches_regenerates_bit_identically_and_adds_noise(tmp_path,
-                                                                          monkeypatch):
-    monkeypatch.setattr(rf, "PLAN", (("train", 1, 8.0), ("validation", 1, 8.0),
-                                     ("test", 1, 8.0)))
+def test_ensure_flights_caches_regenerates_bit_identically_and_adds_noise(tmp_path, monkeypatch):
+    monkeypatch.setattr(rf, "PLAN", (("train", 1, 8.0), ("validation", 1, 8.0), ("test", 1, 8.0)))
     res = rf.ensure_flights("angle", True, tmp_path / "a")
-    assert set(res) >= {"train", "validation", "test", "input_names", "config", "vehicles",
-                        "seeds"}
+    assert set(res) >= {"train", "validation", "test", "input_names", "config", "vehicles", "seeds"}
     assert res["vehicles"] == VEHICLES and len(res["seeds"]) == 6 == len(set(res["seeds"]))
     assert res["input_names"] == ("u_P", "u_R", "u_Y", "u_T")
     config_from_dict({"data": {**res["config"], "files": res["train"]}})  # a valid [data]
@@ -219,20 +239,19 @@ def test_ensure_flights_caches_regenerates_bit_identically_and_adds_noise(tmp_pa
     for p, q in zip(paths, other["train"] + other["validation"] + other["test"]):
         assert open(p, "rb").read() == open(q, "rb").read()
         clean_p = p.replace("angle-noisy", "angle")
-        assert open(clean_p, "rb").read() == open(q.replace("angle-noisy", "angle"),
-                                                   "rb").read()
+        assert open(clean_p, "rb").read() == open(q.replace("angle-noisy", "angle"), "rb").read()
 
     def no_flying(spec):
         raise AssertionError("cached flights were flown again")
 
     monkeypatch.setattr(rf, "simulate_flight", no_flying)
     assert rf.ensure_flights("angle", True, tmp_path / "a") == res
-    monkeypatch.setitem(rf.EXCITATION, "angle", {"sd": (0.1, 0.1, 0.05, 0.05),
-                                                 "cutoff_hz": 1.0})
+    monkeypatch.setitem(rf.EXCITATION, "angle", {"sd": (0.1, 0.1, 0.05, 0.05), "cutoff_hz": 1.0})
     with pytest.raises(AssertionError, match="flown again"):  # other settings: remade
         rf.ensure_flights("angle", False, tmp_path / "a")
 
     import pandas as pd
+
     dv, dw, bias = [], [], []
     for p in paths:
         noisy, clean = pd.read_parquet(p), pd.read_parquet(p.replace("angle-noisy", "angle"))
@@ -261,8 +280,7 @@ def test_heldout_fleet_has_its_own_vehicle_seeds_and_folder(tmp_path, monkeypatc
     tuned = {s.seed for m in rf.MODES for s in rf.flight_plan(m)}
     held = {s.seed for m in rf.MODES for s in rf.flight_plan(m, "heldout")}
     assert held and not tuned & held
-    monkeypatch.setattr(rf, "PLAN", (("train", 1, 6.0), ("validation", 1, 6.0),
-                                     ("test", 1, 6.0)))
+    monkeypatch.setattr(rf, "PLAN", (("train", 1, 6.0), ("validation", 1, 6.0), ("test", 1, 6.0)))
     res = rf.ensure_flights("rate", True, tmp_path, fleet="heldout")
     assert res["vehicles"] == ["crazyfliebrushless"]
     assert all("/heldout-rate-noisy/" in p for p in res["train"] + res["test"])

@@ -79,10 +79,20 @@ def quad12_run(tmp_path_factory):
     truth, _ = simulate_quad12(cfg)
     model = Quad12Model(theta_of(cfg.simulator.true_params, quad12.PARAMS), 5.0, 10)
     scoring = write_flights(run, [quad12.to_flight(truth, "truth")], 0.25)
-    write_run(run, {"method": "ga-gradient", "model": "quad12",
-                    "parameters": cfg.simulator.true_params, "v_hover": 5.0, "substeps": 10,
-                    "equations": model.equations()},
-              {"seed": 0}, {"scoring_data": scoring, "fit_time_s": 3.0}, 0.0)
+    write_run(
+        run,
+        {
+            "method": "ga-gradient",
+            "model": "quad12",
+            "parameters": cfg.simulator.true_params,
+            "v_hover": 5.0,
+            "substeps": 10,
+            "equations": model.equations(),
+        },
+        {"seed": 0},
+        {"scoring_data": scoring, "fit_time_s": 3.0},
+        0.0,
+    )
     return run
 
 
@@ -119,16 +129,19 @@ def test_compare_table_and_cli(quad12_run, gp_run, tmp_path, capsys):
     out = tmp_path / "cmp"
     # The GP run cannot fly the baseline's flight (other inputs): the table is still written,
     # and the command exits 2 saying which run and why, instead of a NaN row and exit 0.
-    assert main(["compare", str(gp_run), str(quad12_run), "--horizon", "50",
-                 "--out", str(out)]) == 2
+    assert (
+        main(["compare", str(gp_run), str(quad12_run), "--horizon", "50", "--out", str(out)]) == 2
+    )
     captured = capsys.readouterr()
     assert "| gp |" in captured.out and (tmp_path / "cmp.csv").is_file()
     assert (tmp_path / "cmp.md").read_text().count("\n|") >= 3
     err = captured.err.strip().splitlines()
     assert len(err) == 1 and "could not be scored on common data" in err[0]
     # Runs on the same flight compare cleanly: exit 0.
-    assert main(["compare", str(quad12_run), str(quad12_run), "--horizon", "50",
-                 "--out", str(out)]) == 0
+    assert (
+        main(["compare", str(quad12_run), str(quad12_run), "--horizon", "50", "--out", str(out)])
+        == 0
+    )
 
 
 def test_scoring_errors_are_one_line(tmp_path):

@@ -34,7 +34,7 @@ def test_measurement_noise_leaves_the_flight_unchanged():
     # rotation angle between clean and noisy attitude: chi with 3 d.o.f. of SD 0.01
     dot = np.abs(np.sum(noisy.quat * clean.quat, axis=1)).clip(max=1.0)
     angle = 2 * np.arccos(dot)
-    assert np.sqrt(np.mean(angle ** 2)) == pytest.approx(0.01 * np.sqrt(3), rel=0.05)
+    assert np.sqrt(np.mean(angle**2)) == pytest.approx(0.01 * np.sqrt(3), rel=0.05)
     assert np.allclose(np.linalg.norm(noisy.quat, axis=1), 1.0)
 
 
@@ -42,5 +42,6 @@ def test_bad_simulator_settings_are_named():
     with pytest.raises(GpquadError, match="pilot_gains"):
         simulate(dataclasses.replace(SHORT, pilot_gains={"u_X": {"phi": 1.0}}), INPUTS)
     with pytest.raises(GpquadError, match="diverged"):
-        simulate(dataclasses.replace(SHORT, equations={"p_dot": "5*p + u_R"}, pilot_gains={}),
-                 INPUTS)
+        simulate(
+            dataclasses.replace(SHORT, equations={"p_dot": "5*p + u_R"}, pilot_gains={}), INPUTS
+        )

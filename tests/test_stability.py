@@ -2,7 +2,6 @@
 whose truth is known: an equation that makes the full model diverge is swapped for the
 front alternative that flies."""
 
-
 import numpy as np
 import pytest
 
@@ -92,12 +91,8 @@ def test_finish_model_repairs_only_with_the_option(raw_dataset):
     assert (
         off.stability is None and off.equations["q_dot"].text() == model.equations["q_dot"].text()
     )
-    on = finish.finish_model(
-        model, raw_dataset, preset_evolution(finish=["repair"])
-    )
+    on = finish.finish_model(model, raw_dataset, preset_evolution(finish=["repair"]))
     assert on.stability["diverged_after"] == 0
     assert on.equations["q_dot"].text() == equation("q_dot", TRUTH["q_dot"], raw_dataset).text()
     again = DiscoveredModel.from_dict(on.to_dict())  # the report is kept in model.json
     assert again.stability == on.stability
-
-

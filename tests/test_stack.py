@@ -20,20 +20,21 @@ N_VARS = 13
 
 
 def _tree(prefix) -> Tree:
-    return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
-                           np.zeros(4, dtype=np.int64))
+    return Tree.from_lists(
+        [c for c, _ in prefix], [v for _, v in prefix], np.zeros(4, dtype=np.int64)
+    )
 
 
 def _products(n_terms):
     """[c_k * x_(k mod 13)] as prefix lists."""
-    return [[(MUL, 0.0), (CONST, 0.001 * (k + 1)), (VAR_BASE + k % N_VARS, 0.0)]
-            for k in range(n_terms)]
+    return [
+        [(MUL, 0.0), (CONST, 0.001 * (k + 1)), (VAR_BASE + k % N_VARS, 0.0)] for k in range(n_terms)
+    ]
 
 
 def _left_comb(n_leaves) -> Tree:
     """(((x0 + x1) + x2) + ...): every left operand is the deepest, the worst case."""
-    prefix = [(ADD, 0.0)] * (n_leaves - 1) + [(VAR_BASE + k % N_VARS, 0.0)
-                                              for k in range(n_leaves)]
+    prefix = [(ADD, 0.0)] * (n_leaves - 1) + [(VAR_BASE + k % N_VARS, 0.0) for k in range(n_leaves)]
     return _tree(prefix)
 
 
@@ -55,10 +56,14 @@ def _height_reference(codes) -> int:
     return rec()
 
 
-leaf = st.one_of(st.just([(CONST, 1.5)]),
-                 st.integers(0, N_VARS - 1).map(lambda k: [(VAR_BASE + k, 0.0)]))
-trees = st.recursive(leaf, lambda sub: st.tuples(st.integers(0, 3), sub, sub).map(
-    lambda t: [(t[0], 0.0)] + t[1] + t[2]), max_leaves=40)
+leaf = st.one_of(
+    st.just([(CONST, 1.5)]), st.integers(0, N_VARS - 1).map(lambda k: [(VAR_BASE + k, 0.0)])
+)
+trees = st.recursive(
+    leaf,
+    lambda sub: st.tuples(st.integers(0, 3), sub, sub).map(lambda t: [(t[0], 0.0)] + t[1] + t[2]),
+    max_leaves=40,
+)
 
 
 @settings(max_examples=80, deadline=None)
@@ -86,8 +91,15 @@ def test_shallow_sum_of_many_products_is_evaluated():
     assert jac.shape == (100, 34) and np.all(np.isfinite(jac))
 
     out = np.empty(len(lanes))
-    eval_lanes(tree.codes, tree.values, tree.size, np.ascontiguousarray(lanes.T),
-               np.empty((STACK_ROWS, len(lanes))), out, len(lanes))
+    eval_lanes(
+        tree.codes,
+        tree.values,
+        tree.size,
+        np.ascontiguousarray(lanes.T),
+        np.empty((STACK_ROWS, len(lanes))),
+        out,
+        len(lanes),
+    )
     ref = [naive.eval_tree(tree.codes, tree.values, lane) for lane in lanes]
     np.testing.assert_allclose(out, ref, rtol=1e-12)
 
@@ -107,7 +119,6 @@ def test_a_tree_deeper_than_the_stack_is_refused_everywhere():
     with pytest.raises(ValueError, match="stack"):
         residuals_and_jacobian(ev, beyond, starts, 50)
     equation = Equation("p_dot", beyond, ds.input_names, 0.0, 0.0)
-    model = DiscoveredModel({"p_dot": equation}, ds.input_names, ds.trim,
-                            ds.dt, 0, {})
+    model = DiscoveredModel({"p_dot": equation}, ds.input_names, ds.trim, ds.dt, 0, {})
     with pytest.raises(ValueError, match="stack"):
         model.simulate(ds, starts, 10)

@@ -19,11 +19,18 @@ from gpquad.study.sweep_folders import RunKey, fingerprint, grid, run_dir
 
 #: A tiny study: 2 equations x 2 repetitions on a 60 s simulated flight.
 TINY = {
-    "name": "tiny", "seed": 5,
+    "name": "tiny",
+    "seed": 5,
     "data": {"trim": "mean", "validation_fraction": 0.3},
     "simulator": {"duration_s": 60.0},
-    "evolution": {"targets": ["a_z", "p_dot"], "iterations": 2, "model_generations": 8,
-                  "test_generations": 3, "simplify_generations": 3, "window_s": 2.0},
+    "evolution": {
+        "targets": ["a_z", "p_dot"],
+        "iterations": 2,
+        "model_generations": 8,
+        "test_generations": 3,
+        "simplify_generations": 3,
+        "window_s": 2.0,
+    },
     "preset": "paper",
     "sweep": {"runs": 2, "full_models": 3, "horizons_s": [1.0, 3.0]},
 }
@@ -38,10 +45,17 @@ def tiny_config(**changes):
 
 def result_files(out: Path) -> dict[str, bytes]:
     """Every deterministic output of a sweep folder (not timings or status)."""
-    names = ("model.json", "assembly.json", "predictions.npz", "result.json", "history.csv",
-             "equations.tex")
-    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
-            if p.name in names}
+    names = (
+        "model.json",
+        "assembly.json",
+        "predictions.npz",
+        "result.json",
+        "history.csv",
+        "equations.tex",
+    )
+    return {
+        str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.name in names
+    }
 
 
 @pytest.fixture(scope="module")
@@ -59,8 +73,9 @@ def test_run_seed_is_a_spawned_child_independent_of_grid():
             expected = np.random.SeedSequence(11, spawn_key=(TARGET_NAMES.index(t), k))
             assert seq.spawn_key == expected.spawn_key
             assert np.array_equal(seq.generate_state(4), expected.generate_state(4))
-    states = {run_seed(11, t, k).generate_state(2).tobytes() for t in TARGET_NAMES
-              for k in range(30)}
+    states = {
+        run_seed(11, t, k).generate_state(2).tobytes() for t in TARGET_NAMES for k in range(30)
+    }
     assert len(states) == 180  # every run of the paper grid gets its own stream
     assembly = {assembly_seed(11, k).generate_state(2).tobytes() for k in range(30)}
     assert not assembly & states
@@ -68,8 +83,7 @@ def test_run_seed_is_a_spawned_child_independent_of_grid():
 
 def test_grid_is_target_major():
     cfg = tiny_config()
-    assert grid(cfg) == [RunKey("a_z", 0), RunKey("a_z", 1), RunKey("p_dot", 0),
-                         RunKey("p_dot", 1)]
+    assert grid(cfg) == [RunKey("a_z", 0), RunKey("a_z", 1), RunKey("p_dot", 0), RunKey("p_dot", 1)]
 
 
 def test_reference_sweep_writes_every_file(reference):
@@ -120,8 +134,14 @@ def test_more_runs_extend_a_sweep_without_changing_earlier_runs(reference, tmp_p
     shutil.copytree(reference, tmp_path / "s")
     out = run_sweep(tiny_config(), tmp_path / "s", jobs=1, runs=3, assemble=False)
     done = {(s["target"], s["repetition"]): s["skipped"] for s in out["runs"]}
-    assert done == {("a_z", 0): True, ("a_z", 1): True, ("a_z", 2): False,
-                    ("p_dot", 0): True, ("p_dot", 1): True, ("p_dot", 2): False}
+    assert done == {
+        ("a_z", 0): True,
+        ("a_z", 1): True,
+        ("a_z", 2): False,
+        ("p_dot", 0): True,
+        ("p_dot", 1): True,
+        ("p_dot", 2): False,
+    }
 
 
 def test_other_config_in_same_folder_is_refused(reference, tmp_path):
@@ -150,21 +170,32 @@ def test_jsonl_progress_events(reference, tmp_path):
         for p in run_dir(tmp_path / "s", key).iterdir():
             p.unlink()
     stream = io.StringIO()
-    run_sweep(tiny_config(), tmp_path / "s", jobs=1,
-              progress=SweepProgress("jsonl", stream=stream, interval=0.05, interval_log=0.0))
+    run_sweep(
+        tiny_config(),
+        tmp_path / "s",
+        jobs=1,
+        progress=SweepProgress("jsonl", stream=stream, interval=0.05, interval_log=0.0),
+    )
     events = [json.loads(line) for line in stream.getvalue().splitlines()]
     kinds = [e["event"] for e in events]
     assert kinds[0] == "start" and kinds[-1] == "sweep_done"
     done = [e for e in events if e["event"] == "run_done"]
     assert sorted((e["target"], e["repetition"], e["skipped"]) for e in done) == [
-        ("a_z", 0, True), ("a_z", 1, True), ("p_dot", 0, True), ("p_dot", 1, False)]
+        ("a_z", 0, True),
+        ("a_z", 1, True),
+        ("p_dot", 0, True),
+        ("p_dot", 1, False),
+    ]
     ref = json.loads((run_dir(reference, RunKey("p_dot", 1)) / "result.json").read_text())
     again = [e for e in done if not e["skipped"]][0]
     assert again["validation_error"] == ref["validation_error"]
     final = events[-1]
     assert final["best_validation_error"]["p_dot"] == min(
-        json.loads((run_dir(reference, RunKey("p_dot", k)) / "result.json").read_text())
-        ["validation_error"] for k in range(2))
+        json.loads((run_dir(reference, RunKey("p_dot", k)) / "result.json").read_text())[
+            "validation_error"
+        ]
+        for k in range(2)
+    )
 
 
 def test_live_progress_line_reports_counts_and_eta(reference):

@@ -41,8 +41,18 @@ horizons_s = [1.0, 3.0]
 
 
 def _sweep_cmd(config: Path, out: Path, jobs: int) -> list[str]:
-    return [sys.executable, "-m", "gpquad", "sweep", str(config), "--jobs", str(jobs),
-            "--out", str(out), "--quiet"]
+    return [
+        sys.executable,
+        "-m",
+        "gpquad",
+        "sweep",
+        str(config),
+        "--jobs",
+        str(jobs),
+        "--out",
+        str(out),
+        "--quiet",
+    ]
 
 
 def _env():
@@ -56,8 +66,9 @@ def reference(tmp_path_factory):
     root = tmp_path_factory.mktemp("kill")
     config = root / "kill.toml"
     config.write_text(KILL_TOML)
-    done = subprocess.run(_sweep_cmd(config, root / "ref", 1), env=_env(), capture_output=True,
-                          text=True, timeout=300)
+    done = subprocess.run(
+        _sweep_cmd(config, root / "ref", 1), env=_env(), capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0, done.stderr
     return config, root / "ref"
 
@@ -70,8 +81,13 @@ def test_sigkill_then_resume_equals_uninterrupted(reference, tmp_path, victim):
     config, ref = reference
     jobs = 2
     out = tmp_path / "killed"
-    proc = subprocess.Popen(_sweep_cmd(config, out, jobs), env=_env(), start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        _sweep_cmd(config, out, jobs),
+        env=_env(),
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     keys = None
     deadline = time.time() + 240
     try:
@@ -93,16 +109,18 @@ def test_sigkill_then_resume_equals_uninterrupted(reference, tmp_path, victim):
         proc.wait()
     try:
         finished = [k for k in keys if (run_dir(out, k) / "result.json").exists()]
-        partial = [k for k in keys if (run_dir(out, k) / "checkpoint.bin").exists()
-                   and k not in finished]
+        partial = [
+            k for k in keys if (run_dir(out, k) / "checkpoint.bin").exists() and k not in finished
+        ]
         assert len(finished) < len(keys) and partial, "the kill did not land mid-sweep"
         assert not (out / "model.json").exists()
         for k in partial:  # a checkpoint that survived the kill is valid and mid-run
             state, _ = load(run_dir(out, k) / "checkpoint.bin")
             assert 1 <= state.iteration <= 6
 
-        again = subprocess.run(_sweep_cmd(config, out, jobs), env=_env(), capture_output=True,
-                               text=True, timeout=300)
+        again = subprocess.run(
+            _sweep_cmd(config, out, jobs), env=_env(), capture_output=True, text=True, timeout=300
+        )
         assert again.returncode == 0, again.stderr
     finally:
         try:  # orphaned workers, if any are left

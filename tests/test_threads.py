@@ -14,8 +14,9 @@ needs_blas = pytest.mark.skipif(not blas_threads(), reason="no BLAS that threadp
 
 
 def blas_state() -> list[tuple[str, int]]:
-    return sorted((i["filepath"], i["num_threads"]) for i in threadpool_info()
-                  if i["user_api"] == "blas")
+    return sorted(
+        (i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"
+    )
 
 
 @needs_blas
@@ -51,8 +52,9 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
         with pytest.raises(Stop):
             search.identify(None, "p_dot", type("C", (), {"evolution": None})())
         model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
-        evolution = type("E", (), {"finish": ("repair",),
-                                    "refine_for": staticmethod(lambda target: 0)})()
+        evolution = type(
+            "E", (), {"finish": ("repair",), "refine_for": staticmethod(lambda target: 0)}
+        )()
         with pytest.raises(Stop):
             finish.finish_model(model, None, evolution)
     assert seen == [{1}, {1}]

@@ -131,20 +131,26 @@ def test_sympy_round_trip(seed):
 def test_parse_equation_with_delays():
     expr, delays = parse_equation("28.2*u_T(t-5) - w - 9.81", INPUTS)
     assert delays == {"u_T": 5}
-    assert expr == sp.sympify("28.2*u_T - w - 9.81", locals={
-        n: sp.Symbol(n, real=True) for n in ("u_T", "w")})
+    assert expr == sp.sympify(
+        "28.2*u_T - w - 9.81", locals={n: sp.Symbol(n, real=True) for n in ("u_T", "w")}
+    )
     tree = from_sympy(expr, delays, INPUTS)
     assert tree.delays.tolist() == [0, 0, 0, 5]
 
 
-@pytest.mark.parametrize("text, message", [
-    # several delays of one input are taps (tests/test_taps.py), up to MAX_TAPS of them
-    ("u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4) + u_R(t-5) + u_R(t-6)",
-     "more than 6 delays"),
-    ("10*p(t-1)", "only inputs"),
-    ("10*zeta", "unknown names"),
-    ("10*(p", "cannot parse"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        # several delays of one input are taps (tests/test_taps.py), up to MAX_TAPS of them
+        (
+            "u_R + u_R(t-1) + u_R(t-2) + u_R(t-3) + u_R(t-4) + u_R(t-5) + u_R(t-6)",
+            "more than 6 delays",
+        ),
+        ("10*p(t-1)", "only inputs"),
+        ("10*zeta", "unknown names"),
+        ("10*(p", "cannot parse"),
+    ],
+)
 def test_parse_equation_errors(text, message):
     with pytest.raises(GpquadError, match=message):
         parse_equation(text, INPUTS)
@@ -157,15 +163,15 @@ def test_latex_writes_delays():
 
 
 def test_sub_and_div_operand_order():
-    tree = Tree.from_lists([SUB, VAR_BASE + 6, DIV, CONST, VAR_BASE + 7], [0, 0, 0, 2.0, 0],
-                           [0] * 4)
+    tree = Tree.from_lists(
+        [SUB, VAR_BASE + 6, DIV, CONST, VAR_BASE + 7], [0, 0, 0, 2.0, 0], [0] * 4
+    )
     assert str(to_sympy(tree, INPUTS)) == "p - 2.0/q"
 
 
 def test_division_by_an_identically_zero_subtree_exports_like_the_kernel():
     # p / (q - q): the kernel's protected division gives 1; sympy alone would give zoo
-    tree = Tree.from_lists([DIV, VAR_BASE + 6, SUB, VAR_BASE + 7, VAR_BASE + 7], [0.0] * 5,
-                           [0] * 4)
+    tree = Tree.from_lists([DIV, VAR_BASE + 6, SUB, VAR_BASE + 7, VAR_BASE + 7], [0.0] * 5, [0] * 4)
     assert to_sympy(tree, INPUTS) == 1
     assert naive.eval_tree(tree.codes, tree.values, np.arange(13.0)) == 1.0
 
@@ -199,8 +205,9 @@ def test_shallow_sum_is_the_sum_of_least_depth(term_depths):
     prefix = shallow_sum(terms)
     codes = [c for c, _ in prefix]
     assert is_valid(codes)
-    least = next(d for d in range(40) if sum(2 ** t for t in term_depths) <= 2 ** d)
+    least = next(d for d in range(40) if sum(2**t for t in term_depths) <= 2**d)
     assert tree_depth(codes) == least
-    found = sorted(tuple(c) for _, c, _ in additive_terms(np.array(codes),
-                                                          np.array([v for _, v in prefix])))
+    found = sorted(
+        tuple(c) for _, c, _ in additive_terms(np.array(codes), np.array([v for _, v in prefix]))
+    )
     assert found == sorted(tuple(c for c, _ in t) for t in terms)

@@ -33,9 +33,11 @@ def test_config_that_is_not_utf8(tmp_path, capsys, encoding, command):
     text = QUICK.replace("[simulator]", "# caf\xe9\n[simulator]")
     blob = bytes(range(256)) if encoding == "binary" else text.encode(encoding)
     (tmp_path / "c.toml").write_bytes(blob)
-    argv = {"run": ["run", tmp_path / "c.toml", "--out", tmp_path / "r"],
-            "simulate": ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"],
-            "sweep": ["sweep", tmp_path / "c.toml", "--out", tmp_path / "s"]}[command]
+    argv = {
+        "run": ["run", tmp_path / "c.toml", "--out", tmp_path / "r"],
+        "simulate": ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"],
+        "sweep": ["sweep", tmp_path / "c.toml", "--out", tmp_path / "s"],
+    }[command]
     line = one_error_line(capsys, argv)
     assert "c.toml" in line and "not UTF-8" in line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.toml"]
@@ -46,8 +48,7 @@ SIMULATOR = {
     "rate-huge": ("rate_hz = 1e9", "simulator.rate_hz"),
     "duration-nan": ("duration_s = nan", "simulator.rate_hz"),
     "duration-inf": ("duration_s = inf", "simulator.rate_hz"),
-    "rate-negative-duration-negative": ("rate_hz = -1.0\nduration_s = -1.0",
-                                        "simulator.rate_hz"),
+    "rate-negative-duration-negative": ("rate_hz = -1.0\nduration_s = -1.0", "simulator.rate_hz"),
     "stick-negative": ("stick_sd = {u_P = -0.1}", "simulator.stick_sd.u_P"),
     "stick-nan": ("stick_sd = {u_R = nan}", "simulator.stick_sd.u_R"),
     "noise-huge": ("measurement_noise = {attitude = 1e6}", "simulator.measurement_noise.attitude"),
@@ -55,12 +56,16 @@ SIMULATOR = {
     "noise-unknown": ("measurement_noise = {altitude = 0.1}", "simulator.measurement_noise"),
     "input-limit-zero": ("input_limit = 0.0", "simulator.input_limit"),
     "time-constant-zero": ("stick_time_constant_s = 0.0", "simulator.stick_time_constant_s"),
-    "motionless": ("stick_sd = {u_P = 0.0, u_R = 0.0, u_Y = 0.0, u_T = 0.0}\n"
-                   "pilot_gains = {}", "simulator.stick_sd"),
+    "motionless": (
+        "stick_sd = {u_P = 0.0, u_R = 0.0, u_Y = 0.0, u_T = 0.0}\npilot_gains = {}",
+        "simulator.stick_sd",
+    ),
     "delay-huge": ('equations = {p_dot = "u_R(t-100000000) - p"}', "simulator.equations.p_dot"),
     "power-huge": ('equations = {p_dot = "p**100000"}', "simulator.equations.p_dot"),
-    "one-input-still": ("stick_sd = {u_Y = 0.0}\npilot_gains = {u_R = {phi = -0.6}}",
-                        "simulator.stick_sd.u_Y"),
+    "one-input-still": (
+        "stick_sd = {u_Y = 0.0}\npilot_gains = {u_R = {phi = -0.6}}",
+        "simulator.stick_sd.u_Y",
+    ),
 }
 
 
@@ -68,11 +73,17 @@ SIMULATOR = {
 @pytest.mark.parametrize("command", ["simulate", "run"])
 def test_simulator_settings(tmp_path, capsys, case, command):
     line_in_toml, field = SIMULATOR[case]
-    text = QUICK.replace("duration_s = 40.0\n", "" if "duration" in case else
-                         "duration_s = 40.0\n") + line_in_toml + "\n"
+    text = (
+        QUICK.replace("duration_s = 40.0\n", "" if "duration" in case else "duration_s = 40.0\n")
+        + line_in_toml
+        + "\n"
+    )
     (tmp_path / "c.toml").write_text(text)
-    argv = ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"] if command == \
-        "simulate" else ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"]
+    argv = (
+        ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"]
+        if command == "simulate"
+        else ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"]
+    )
     line = one_error_line(capsys, argv)
     assert field in line, line
     assert not (tmp_path / "f.csv").exists() and not (tmp_path / "r" / "model.json").exists()
@@ -80,8 +91,7 @@ def test_simulator_settings(tmp_path, capsys, case, command):
 
 def test_a_partial_equations_table_changes_one_equation():
     """equations = {p_dot = ...} replaces p_dot only; the other five keep the truth."""
-    flight = simulate(SimulatorConfig(duration_s=20.0, equations={"p_dot": "-2.0*p + u_R"}),
-                      INPUTS)
+    flight = simulate(SimulatorConfig(duration_s=20.0, equations={"p_dot": "-2.0*p + u_R"}), INPUTS)
     assert flight.meta["equations"] == {**MEDIAN_MODEL, "p_dot": "-2.0*p + u_R"}
     assert np.std(flight.vel[:, 0]) > 1e-3 and np.std(flight.vel[:, 2]) > 1e-3
 
@@ -91,28 +101,31 @@ def test_a_partial_stick_table_moves_every_input():
     assert all(np.ptp(flight.inputs[:, j]) > 0.01 for j in range(4))
 
 
-@pytest.mark.parametrize("line,field", [("const_variance = inf", "evolution.gp.const_variance"),
-                                        ("const_low = -inf", "evolution.gp.const_low")])
+@pytest.mark.parametrize(
+    "line,field",
+    [
+        ("const_variance = inf", "evolution.gp.const_variance"),
+        ("const_low = -inf", "evolution.gp.const_low"),
+    ],
+)
 def test_constant_settings_must_be_finite(tmp_path, capsys, line, field):
     (tmp_path / "c.toml").write_text(QUICK.replace("[simulator]", f"{line}\n[simulator]"))
-    out = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r",
-                                  "--quiet"])
+    out = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"])
     assert f"'{field}'" in out
 
 
 def test_exclude_leaves_of_every_variable(tmp_path, capsys):
     names = '["phi", "theta", "psi", "u", "v", "w", "p", "q", "r", "u_P", "u_R", "u_Y", "u_T"]'
-    (tmp_path / "c.toml").write_text(QUICK.replace("[simulator]", f"exclude_leaves = {names}\n"
-                                                   "[simulator]"))
-    line = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r",
-                                   "--quiet"])
+    (tmp_path / "c.toml").write_text(
+        QUICK.replace("[simulator]", f"exclude_leaves = {names}\n[simulator]")
+    )
+    line = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"])
     assert "evolution.exclude_leaves" in line
 
 
 # ---------------------------------------------------------------- hand-edited model.json
 def _prefix(codes, values):
-    return lambda m: m["targets"]["p_dot"].__setitem__("prefix", {"codes": codes,
-                                                                  "values": values})
+    return lambda m: m["targets"]["p_dot"].__setitem__("prefix", {"codes": codes, "values": values})
 
 
 def _set(key, value):
@@ -130,15 +143,21 @@ MODEL_EDITS = {
     "nan-constant": (_prefix([2, 4, 11], [float("nan"), 0.0, 0.0]), "prefix.values[0]"),
     "huge-constant": (_prefix([2, 4, 11], [1e308, 0.0, 0.0]), "prefix.values[0]"),
     "string-codes": (_prefix("abc", [1.0]), "prefix"),
-    "huge-delay": (_set("delays", {"u_R": 10 ** 9}), "delays.u_R"),
+    "huge-delay": (_set("delays", {"u_R": 10**9}), "delays.u_R"),
     "negative-delay": (_set("delays", {"u_R": -3}), "delays.u_R"),
     "delay-of-unknown": (_set("delays", {"u_Q": 2}), "delays.u_Q"),
     "expr-disagrees": (_set("expr", "42*q"), "targets.p_dot.expr"),
     "empty-inputs": (lambda m: m.__setitem__("input_names", []), "input_names"),
-    "payload-input-name": (lambda m: m.__setitem__(
-        "input_names", ["__import__('os').system('x')", "u_R", "u_Y", "u_T"]), "input_names[0]"),
-    "renamed-target": (lambda m: m["targets"].__setitem__("x_dot", m["targets"].pop("p_dot")),
-                       "targets.x_dot"),
+    "payload-input-name": (
+        lambda m: m.__setitem__(
+            "input_names", ["__import__('os').system('x')", "u_R", "u_Y", "u_T"]
+        ),
+        "input_names[0]",
+    ),
+    "renamed-target": (
+        lambda m: m["targets"].__setitem__("x_dot", m["targets"].pop("p_dot")),
+        "targets.x_dot",
+    ),
     "dt-zero": (lambda m: m.__setitem__("dt", 0.0), "'dt'"),
     "dt-nan": (lambda m: m.__setitem__("dt", float("nan")), "'dt'"),
     "targets-list": (lambda m: m.__setitem__("targets", []), "'targets'"),
@@ -153,10 +172,18 @@ def test_hand_edited_model(tmp_path, capsys, flight_csv, case, command):
     model = json.loads((run / "model.json").read_text())
     edit(model)
     (run / "model.json").write_text(json.dumps(model))
-    argv = {"export": ["export", run, "--format", "json"],
-            "fly": ["fly", run, "--inputs", write_inputs(tmp_path / "in.csv"), "--out",
-                    tmp_path / "o.csv"],
-            "score": ["score", run, "--data", flight_csv]}[command]
+    argv = {
+        "export": ["export", run, "--format", "json"],
+        "fly": [
+            "fly",
+            run,
+            "--inputs",
+            write_inputs(tmp_path / "in.csv"),
+            "--out",
+            tmp_path / "o.csv",
+        ],
+        "score": ["score", run, "--data", flight_csv],
+    }[command]
     line = one_error_line(capsys, argv)
     assert "model.json" in line and field in line, line
     assert not (tmp_path / "o.csv").exists()
@@ -168,9 +195,18 @@ def test_an_interrupted_model_is_flown_with_a_warning(tmp_path, capsys, command)
     model = json.loads((run / "model.json").read_text())
     model["interrupted"] = True
     (run / "model.json").write_text(json.dumps(model))
-    argv = ["export", str(run)] if command == "export" else \
-        ["fly", str(run), "--inputs", str(write_inputs(tmp_path / "in.csv")), "--out",
-         str(tmp_path / "o.csv")]
+    argv = (
+        ["export", str(run)]
+        if command == "export"
+        else [
+            "fly",
+            str(run),
+            "--inputs",
+            str(write_inputs(tmp_path / "in.csv")),
+            "--out",
+            str(tmp_path / "o.csv"),
+        ]
+    )
     capsys.readouterr()
     assert main(argv) == 0
     err = capsys.readouterr().err.strip().splitlines()
@@ -181,16 +217,16 @@ def test_an_interrupted_model_is_flown_with_a_warning(tmp_path, capsys, command)
 @pytest.mark.parametrize("horizon", ["0", "-5", "1000000000"])
 def test_compare_horizon(tmp_path, capsys, horizon):
     run = gp_folder(tmp_path)
-    line = one_error_line(capsys, ["compare", run, "--horizon", horizon, "--out",
-                                   tmp_path / "c"])
+    line = one_error_line(capsys, ["compare", run, "--horizon", horizon, "--out", tmp_path / "c"])
     assert "--horizon" in line
     assert not (tmp_path / "c.md").exists()
 
 
 @pytest.mark.parametrize("horizon", ["inf", "nan", "-1", "0"])
 def test_score_horizon(tmp_path, capsys, flight_csv, horizon):
-    line = one_error_line(capsys, ["score", gp_folder(tmp_path), "--data", flight_csv,
-                                   "--horizon-s", horizon])
+    line = one_error_line(
+        capsys, ["score", gp_folder(tmp_path), "--data", flight_csv, "--horizon-s", horizon]
+    )
     assert "--horizon-s" in line
 
 
@@ -205,7 +241,8 @@ def test_score_at_another_sample_rate(tmp_path, capsys, flight_csv):
 
 
 FLY_INPUTS = {
-    "empty": b"", "garbage": b"\x00\xff garbage \x01\n1,2\n",
+    "empty": b"",
+    "garbage": b"\x00\xff garbage \x01\n1,2\n",
     "utf16": "t,u_P,u_R,u_Y,u_T\n0,0,0,0,0\n0.04,0,0,0,0\n".encode("utf-16"),
     "header-only": b"t,u_P,u_R,u_Y,u_T\n",
     "one-row": b"t,u_P,u_R,u_Y,u_T\n0,0,0,0,0\n",
@@ -217,8 +254,10 @@ FLY_INPUTS = {
 @pytest.mark.parametrize("case", sorted(FLY_INPUTS))
 def test_fly_inputs(tmp_path, capsys, case):
     (tmp_path / "in.csv").write_bytes(FLY_INPUTS[case])
-    line = one_error_line(capsys, ["fly", gp_folder(tmp_path), "--inputs", tmp_path / "in.csv",
-                                   "--out", tmp_path / "o.csv"])
+    line = one_error_line(
+        capsys,
+        ["fly", gp_folder(tmp_path), "--inputs", tmp_path / "in.csv", "--out", tmp_path / "o.csv"],
+    )
     assert "in.csv" in line
     assert not (tmp_path / "o.csv").exists()
 
@@ -226,9 +265,11 @@ def test_fly_inputs(tmp_path, capsys, case):
 @pytest.mark.parametrize("command", ["check", "score"])
 def test_a_named_pipe_is_refused_without_blocking(tmp_path, capsys, command):
     os.mkfifo(tmp_path / "pipe.csv")
-    argv = ["data", "check", tmp_path / "pipe.csv", "--plot", tmp_path / "p.png"] \
-        if command == "check" else ["score", gp_folder(tmp_path), "--data",
-                                    tmp_path / "pipe.csv"]
+    argv = (
+        ["data", "check", tmp_path / "pipe.csv", "--plot", tmp_path / "p.png"]
+        if command == "check"
+        else ["score", gp_folder(tmp_path), "--data", tmp_path / "pipe.csv"]
+    )
     line = one_error_line(capsys, argv)
     assert "pipe" in line
 
@@ -241,8 +282,15 @@ def sweep_folder(tmp_path_factory):
     return folder / "s"
 
 
-@pytest.mark.parametrize("target", ["runs/p_dot/rep000/history.csv", "sweep.json",
-                                    "runs/p_dot/rep000/result.json", "assembly.json"])
+@pytest.mark.parametrize(
+    "target",
+    [
+        "runs/p_dot/rep000/history.csv",
+        "sweep.json",
+        "runs/p_dot/rep000/result.json",
+        "assembly.json",
+    ],
+)
 @pytest.mark.parametrize("blob", [b"\x00\xffnot it", b"", b"[1, 2]"])
 def test_report_of_a_damaged_sweep(tmp_path, capsys, sweep_folder, target, blob):
     import shutil
@@ -299,9 +347,20 @@ def test_sweep_with_an_unreachable_dask_scheduler(tmp_path, capsys, monkeypatch)
 
     monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1)
     (tmp_path / "c.toml").write_text(QUICK)
-    line = one_error_line(capsys, ["sweep", tmp_path / "c.toml", "--backend", "dask",
-                                   "--address", "tcp://127.0.0.1:1", "--out", tmp_path / "s",
-                                   "--quiet"])
+    line = one_error_line(
+        capsys,
+        [
+            "sweep",
+            tmp_path / "c.toml",
+            "--backend",
+            "dask",
+            "--address",
+            "tcp://127.0.0.1:1",
+            "--out",
+            tmp_path / "s",
+            "--quiet",
+        ],
+    )
     assert "--address" in line and "no Dask scheduler" in line
 
 

@@ -27,8 +27,10 @@ def payloads(marker) -> dict[str, str]:
     """The issue's payloads, each creating `marker` if evaluated."""
     return {
         "import": f"__import__('os').system('touch {marker}')",
-        "globals": ("0*Integer.__new__.__globals__['__builtins__']['__import__']('os')"
-                    f".system('touch {marker}')"),
+        "globals": (
+            "0*Integer.__new__.__globals__['__builtins__']['__import__']('os')"
+            f".system('touch {marker}')"
+        ),
         "lambda": f"(lambda: open('{marker}', 'w'))()",
     }
 
@@ -57,8 +59,10 @@ def gp_folder(tmp_path, equation: str | None = None, where: str = "config.json")
     (run / "config.json").write_text(json.dumps(table))
     (run / "run.json").write_text(json.dumps(info))
     rows = [f"{t},0,0,1.0,1.0,3" for t in ("a_x", "a_y", "a_z", "p_dot", "q_dot", "r_dot")]
-    (run / "history.csv").write_text("target,iteration,generation,best_suite_error,"
-                                     "median_suite_error,best_size\n" + "\n".join(rows) + "\n")
+    (run / "history.csv").write_text(
+        "target,iteration,generation,best_suite_error,"
+        "median_suite_error,best_size\n" + "\n".join(rows) + "\n"
+    )
     return run
 
 
@@ -69,27 +73,30 @@ def test_simulator_equation_in_a_config(tmp_path, capsys, monkeypatch, payload, 
     marker = tmp_path / "MARKER"
     text = QUICK + f'[simulator.equations]\np_dot = "{payloads(marker)[payload]}"\n'
     (tmp_path / "c.toml").write_text(text)
-    argv = {"simulate": ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"],
-            "run": ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"],
-            "sweep": ["sweep", tmp_path / "c.toml", "--out", tmp_path / "s", "--quiet"]}[command]
+    argv = {
+        "simulate": ["simulate", tmp_path / "c.toml", "--out", tmp_path / "f.csv"],
+        "run": ["run", tmp_path / "c.toml", "--out", tmp_path / "r", "--quiet"],
+        "sweep": ["sweep", tmp_path / "c.toml", "--out", tmp_path / "s", "--quiet"],
+    }[command]
     line = one_error_line(capsys, argv)
     assert "simulator.equations.p_dot" in line and "cannot parse" in line
     assert not marker.exists()
 
 
 @pytest.mark.parametrize("payload", PAYLOADS)
-@pytest.mark.parametrize("where,command", [("run.json", "compare"),
-                                           ("config.json", "control"),
-                                           ("config.json", "report")])
-def test_simulator_equation_in_a_run_folder(tmp_path, capsys, monkeypatch, payload, where,
-                                            command):
+@pytest.mark.parametrize(
+    "where,command",
+    [("run.json", "compare"), ("config.json", "control"), ("config.json", "report")],
+)
+def test_simulator_equation_in_a_run_folder(tmp_path, capsys, monkeypatch, payload, where, command):
     monkeypatch.chdir(tmp_path)
     marker = tmp_path / "MARKER"
     run = gp_folder(tmp_path, payloads(marker)[payload], where)
-    argv = {"compare": ["compare", run, "--out", tmp_path / "cmp"],
-            "control": ["control", "pid", run, "--out", tmp_path / "pid", "--no-figures",
-                        "--json"],
-            "report": ["report", run, "--format", "png"]}[command]
+    argv = {
+        "compare": ["compare", run, "--out", tmp_path / "cmp"],
+        "control": ["control", "pid", run, "--out", tmp_path / "pid", "--no-figures", "--json"],
+        "report": ["report", run, "--format", "png"],
+    }[command]
     line = one_error_line(capsys, argv)
     assert "simulator.equations.p_dot" in line and "cannot parse" in line
     assert not marker.exists()
@@ -111,10 +118,18 @@ def test_expression_in_model_json(tmp_path, capsys, monkeypatch, payload, field,
     (run / "model.json").write_text(json.dumps(model))
     if command == "score":
         assert main(["simulate", "--out", str(tmp_path / "f.csv")]) == 0
-    argv = {"export": ["export", run, "--format", "sympy"],
-            "fly": ["fly", run, "--inputs", write_inputs(tmp_path / "in.csv"), "--out",
-                    tmp_path / "o.csv"],
-            "score": ["score", run, "--data", tmp_path / "f.csv"]}[command]
+    argv = {
+        "export": ["export", run, "--format", "sympy"],
+        "fly": [
+            "fly",
+            run,
+            "--inputs",
+            write_inputs(tmp_path / "in.csv"),
+            "--out",
+            tmp_path / "o.csv",
+        ],
+        "score": ["score", run, "--data", tmp_path / "f.csv"],
+    }[command]
     line = one_error_line(capsys, argv)
     assert f"targets.p_dot.{field}" in line and "model.json" in line and "cannot parse" in line
     assert not marker.exists()
@@ -132,6 +147,7 @@ def finished_run(tmp_path_factory):
 
 def pickled_checkpoint(marker) -> bytes:
     """A checkpoint of the old pickled layout whose payload creates `marker`."""
+
     class Payload:
         def __reduce__(self):
             return (os.system, (f"touch {marker}",))
@@ -180,8 +196,19 @@ def test_sweep_result_candidates_run_no_code(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     marker = tmp_path / "MARKER"
     (tmp_path / "c.toml").write_text(QUICK + "[sweep]\nruns = 1\nfull_models = 1\n")
-    assert main(["sweep", str(tmp_path / "c.toml"), "--out", str(tmp_path / "s"), "--quiet",
-                 "--no-assemble"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(tmp_path / "c.toml"),
+                "--out",
+                str(tmp_path / "s"),
+                "--quiet",
+                "--no-assemble",
+            ]
+        )
+        == 0
+    )
     result = tmp_path / "s" / "runs" / "p_dot" / "rep000" / "result.json"
     saved = json.loads(result.read_text())
     saved["equation"]["candidates"] = [{"expr": payloads(marker)["import"], "delays": {}}]

@@ -21,8 +21,20 @@ def listing(folder) -> set[str]:
     return {str(p.relative_to(folder)) for p in folder.rglob("*")}
 
 
-@pytest.mark.parametrize("name", ["../../..", "..", "a/../../b", "/tmp/gpquad-trust-abs",
-                                  "x/y", "", ".hidden", "a\\u0000b", "n" * 101])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "../../..",
+        "..",
+        "a/../../b",
+        "/tmp/gpquad-trust-abs",
+        "x/y",
+        "",
+        ".hidden",
+        "a\\u0000b",
+        "n" * 101,
+    ],
+)
 @pytest.mark.parametrize("command", ["run", "sweep"])
 def test_run_name_is_a_file_name(tmp_path, capsys, monkeypatch, name, command):
     work = tmp_path / "a" / "b" / "work"
@@ -68,8 +80,9 @@ def test_run_files_that_are_links_are_refused(finished_run, tmp_path, capsys, li
     assert (listing(victim) if victim.is_dir() else victim.read_bytes()) == before
 
 
-def test_a_checkpoint_that_is_a_link_is_not_read_nor_written_through(finished_run, tmp_path,
-                                                                    capsys):
+def test_a_checkpoint_that_is_a_link_is_not_read_nor_written_through(
+    finished_run, tmp_path, capsys
+):
     run = copy_of(finished_run, tmp_path)
     victim = tmp_path / "victim"
     shutil.copy(run / "checkpoints" / "p_dot.ckpt", victim)
@@ -84,8 +97,18 @@ def test_a_checkpoint_that_is_a_link_is_not_read_nor_written_through(finished_ru
     assert victim.read_bytes() == before
 
 
-@pytest.mark.parametrize("files", [["../secret.csv"], ["sub/../../secret.csv"], "absolute",
-                                   ["flights/../../secret.csv"], "link", [], "text"])
+@pytest.mark.parametrize(
+    "files",
+    [
+        ["../secret.csv"],
+        ["sub/../../secret.csv"],
+        "absolute",
+        ["flights/../../secret.csv"],
+        "link",
+        [],
+        "text",
+    ],
+)
 def test_scoring_data_stays_inside_the_run_folder(tmp_path, capsys, files):
     run = gp_folder(tmp_path)
     secret = tmp_path / "secret.csv"
@@ -98,8 +121,11 @@ def test_scoring_data_stays_inside_the_run_folder(tmp_path, capsys, files):
     elif files == "text":
         files = "flight.csv"
     info = json.loads((run / "run.json").read_text())
-    info["scoring_data"] = {"files": files, "inputs": ["u_P", "u_R", "u_Y", "u_T"],
-                            "validation_fraction": 0.5}
+    info["scoring_data"] = {
+        "files": files,
+        "inputs": ["u_P", "u_R", "u_Y", "u_T"],
+        "validation_fraction": 0.5,
+    }
     (run / "run.json").write_text(json.dumps(info))
     line = one_error_line(capsys, ["compare", run, "--out", tmp_path / "cmp"])
     assert "run.json" in line and "scoring_data.files" in line
@@ -135,12 +161,24 @@ def test_a_folder_of_user_files_is_refused(tmp_path, capsys):
 def test_a_sweep_folder_is_not_taken_for_a_run(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "c.toml").write_text(QUICK)
-    assert main(["sweep", str(tmp_path / "c.toml"), "--runs", "1", "--out", str(tmp_path / "s"),
-                 "--quiet", "--no-assemble"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(tmp_path / "c.toml"),
+                "--runs",
+                "1",
+                "--out",
+                str(tmp_path / "s"),
+                "--quiet",
+                "--no-assemble",
+            ]
+        )
+        == 0
+    )
     (tmp_path / "s" / "model.json").write_text('{"the sweep best": 1}\n')
     before = listing(tmp_path / "s")
-    line = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "s",
-                                   "--quiet"])
+    line = one_error_line(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "s", "--quiet"])
     assert "sweep folder" in line
     assert listing(tmp_path / "s") == before
     assert (tmp_path / "s" / "model.json").read_text() == '{"the sweep best": 1}\n'
@@ -148,8 +186,7 @@ def test_a_sweep_folder_is_not_taken_for_a_run(tmp_path, capsys, monkeypatch):
 
 @pytest.mark.parametrize("value", [100_000_000, -5, "12", 1.5, None])
 @pytest.mark.parametrize("record", ["finished", "checkpoint"])
-def test_resume_checks_history_bytes_before_cutting(finished_run, tmp_path, capsys, value,
-                                                    record):
+def test_resume_checks_history_bytes_before_cutting(finished_run, tmp_path, capsys, value, record):
     """A damaged history_bytes (the finished record's or the checkpoint's) restarts the
     target with one warning; history.csv never grows past what was written."""
     run = copy_of(finished_run, tmp_path)
@@ -190,8 +227,10 @@ def _forge(state_dict: dict, change) -> bytes:
     fields = copy.deepcopy(state_dict)
     change(fields)
     payload = json.dumps({"state": fields, "meta": {"history_bytes": 0}}).encode()
-    return struct.pack("<8sQ32s", checkpoint.MAGIC, len(payload),
-                       hashlib.sha256(payload).digest()) + payload
+    return (
+        struct.pack("<8sQ32s", checkpoint.MAGIC, len(payload), hashlib.sha256(payload).digest())
+        + payload
+    )
 
 
 FORGERIES = {

@@ -20,22 +20,56 @@ from gpquad.models.equations import DiscoveredModel
 SYMBOLS = {n: sp.Symbol(n, real=True) for n in terminal_names(INPUTS)}
 
 
-@pytest.mark.parametrize("text", [
-    "__import__('os')", "p.__class__", "p[0]", "lambda: 1", "p; q", "p if q else r",
-    "exec", "[p]", "{p}", "p @ q", "p % q", "p // q", "'p'", "p == q", "p**q", "p**2.5",
-    f"p**{MAX_POWER + 1}", "9**9**9", "sin(p)", "p(t-1)", "u_R(t+1)", "u_R(t-1.5)", "",
-    "(" * 200 + "p" + ")" * 200, "1e999", "p +", "* p", "p q",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "__import__('os')",
+        "p.__class__",
+        "p[0]",
+        "lambda: 1",
+        "p; q",
+        "p if q else r",
+        "exec",
+        "[p]",
+        "{p}",
+        "p @ q",
+        "p % q",
+        "p // q",
+        "'p'",
+        "p == q",
+        "p**q",
+        "p**2.5",
+        f"p**{MAX_POWER + 1}",
+        "9**9**9",
+        "sin(p)",
+        "p(t-1)",
+        "u_R(t+1)",
+        "u_R(t-1.5)",
+        "",
+        "(" * 200 + "p" + ")" * 200,
+        "1e999",
+        "p +",
+        "* p",
+        "p q",
+    ],
+)
 def test_parser_refuses(text):
     with pytest.raises(GpquadError):
         parse_equation(text, INPUTS, source="test")
 
 
-@pytest.mark.parametrize("text,expected", [
-    ("10.3*u_R(t-1) - 4.15*p", "-4.15*p + 10.3*u_R"),
-    ("-p**2", "-p**2"), ("(p + q)/2", "p/2 + q/2"), ("p**(-2)", "p**(-2)"),
-    ("1.5e-3*q - -r", "0.0015*q + r"), ("2*3", "6"), ("+p", "p"),
-])
+@pytest.mark.parametrize(
+    "text,expected",
+    [
+        ("10.3*u_R(t-1) - 4.15*p", "-4.15*p + 10.3*u_R"),
+        ("-p**2", "-p**2"),
+        ("(p + q)/2", "p/2 + q/2"),
+        ("p**(-2)", "p**(-2)"),
+        ("1.5e-3*q - -r", "0.0015*q + r"),
+        ("2*3", "6"),
+        ("+p", "p"),
+    ],
+)
 def test_parser_reads_the_grammar(text, expected):
     expr, _ = parse_equation(text, INPUTS)
     assert sp.simplify(expr - parse_in_symbols(expected, SYMBOLS)) == 0

@@ -94,7 +94,11 @@ def fly(theta, vehicle, gain, drive, closed, quat0, vel0, rates0, dt, substeps):
                 for i in range(4):
                     speeds[k, i] = omega[i]
             integrate_step(q, v, w, pos, a, h, mat)
-        if not (np.isfinite(w[0]) and np.isfinite(w[1]) and np.isfinite(w[2])
-                and abs(w[0]) + abs(w[1]) + abs(w[2]) < 1e3):
+        if not (
+            np.isfinite(w[0])
+            and np.isfinite(w[1])
+            and np.isfinite(w[2])
+            and abs(w[0]) + abs(w[1]) + abs(w[2]) < 1e3
+        ):
             break
     return states, acc, speeds

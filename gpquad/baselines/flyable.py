@@ -34,12 +34,21 @@ class Quad12Model:
     def simulate(self, dataset, starts, n_steps: int) -> np.ndarray:
         idx = np.asarray(starts)[:, None] + np.arange(n_steps)[None, :]
         V = dataset.arrays.inputs[idx]
-        return quad12.fly_windows(self.theta, dataset.arrays.states[np.asarray(starts)], V,
-                                  self.v_hover, dataset.dt, self.substeps)
+        return quad12.fly_windows(
+            self.theta,
+            dataset.arrays.states[np.asarray(starts)],
+            V,
+            self.v_hover,
+            dataset.dt,
+            self.substeps,
+        )
 
     def equations(self) -> dict[str, str]:
-        f = quad12.f_quad12([sp.Symbol(n, real=True) for n in quad12.STATES],
-                            [sp.Symbol(n, real=True) for n in quad12.INPUTS], list(self.theta))
+        f = quad12.f_quad12(
+            [sp.Symbol(n, real=True) for n in quad12.STATES],
+            [sp.Symbol(n, real=True) for n in quad12.INPUTS],
+            list(self.theta),
+        )
         pairs = zip(quad12.STATES, f, strict=True)
         return {f"d({n})/dt": sp.sstr(e, full_prec=True) for n, e in pairs}
 
@@ -50,7 +59,7 @@ class BodyModel:
 
     theta: np.ndarray
     vehicle: np.ndarray  # [l, m, g, omega_min, omega_max]
-    gain: np.ndarray     # (4, 6)
+    gain: np.ndarray  # (4, 6)
     substeps: int
     input_names: tuple[str, ...] = REF_NAMES
     max_delay: int = 0
@@ -63,21 +72,31 @@ class BodyModel:
         arr = dataset.arrays
         out = np.empty((len(starts), n_steps + 1, 9))
         for i, s in enumerate(np.asarray(starts)):
-            states, _, _ = fly(self.theta, self.vehicle, self.gain,
-                               np.ascontiguousarray(arr.inputs[s: s + n_steps + 1]), True,
-                               arr.quat[s].copy(), arr.states[s, 3:6].copy(),
-                               arr.states[s, 6:9].copy(), dataset.dt, self.substeps)
+            states, _, _ = fly(
+                self.theta,
+                self.vehicle,
+                self.gain,
+                np.ascontiguousarray(arr.inputs[s : s + n_steps + 1]),
+                True,
+                arr.quat[s].copy(),
+                arr.states[s, 3:6].copy(),
+                arr.states[s, 6:9].copy(),
+                dataset.dt,
+                self.substeps,
+            )
             out[i] = states
         return out
 
     def equations(self) -> dict[str, str]:
         """Eq. (10) accelerations in motor speeds Omega_1..4 (the controller is in model.json)."""
-        s = {n: sp.Symbol(n, real=True) for n in
-             ("phi", "theta", "p", "q", "r", "Omega_1", "Omega_2", "Omega_3", "Omega_4")}
+        s = {
+            n: sp.Symbol(n, real=True)
+            for n in ("phi", "theta", "p", "q", "r", "Omega_1", "Omega_2", "Omega_3", "Omega_4")
+        }
         ixx, iyy, izz, jr, b, d = (sp.Float(float(v)) for v in self.theta)
         ell, m, g = (sp.Float(float(v)) for v in self.vehicle[:3])
         w = [s[f"Omega_{i}"] for i in range(1, 5)]
-        u1 = sum(x ** 2 for x in w)
+        u1 = sum(x**2 for x in w)
         u2, u3 = w[3] ** 2 - w[1] ** 2, w[0] ** 2 - w[2] ** 2
         u4 = w[1] ** 2 + w[3] ** 2 - w[0] ** 2 - w[2] ** 2
         om = w[1] + w[3] - w[0] - w[2]
@@ -97,7 +116,12 @@ def from_model_dict(d: dict):
     """The flyable model of a baseline model.json."""
     params = d["parameters"]
     if d["model"] == "quad12":
-        return Quad12Model(np.array([params[p] for p in quad12.PARAMS]), float(d["v_hover"]),
-                           int(d["substeps"]))
-    return BodyModel(np.array([params[p] for p in BODY_PARAMS]), np.array(d["vehicle"], float),
-                     np.array(d["controller_gain"], float), int(d["substeps"]))
+        return Quad12Model(
+            np.array([params[p] for p in quad12.PARAMS]), float(d["v_hover"]), int(d["substeps"])
+        )
+    return BodyModel(
+        np.array([params[p] for p in BODY_PARAMS]),
+        np.array(d["vehicle"], float),
+        np.array(d["controller_gain"], float),
+        int(d["substeps"]),
+    )

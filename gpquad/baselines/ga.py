@@ -57,7 +57,7 @@ class GAResult:
         return self.best[-1]
 
 
-CostFn = Callable[[np.ndarray], np.ndarray]          # theta (P, n_p) -> I (P,)
+CostFn = Callable[[np.ndarray], np.ndarray]  # theta (P, n_p) -> I (P,)
 GradFn = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # -> (I (P,), grad (P, n_p))
 
 
@@ -73,8 +73,9 @@ def roulette(rng: np.random.Generator, cost: np.ndarray, n: int) -> np.ndarray:
     return rng.choice(len(cost), size=n, p=fitness / fitness.sum())
 
 
-def gradient_step(z: np.ndarray, cost: Callable, grad_z: Callable, alpha0: float,
-                  max_backtracks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def gradient_step(
+    z: np.ndarray, cost: Callable, grad_z: Callable, alpha0: float, max_backtracks: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Armijo-backtracked steepest-descent step for each row of z (P, n) in the unit box.
 
     cost(z) -> I (P,); grad_z(z) -> (I, dI/dz).
@@ -102,8 +103,9 @@ def gradient_step(z: np.ndarray, cost: Callable, grad_z: Callable, alpha0: float
     return new_z, new_c, accepted, evals
 
 
-def crossover(rng: np.random.Generator, a: np.ndarray, b: np.ndarray, prob: float
-              ) -> tuple[np.ndarray, np.ndarray]:
+def crossover(
+    rng: np.random.Generator, a: np.ndarray, b: np.ndarray, prob: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Weighted-average crossover of parent pairs (n, n_p) with probability prob."""
     w = rng.random((len(a), 1))
     do = rng.random((len(a), 1)) < prob
@@ -112,8 +114,14 @@ def crossover(rng: np.random.Generator, a: np.ndarray, b: np.ndarray, prob: floa
     return c1, c2
 
 
-def mutate(rng: np.random.Generator, z: np.ndarray, prob: float, generation: int,
-           generations: int, shape: float) -> np.ndarray:
+def mutate(
+    rng: np.random.Generator,
+    z: np.ndarray,
+    prob: float,
+    generation: int,
+    generations: int,
+    shape: float,
+) -> np.ndarray:
     """Non-uniform mutation: genes move toward a box edge by a shrinking random fraction."""
     hit = rng.random(z.shape) < prob
     up = rng.random(z.shape) < 0.5
@@ -123,8 +131,15 @@ def mutate(rng: np.random.Generator, z: np.ndarray, prob: float, generation: int
     return np.where(hit, moved, z)
 
 
-def run_ga(cost: CostFn, gradient: GradFn, low: np.ndarray, high: np.ndarray,
-           init_z: np.ndarray, params: GAParams, rng: np.random.Generator) -> GAResult:
+def run_ga(
+    cost: CostFn,
+    gradient: GradFn,
+    low: np.ndarray,
+    high: np.ndarray,
+    init_z: np.ndarray,
+    params: GAParams,
+    rng: np.random.Generator,
+) -> GAResult:
     """Minimise I(theta) over the box [low, high]; init_z (P, n_p) in the unit box.
 
     The random draws do not depend on params.gradient, so the gradient and traditional

@@ -11,10 +11,20 @@ from gpquad.baselines.schema import build, read_toml, require
 
 #: Feasible box per parameter ("physical specs"); the truth is inside but off-centre.
 DEFAULT_BOUNDS = {
-    "a_1": (-1.0, 0.0), "a_2": (0.0, 1.0), "a_3": (-1.0, 0.0), "a_4": (0.0, 1.0),
-    "a_5": (-1.0, 0.0), "a_6": (-0.05, 0.05), "a_7": (0.5, 5.0), "a_8": (-0.05, 0.05),
-    "a_9": (0.5, 5.0), "a_10": (-0.05, 0.05), "a_11": (0.5, 5.0), "b_1": (0.0, 1.0),
-    "b_2": (0.0, 1.0), "b_3": (-1.0, 0.0),
+    "a_1": (-1.0, 0.0),
+    "a_2": (0.0, 1.0),
+    "a_3": (-1.0, 0.0),
+    "a_4": (0.0, 1.0),
+    "a_5": (-1.0, 0.0),
+    "a_6": (-0.05, 0.05),
+    "a_7": (0.5, 5.0),
+    "a_8": (-0.05, 0.05),
+    "a_9": (0.5, 5.0),
+    "a_10": (-0.05, 0.05),
+    "a_11": (0.5, 5.0),
+    "b_1": (0.0, 1.0),
+    "b_2": (0.0, 1.0),
+    "b_3": (-1.0, 0.0),
 }
 
 
@@ -56,8 +66,20 @@ class StudySection:
 
     seeds: int = 20
     fraction: float = 0.05
-    noise_sd: tuple[float, ...] = (0.0, 0.002, 0.0, 0.002, 0.0, 0.002,
-                                   0.0005, 0.001, 0.0005, 0.001, 0.0005, 0.001)
+    noise_sd: tuple[float, ...] = (
+        0.0,
+        0.002,
+        0.0,
+        0.002,
+        0.0,
+        0.002,
+        0.0005,
+        0.001,
+        0.0005,
+        0.001,
+        0.0005,
+        0.001,
+    )
 
 
 @dataclass(frozen=True)
@@ -73,35 +95,60 @@ class GAConfig:
 
 def validate(cfg: GAConfig, source: str) -> GAConfig:
     s, g = cfg.simulator, cfg.ga
-    require(len(s.excitation_sd) == 4, "give 4 values (u_1..u_4)", source,
-            "simulator.excitation_sd")
+    require(
+        len(s.excitation_sd) == 4, "give 4 values (u_1..u_4)", source, "simulator.excitation_sd"
+    )
     require(len(s.pilot_gains) == 7, "give 7 gains", source, "simulator.pilot_gains")
     for name, sd in (("simulator.noise_sd", s.noise_sd), ("study.noise_sd", cfg.study.noise_sd)):
         require(len(sd) in (0, 12), "give 12 SDs (one per state) or none", source, name)
-    require(set(s.true_params) == set(quad12.PARAMS),
-            f"give exactly the parameters {list(quad12.PARAMS)}", source, "simulator.true_params")
-    require(s.rate_hz > 0 and s.duration_s > 0 and s.substeps >= 1,
-            "rate_hz, duration_s > 0 and substeps >= 1", source, "simulator.rate_hz")
+    require(
+        set(s.true_params) == set(quad12.PARAMS),
+        f"give exactly the parameters {list(quad12.PARAMS)}",
+        source,
+        "simulator.true_params",
+    )
+    require(
+        s.rate_hz > 0 and s.duration_s > 0 and s.substeps >= 1,
+        "rate_hz, duration_s > 0 and substeps >= 1",
+        source,
+        "simulator.rate_hz",
+    )
     for loop in g.loops:
-        require(loop in quad12.LOOPS, f"unknown loop '{loop}'; choose from {list(quad12.LOOPS)}",
-                source, "ga.loops")
+        require(
+            loop in quad12.LOOPS,
+            f"unknown loop '{loop}'; choose from {list(quad12.LOOPS)}",
+            source,
+            "ga.loops",
+        )
     for p in quad12.PARAMS:
         b = g.bounds.get(p)
-        require(b is not None and len(b) == 2 and b[0] < b[1],
-                "need [low, high] with low < high for every parameter", source, f"ga.bounds.{p}")
+        require(
+            b is not None and len(b) == 2 and b[0] < b[1],
+            "need [low, high] with low < high for every parameter",
+            source,
+            f"ga.bounds.{p}",
+        )
     require(set(g.bounds) <= set(quad12.PARAMS), "unknown parameter", source, "ga.bounds")
-    require(g.difference in ("forward", "central"), "choose forward or central", source,
-            "ga.difference")
-    require(g.population >= 4 and 0 <= g.elite < g.population, "need population >= 4 and "
-            "0 <= elite < population", source, "ga.population")
+    require(
+        g.difference in ("forward", "central"), "choose forward or central", source, "ga.difference"
+    )
+    require(
+        g.population >= 4 and 0 <= g.elite < g.population,
+        "need population >= 4 and 0 <= elite < population",
+        source,
+        "ga.population",
+    )
     require(g.generations >= 1, "must be >= 1", source, "ga.generations")
     for name in ("crossover_prob", "mutation_prob"):
         v = getattr(g, name)
         require(0.0 <= v <= 1.0, "must be in [0, 1]", source, f"ga.{name}")
-    require(cfg.study.seeds >= 1 and 0 < cfg.study.fraction < 1, "need seeds >= 1 and "
-            "0 < fraction < 1", source, "study.fraction")
-    require(0.0 < cfg.validation_fraction < 1.0, "must be in (0, 1)", source,
-            "validation_fraction")
+    require(
+        cfg.study.seeds >= 1 and 0 < cfg.study.fraction < 1,
+        "need seeds >= 1 and 0 < fraction < 1",
+        source,
+        "study.fraction",
+    )
+    require(0.0 < cfg.validation_fraction < 1.0, "must be in (0, 1)", source, "validation_fraction")
     require(cfg.score_horizon_steps >= 1, "must be >= 1", source, "score_horizon_steps")
     return cfg
 

@@ -30,15 +30,23 @@ class LoopData:
         return self.model.gradient(self.X, self.U, self.D, theta)
 
 
-def simulate(cfg: GAConfig, noise_sd=(), seed_offset: int = 0
-             ) -> tuple[quad12.Quad12Record, quad12.Quad12Record]:
+def simulate(
+    cfg: GAConfig, noise_sd=(), seed_offset: int = 0
+) -> tuple[quad12.Quad12Record, quad12.Quad12Record]:
     """(truth record, measured record with state noise) of the configured simulator."""
     s = cfg.simulator
     rng = np.random.default_rng(np.random.SeedSequence([s.seed, seed_offset]))
-    rec = quad12.simulate_quad12(theta_of(s.true_params, quad12.PARAMS), duration_s=s.duration_s,
-                                 rate_hz=s.rate_hz, substeps=s.substeps,
-                                 excitation_sd=np.array(s.excitation_sd), tau_s=s.excitation_tau_s,
-                                 gains=np.array(s.pilot_gains), v_hover=s.v_hover, rng=rng)
+    rec = quad12.simulate_quad12(
+        theta_of(s.true_params, quad12.PARAMS),
+        duration_s=s.duration_s,
+        rate_hz=s.rate_hz,
+        substeps=s.substeps,
+        excitation_sd=np.array(s.excitation_sd),
+        tau_s=s.excitation_tau_s,
+        gains=np.array(s.pilot_gains),
+        v_hover=s.v_hover,
+        rng=rng,
+    )
     if len(noise_sd) == 0 or not np.any(noise_sd):
         return rec, rec
     X = rec.X + rng.standard_normal(rec.X.shape) * np.asarray(noise_sd)
@@ -56,14 +64,21 @@ def loop_data(rec: quad12.Quad12Record, loop: str, stop: int, difference: str) -
 
 def ga_params(cfg: GAConfig, gradient: bool) -> GAParams:
     g = cfg.ga
-    return GAParams(population=g.population, generations=g.generations, elite=g.elite,
-                    crossover_prob=g.crossover_prob, mutation_prob=g.mutation_prob,
-                    mutation_shape=g.mutation_shape, gradient=gradient,
-                    max_backtracks=g.max_backtracks)
+    return GAParams(
+        population=g.population,
+        generations=g.generations,
+        elite=g.elite,
+        crossover_prob=g.crossover_prob,
+        mutation_prob=g.mutation_prob,
+        mutation_shape=g.mutation_shape,
+        gradient=gradient,
+        max_backtracks=g.max_backtracks,
+    )
 
 
-def identify_loops(cfg: GAConfig, rec: quad12.Quad12Record, gradient: bool, seed: int
-                   ) -> tuple[dict[str, GAResult], dict[str, LoopData], dict[str, float]]:
+def identify_loops(
+    cfg: GAConfig, rec: quad12.Quad12Record, gradient: bool, seed: int
+) -> tuple[dict[str, GAResult], dict[str, LoopData], dict[str, float]]:
     """Run the GA on every configured loop; returns results, problems and fit time per loop (s).
 
     The initial population of loop i is drawn from SeedSequence([seed, i, 0]) and the GA's
@@ -75,11 +90,21 @@ def identify_loops(cfg: GAConfig, rec: quad12.Quad12Record, gradient: bool, seed
         prob = loop_data(rec, loop, stop, cfg.ga.difference)
         low = np.array([cfg.ga.bounds[p][0] for p in prob.names])
         high = np.array([cfg.ga.bounds[p][1] for p in prob.names])
-        init = initial_population(np.random.default_rng(np.random.SeedSequence([seed, i, 0])),
-                                  cfg.ga.population, len(prob.names))
+        init = initial_population(
+            np.random.default_rng(np.random.SeedSequence([seed, i, 0])),
+            cfg.ga.population,
+            len(prob.names),
+        )
         t0 = time.perf_counter()
-        results[loop] = run_ga(prob.cost, prob.gradient, low, high, init, ga_params(cfg, gradient),
-                               np.random.default_rng(np.random.SeedSequence([seed, i, 1])))
+        results[loop] = run_ga(
+            prob.cost,
+            prob.gradient,
+            low,
+            high,
+            init,
+            ga_params(cfg, gradient),
+            np.random.default_rng(np.random.SeedSequence([seed, i, 1])),
+        )
         times[loop] = time.perf_counter() - t0
         problems[loop] = prob
     return results, problems, times
@@ -125,16 +150,23 @@ def convergence_study(cfg: GAConfig, progress=None) -> dict:
             g_all = generations_to(curve, cfg.study.fraction)
             gens["all"].append(g_all)
             if g_all is not None:
-                to_threshold.append(int(sum(r.cumulative_evaluations[g_all]
-                                            for r in results.values())))
+                to_threshold.append(
+                    int(sum(r.cumulative_evaluations[g_all] for r in results.values()))
+                )
             curves.append(curve.tolist())
             evals.append(int(sum(r.evaluations for r in results.values())))
             if progress:
-                progress(f"  {label:11s} seed {seed:2d}: generations to "
-                         f"{cfg.study.fraction:.0%} of initial error {gens['all'][-1]}")
-        out[label] = {"generations": gens, "evaluations": evals, "curves": curves,
-                      "evaluations_to_threshold": to_threshold,
-                      "summary": summarise(gens, cfg.ga.generations)}
+                progress(
+                    f"  {label:11s} seed {seed:2d}: generations to "
+                    f"{cfg.study.fraction:.0%} of initial error {gens['all'][-1]}"
+                )
+        out[label] = {
+            "generations": gens,
+            "evaluations": evals,
+            "curves": curves,
+            "evaluations_to_threshold": to_threshold,
+            "summary": summarise(gens, cfg.ga.generations),
+        }
     return out
 
 
@@ -143,7 +175,12 @@ def summarise(gens: dict[str, list], cap: int) -> dict:
     out = {}
     for loop, values in gens.items():
         arr = np.array([cap + 1 if v is None else v for v in values], float)
-        out[loop] = {"median": float(np.median(arr)), "q25": float(np.percentile(arr, 25)),
-                     "q75": float(np.percentile(arr, 75)), "min": float(arr.min()),
-                     "max": float(arr.max()), "not_reached": int(sum(v is None for v in values))}
+        out[loop] = {
+            "median": float(np.median(arr)),
+            "q25": float(np.percentile(arr, 25)),
+            "q75": float(np.percentile(arr, 75)),
+            "min": float(arr.min()),
+            "max": float(arr.max()),
+            "not_reached": int(sum(v is None for v in values)),
+        }
     return out

@@ -21,13 +21,13 @@ class Geometry:
     n_blades: int = 2
     chord: float = 0.025
     prop_radius: float = 0.127
-    theta_tw0: float = 0.30       # blade twist at the hub, eq. (12)
-    theta_twf: float = 0.15       # twist slope along the radius, eq. (12)
-    inflow_ratio: float = 0.05    # lambda
+    theta_tw0: float = 0.30  # blade twist at the hub, eq. (12)
+    theta_twf: float = 0.15  # twist slope along the radius, eq. (12)
+    inflow_ratio: float = 0.05  # lambda
     drag_coefficient: float = 0.01
-    lift_method: str = "hover"    # hover (eq. 14) or blade_element (eq. 13)
-    hover_speed: float = 405.0    # measured hover motor speed, rad/s
-    rod_mass: float = 0.1         # each of the two arms, tip to tip 2 l
+    lift_method: str = "hover"  # hover (eq. 14) or blade_element (eq. 13)
+    hover_speed: float = 405.0  # measured hover motor speed, rad/s
+    rod_mass: float = 0.1  # each of the two arms, tip to tip 2 l
     box_mass: float = 0.9
     box_size: tuple[float, ...] = (0.12, 0.12, 0.08)
     motor_mass: float = 0.1
@@ -35,7 +35,7 @@ class Geometry:
     motor_height: float = 0.03
     prop_mass: float = 0.01
     prop_inertia_factor: float = 1.0 / 3.0
-    rotor_mass: float = 0.02      # spinning motor bell
+    rotor_mass: float = 0.02  # spinning motor bell
 
 
 def blade_element_factor(g: Geometry) -> float:
@@ -46,29 +46,38 @@ def blade_element_factor(g: Geometry) -> float:
 def lift_factor(g: Geometry, mass: float, gravity: float) -> float:
     """b (N s^2): eq. (14) from the hover speed, or eq. (13) from blade elements."""
     if g.lift_method == "hover":
-        return mass * gravity / (4.0 * g.hover_speed ** 2)
-    return (2 * math.pi * g.rho * g.n_blades * g.chord * g.prop_radius ** 3
-            * blade_element_factor(g))
+        return mass * gravity / (4.0 * g.hover_speed**2)
+    return 2 * math.pi * g.rho * g.n_blades * g.chord * g.prop_radius**3 * blade_element_factor(g)
 
 
 def drag_factor(g: Geometry) -> float:
     """d (N m s^2), eq. (16)."""
-    return (2 * math.pi * g.rho * g.n_blades * g.chord * g.prop_radius ** 4
-            * (g.drag_coefficient / (16 * math.pi) + g.inflow_ratio * blade_element_factor(g)))
+    return (
+        2
+        * math.pi
+        * g.rho
+        * g.n_blades
+        * g.chord
+        * g.prop_radius**4
+        * (g.drag_coefficient / (16 * math.pi) + g.inflow_ratio * blade_element_factor(g))
+    )
 
 
 def inertia(g: Geometry, arm: float) -> tuple[float, float, float, float]:
     """(I_xx, I_yy, I_zz, J_r) kg m^2 from simple shapes; arm = motor distance l (m)."""
-    rod = g.rod_mass * (2 * arm) ** 2 / 12.0          # each rod, about its transverse axes
+    rod = g.rod_mass * (2 * arm) ** 2 / 12.0  # each rod, about its transverse axes
     a, b, c = g.box_size
-    box = (g.box_mass * (b * b + c * c) / 12.0, g.box_mass * (a * a + c * c) / 12.0,
-           g.box_mass * (a * a + b * b) / 12.0)
+    box = (
+        g.box_mass * (b * b + c * c) / 12.0,
+        g.box_mass * (a * a + c * c) / 12.0,
+        g.box_mass * (a * a + b * b) / 12.0,
+    )
     mr, mh = g.motor_radius, g.motor_height
     motor_axial = g.motor_mass * mr * mr / 2.0
     motor_trans = g.motor_mass * (3 * mr * mr + mh * mh) / 12.0
-    tip = (g.motor_mass + g.prop_mass) * arm * arm   # point masses at the arm tips
-    prop_axial = g.prop_inertia_factor * g.prop_mass * g.prop_radius ** 2
-    prop_trans = prop_axial / 2.0                     # flat disc: transverse = axial / 2
+    tip = (g.motor_mass + g.prop_mass) * arm * arm  # point masses at the arm tips
+    prop_axial = g.prop_inertia_factor * g.prop_mass * g.prop_radius**2
+    prop_trans = prop_axial / 2.0  # flat disc: transverse = axial / 2
     # arms on x (motors 1, 3) and y (motors 2, 4): each pair adds 2 tip masses to the two
     # axes perpendicular to its arm.
     ixx = rod + box[0] + 2 * tip + 4 * (motor_trans + prop_trans)
@@ -81,5 +90,11 @@ def inertia(g: Geometry, arm: float) -> tuple[float, float, float, float]:
 def initial_guess(g: Geometry, arm: float, mass: float, gravity: float) -> dict[str, float]:
     """Theta_0 = {I_xx, I_yy, I_zz, J_r, b, d} of the analytic approximations."""
     ixx, iyy, izz, jr = inertia(g, arm)
-    return {"I_xx": ixx, "I_yy": iyy, "I_zz": izz, "J_r": jr,
-            "b": lift_factor(g, mass, gravity), "d": drag_factor(g)}
+    return {
+        "I_xx": ixx,
+        "I_yy": iyy,
+        "I_zz": izz,
+        "J_r": jr,
+        "b": lift_factor(g, mass, gravity),
+        "d": drag_factor(g),
+    }

@@ -34,8 +34,9 @@ def residuals(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
     return eps
 
 
-def error(theta, cfg: PemConfig, rec: PemRecord, y: np.ndarray, lam: np.ndarray,
-          closed: bool = True) -> float:
+def error(
+    theta, cfg: PemConfig, rec: PemRecord, y: np.ndarray, lam: np.ndarray, closed: bool = True
+) -> float:
     """E(Theta) of eq. (17) on a record; y (N, 9) measured outputs (noisy or not)."""
     drive = rec.refs if closed else rec.speeds
     states, acc, _ = predict(theta, cfg, drive, closed, y[0, :3], y[0, 3:6], rec.dt)
@@ -67,8 +68,9 @@ class PemFit:
     message: str
 
 
-def fit(cfg: PemConfig, rec: PemRecord, y: np.ndarray, theta0: np.ndarray,
-        closed: bool = True) -> PemFit:
+def fit(
+    cfg: PemConfig, rec: PemRecord, y: np.ndarray, theta0: np.ndarray, closed: bool = True
+) -> PemFit:
     """Minimise E from theta0 with scipy (SLSQP or trust-constr), bounds and eq. (20)."""
     p = cfg.pem
     lam = weights(y)
@@ -85,21 +87,40 @@ def fit(cfg: PemConfig, rec: PemRecord, y: np.ndarray, theta0: np.ndarray,
         cons = [LinearConstraint(perpendicular_axis_matrix(theta0), 0.0, np.inf)]
     t0 = time.perf_counter()
     if p.method == "SLSQP":
-        res = minimize(objective, np.ones(6), method="SLSQP", bounds=bounds, constraints=cons,
-                       options={"maxiter": p.max_iter, "ftol": p.tolerance})
+        res = minimize(
+            objective,
+            np.ones(6),
+            method="SLSQP",
+            bounds=bounds,
+            constraints=cons,
+            options={"maxiter": p.max_iter, "ftol": p.tolerance},
+        )
     else:
-        res = minimize(objective, np.ones(6), method="trust-constr", bounds=bounds,
-                       constraints=cons, options={"maxiter": p.max_iter, "gtol": p.tolerance,
-                                                  "xtol": p.tolerance})
+        res = minimize(
+            objective,
+            np.ones(6),
+            method="trust-constr",
+            bounds=bounds,
+            constraints=cons,
+            options={"maxiter": p.max_iter, "gtol": p.tolerance, "xtol": p.tolerance},
+        )
     x = np.clip(res.x, bounds.lb, bounds.ub)
     theta = x * theta0
-    return PemFit(theta, theta0, e0, error(theta, cfg, rec, y, lam, closed),
-                  int(getattr(res, "nit", 0)), count[0], time.perf_counter() - t0,
-                  str(res.message))
+    return PemFit(
+        theta,
+        theta0,
+        e0,
+        error(theta, cfg, rec, y, lam, closed),
+        int(getattr(res, "nit", 0)),
+        count[0],
+        time.perf_counter() - t0,
+        str(res.message),
+    )
 
 
-def divergence_times(theta, cfg: PemConfig, rec: PemRecord, window_s: float,
-                     limit_rad: float) -> dict[str, np.ndarray]:
+def divergence_times(
+    theta, cfg: PemConfig, rec: PemRecord, window_s: float, limit_rad: float
+) -> dict[str, np.ndarray]:
     """Seconds until the predicted attitude is off by more than limit_rad, per window.
 
     Windows of window_s tile the record; each starts from the recorded state and flies

@@ -9,8 +9,14 @@ from gpquad.baselines.schema import build, read_toml, require
 
 PARAMS = ("I_xx", "I_yy", "I_zz", "J_r", "b", "d")
 #: Truth: the paper's refined Pelican values (Table 1).
-TRUE_PARAMS = {"I_xx": 1.21e-2, "I_yy": 1.355e-2, "I_zz": 2.179e-2, "J_r": 1.143e-4,
-               "b": 2.256e-5, "d": 3.679e-7}
+TRUE_PARAMS = {
+    "I_xx": 1.21e-2,
+    "I_yy": 1.355e-2,
+    "I_zz": 2.179e-2,
+    "J_r": 1.143e-4,
+    "b": 2.256e-5,
+    "d": 3.679e-7,
+}
 #: The Pelican's LQ state-feedback gain K (appendix, Table A1): rows motors 1..4,
 #: columns [phi, theta, psi, p, q, r]; motor speed deviations in rad/s.
 PELICAN_GAIN = (
@@ -56,13 +62,13 @@ class PemSimConfig:
 
 @dataclass(frozen=True)
 class PemSection:
-    method: str = "SLSQP"          # SLSQP or trust-constr (quasi-Newton, constrained)
-    bound_factor: float = 10.0     # bounds theta0 / f .. theta0 * f
-    constraints: bool = True       # perpendicular-axis inequalities (20)
+    method: str = "SLSQP"  # SLSQP or trust-constr (quasi-Newton, constrained)
+    bound_factor: float = 10.0  # bounds theta0 / f .. theta0 * f
+    constraints: bool = True  # perpendicular-axis inequalities (20)
     max_iter: int = 200
     tolerance: float = 1e-12
     open_loop_windows_s: float = 10.0
-    divergence_rad: float = 0.2    # attitude error that counts as a failed prediction
+    divergence_rad: float = 0.2  # attitude error that counts as a failed prediction
 
 
 @dataclass(frozen=True)
@@ -81,29 +87,49 @@ class PemConfig:
 
 def validate(cfg: PemConfig, source: str) -> PemConfig:
     s, p, g = cfg.simulator, cfg.pem, cfg.geometry
-    require(len(cfg.controller.gain) == 4 and all(len(r) == 6 for r in cfg.controller.gain),
-            "need 4 rows (motors) of 6 gains [phi, theta, psi, p, q, r]", source,
-            "controller.gain")
-    require(len(s.ref_sd) == 4 and len(s.ref_tau_s) == 4, "give 4 values", source,
-            "simulator.ref_sd")
+    require(
+        len(cfg.controller.gain) == 4 and all(len(r) == 6 for r in cfg.controller.gain),
+        "need 4 rows (motors) of 6 gains [phi, theta, psi, p, q, r]",
+        source,
+        "controller.gain",
+    )
+    require(
+        len(s.ref_sd) == 4 and len(s.ref_tau_s) == 4, "give 4 values", source, "simulator.ref_sd"
+    )
     for name, sd in (("simulator.noise_sd", s.noise_sd), ("noisy_sd", cfg.noisy_sd)):
         require(len(sd) in (0, 9), "give 9 SDs (outputs y) or none", source, name)
-    require(set(s.true_params) == set(PARAMS), f"give exactly {list(PARAMS)}", source,
-            "simulator.true_params")
-    require(s.rate_hz > 0 and s.train_s > 0 and s.substeps >= 1, "rate_hz, train_s > 0 and "
-            "substeps >= 1", source, "simulator.rate_hz")
-    require(len(s.unseen_s) >= 1 and min(s.unseen_s) > p.open_loop_windows_s > 0,
-            f"each unseen flight must be longer than pem.open_loop_windows_s = "
-            f"{p.open_loop_windows_s:g} s (> 0), which the open-loop test windows span; lengthen "
-            "them or shorten the windows", source, "simulator.unseen_s")
-    require(p.method in ("SLSQP", "trust-constr"), "choose SLSQP or trust-constr", source,
-            "pem.method")
+    require(
+        set(s.true_params) == set(PARAMS),
+        f"give exactly {list(PARAMS)}",
+        source,
+        "simulator.true_params",
+    )
+    require(
+        s.rate_hz > 0 and s.train_s > 0 and s.substeps >= 1,
+        "rate_hz, train_s > 0 and substeps >= 1",
+        source,
+        "simulator.rate_hz",
+    )
+    require(
+        len(s.unseen_s) >= 1 and min(s.unseen_s) > p.open_loop_windows_s > 0,
+        f"each unseen flight must be longer than pem.open_loop_windows_s = "
+        f"{p.open_loop_windows_s:g} s (> 0), which the open-loop test windows span; lengthen "
+        "them or shorten the windows",
+        source,
+        "simulator.unseen_s",
+    )
+    require(
+        p.method in ("SLSQP", "trust-constr"), "choose SLSQP or trust-constr", source, "pem.method"
+    )
     require(p.bound_factor > 1.0, "must be > 1", source, "pem.bound_factor")
-    require(g.lift_method in ("hover", "blade_element"), "choose hover or blade_element", source,
-            "geometry.lift_method")
+    require(
+        g.lift_method in ("hover", "blade_element"),
+        "choose hover or blade_element",
+        source,
+        "geometry.lift_method",
+    )
     require(len(g.box_size) == 3, "give [x, y, z] in m", source, "geometry.box_size")
-    require(0.0 < cfg.validation_fraction < 1.0, "must be in (0, 1)", source,
-            "validation_fraction")
+    require(0.0 < cfg.validation_fraction < 1.0, "must be in (0, 1)", source, "validation_fraction")
     return cfg
 
 

@@ -35,8 +35,7 @@ class PemRecord:
         return np.hstack([self.states[:, :3], self.states[:, 6:9], self.acc])
 
     def head(self, n: int) -> PemRecord:
-        return PemRecord(self.t[:n], self.states[:n], self.acc[:n], self.speeds[:n],
-                         self.refs[:n])
+        return PemRecord(self.t[:n], self.states[:n], self.acc[:n], self.speeds[:n], self.refs[:n])
 
 
 def vehicle_array(cfg: PemConfig) -> np.ndarray:
@@ -58,9 +57,18 @@ def quat_of(angles: np.ndarray) -> np.ndarray:
 
 def predict(theta, cfg: PemConfig, drive, closed: bool, angles0, rates0, dt: float):
     """Fly the model from initial angles/rates (zero velocity): (states, acc, speeds)."""
-    return fly(np.asarray(theta, float), vehicle_array(cfg), np.array(cfg.controller.gain),
-               np.ascontiguousarray(drive, dtype=float), closed, quat_of(angles0),
-               np.zeros(3), np.asarray(rates0, float), dt, cfg.simulator.substeps)
+    return fly(
+        np.asarray(theta, float),
+        vehicle_array(cfg),
+        np.array(cfg.controller.gain),
+        np.ascontiguousarray(drive, dtype=float),
+        closed,
+        quat_of(angles0),
+        np.zeros(3),
+        np.asarray(rates0, float),
+        dt,
+        cfg.simulator.substeps,
+    )
 
 
 def simulate(cfg: PemConfig, duration_s: float, flight_index: int) -> PemRecord:
@@ -87,6 +95,13 @@ def add_noise(y: np.ndarray, sd, rng: np.random.Generator) -> np.ndarray:
 def to_flight(rec: PemRecord, name: str) -> Flight:
     """The truth record as an engine Flight with the references as inputs."""
     quat = np.array([quat_of(a) for a in rec.states[:, :3]])
-    return Flight(name=name, t=rec.t.copy(), quat=quat, vel=rec.states[:, 3:6].copy(),
-                  rates=rec.states[:, 6:9].copy(), inputs=rec.refs.copy(), input_names=REF_NAMES,
-                  meta={"source": "body-centric closed-loop simulator"})
+    return Flight(
+        name=name,
+        t=rec.t.copy(),
+        quat=quat,
+        vel=rec.states[:, 3:6].copy(),
+        rates=rec.states[:, 6:9].copy(),
+        inputs=rec.refs.copy(),
+        input_names=REF_NAMES,
+        meta={"source": "body-centric closed-loop simulator"},
+    )

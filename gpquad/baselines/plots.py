@@ -21,12 +21,19 @@ def convergence_png(study: dict, fraction: float) -> bytes:
         gens = np.arange(rel.shape[1])
         med = np.median(rel, axis=0)
         ax.semilogy(gens, med, color=color, label=f"{label} GA (median of {len(rel)} seeds)")
-        ax.fill_between(gens, np.percentile(rel, 25, axis=0), np.percentile(rel, 75, axis=0),
-                        color=color, alpha=0.25, linewidth=0)
+        ax.fill_between(
+            gens,
+            np.percentile(rel, 25, axis=0),
+            np.percentile(rel, 75, axis=0),
+            color=color,
+            alpha=0.25,
+            linewidth=0,
+        )
         m = study[label]["summary"]["all"]["median"]
         ax.axvline(m, color=color, linestyle=":", linewidth=1)
-    ax.axhline(fraction, color="k", linestyle="--", linewidth=1,
-               label=f"{fraction:.0%} of initial error")
+    ax.axhline(
+        fraction, color="k", linestyle="--", linewidth=1, label=f"{fraction:.0%} of initial error"
+    )
     ax.set_xlabel("generation")
     ax.set_ylabel("parameter error / initial error")
     ax.set_title("12-state model, all loops: gradient vs traditional GA")

@@ -23,44 +23,79 @@ from gpquad.baselines.symbolic import ParametricModel
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.quaternion import quat_from_euler
 
-STATES = ("x", "x_dot", "y", "y_dot", "z", "z_dot", "phi", "phi_dot", "theta", "theta_dot",
-          "psi", "psi_dot")
+STATES = (
+    "x",
+    "x_dot",
+    "y",
+    "y_dot",
+    "z",
+    "z_dot",
+    "phi",
+    "phi_dot",
+    "theta",
+    "theta_dot",
+    "psi",
+    "psi_dot",
+)
 INPUTS = ("u_1", "u_2", "u_3", "u_4")
 VOLTAGES = ("V_1", "V_2", "V_3", "V_4")
 PARAMS = tuple(f"a_{i}" for i in range(1, 12)) + ("b_1", "b_2", "b_3")
 LOOPS: dict[str, tuple[str, ...]] = {
-    "roll": ("phi_dot",), "pitch": ("theta_dot",), "yaw": ("psi_dot",),
+    "roll": ("phi_dot",),
+    "pitch": ("theta_dot",),
+    "yaw": ("psi_dot",),
     "position": ("x_dot", "y_dot", "z_dot"),
 }
 #: Default truth: the paper's identified attitude values (a6..a11), plausible drag and
 #: control effectiveness for the position rows (its table gives b1, b2 and k/m = 0.45).
-TRUE_PARAMS = {"a_1": -0.25, "a_2": 0.35, "a_3": -0.25, "a_4": 0.35, "a_5": -0.4,
-               "a_6": 0.012, "a_7": 2.34, "a_8": 0.011, "a_9": 2.31, "a_10": 0.005,
-               "a_11": 1.89, "b_1": 0.56, "b_2": 0.55, "b_3": -0.45}
+TRUE_PARAMS = {
+    "a_1": -0.25,
+    "a_2": 0.35,
+    "a_3": -0.25,
+    "a_4": 0.35,
+    "a_5": -0.4,
+    "a_6": 0.012,
+    "a_7": 2.34,
+    "a_8": 0.011,
+    "a_9": 2.31,
+    "a_10": 0.005,
+    "a_11": 1.89,
+    "b_1": 0.56,
+    "b_2": 0.55,
+    "b_3": -0.45,
+}
 
 
 def f_quad12(X, U, th):
     """The paper's f(X, U; theta) as a function of sequences (works on sympy symbols)."""
     a = {i: th[i - 1] for i in range(1, 12)}
     b1, b2, b3 = th[11], th[12], th[13]
-    return [X[1], a[1] * X[1] + a[2] * U[1] + b1 * U[0],
-            X[3], a[3] * X[3] + a[4] * U[2] + b2 * U[0],
-            X[5], a[5] * X[5] + b3 * U[0],
-            X[7], a[6] * X[7] * X[9] + a[7] * U[1],
-            X[9], a[8] * X[7] * X[11] + a[9] * U[2],
-            X[11], a[10] * X[7] * X[9] + a[11] * U[3]]
+    return [
+        X[1],
+        a[1] * X[1] + a[2] * U[1] + b1 * U[0],
+        X[3],
+        a[3] * X[3] + a[4] * U[2] + b2 * U[0],
+        X[5],
+        a[5] * X[5] + b3 * U[0],
+        X[7],
+        a[6] * X[7] * X[9] + a[7] * U[1],
+        X[9],
+        a[8] * X[7] * X[11] + a[9] * U[2],
+        X[11],
+        a[10] * X[7] * X[9] + a[11] * U[3],
+    ]
 
 
 def loop_model(loop: str) -> tuple[ParametricModel, tuple[str, ...]]:
     """The model restricted to one loop's rows, and that loop's parameter names."""
-    full = ParametricModel.from_function(f_quad12, STATES, INPUTS, PARAMS,
-                                         rows=list(LOOPS[loop]))
+    full = ParametricModel.from_function(f_quad12, STATES, INPUTS, PARAMS, rows=list(LOOPS[loop]))
     names = tuple(p for p in PARAMS if any(full.jacobian[(r, p)] != 0 for r in full.rows))
     syms = {p: sp.Symbol(p, real=True) for p in PARAMS}
     # the parameters outside the loop do not appear in its rows; keep only the loop's own
     rhs = {r: e for r, e in full.rhs.items()}
-    assert all(not (e.free_symbols & {syms[p] for p in PARAMS if p not in names})
-               for e in rhs.values())
+    assert all(
+        not (e.free_symbols & {syms[p] for p in PARAMS if p not in names}) for e in rhs.values()
+    )
     return ParametricModel(STATES, INPUTS, names, rhs), names
 
 
@@ -78,8 +113,9 @@ def motor_voltages(u: np.ndarray, v_hover: float) -> np.ndarray:
     """Inverse of decoupled_inputs: V (N, 4)."""
     s = 0.5 * (u[:, 0] + 4.0 * v_hover + u[:, 3])  # V1 + V3
     t = 0.5 * (u[:, 0] + 4.0 * v_hover - u[:, 3])  # V2 + V4
-    return np.column_stack([0.5 * (s + u[:, 2]), 0.5 * (t - u[:, 1]),
-                            0.5 * (s - u[:, 2]), 0.5 * (t + u[:, 1])])
+    return np.column_stack(
+        [0.5 * (s + u[:, 2]), 0.5 * (t - u[:, 1]), 0.5 * (s - u[:, 2]), 0.5 * (t + u[:, 1])]
+    )
 
 
 @dataclass
@@ -100,11 +136,12 @@ class Quad12Record:
         return decoupled_inputs(self.V, self.v_hover)
 
 
-def ou_signal(rng: np.random.Generator, n: int, sd: np.ndarray, dt: float, tau: float
-              ) -> np.ndarray:
+def ou_signal(
+    rng: np.random.Generator, n: int, sd: np.ndarray, dt: float, tau: float
+) -> np.ndarray:
     """Ornstein-Uhlenbeck excitation (n, len(sd)) with stationary SD sd and time constant tau s."""
     decay = np.exp(-dt / tau)
-    shocks = rng.standard_normal((n, len(sd))) * sd * np.sqrt(1.0 - decay ** 2)
+    shocks = rng.standard_normal((n, len(sd))) * sd * np.sqrt(1.0 - decay**2)
     out = np.empty((n, len(sd)))
     out[0] = sd * rng.standard_normal(len(sd))
     for k in range(1, n):
@@ -112,34 +149,59 @@ def ou_signal(rng: np.random.Generator, n: int, sd: np.ndarray, dt: float, tau: 
     return out
 
 
-def simulate_quad12(theta: np.ndarray, *, duration_s: float, rate_hz: float, substeps: int,
-                    excitation_sd: np.ndarray, tau_s: float, gains: np.ndarray, v_hover: float,
-                    rng: np.random.Generator) -> Quad12Record:
+def simulate_quad12(
+    theta: np.ndarray,
+    *,
+    duration_s: float,
+    rate_hz: float,
+    substeps: int,
+    excitation_sd: np.ndarray,
+    tau_s: float,
+    gains: np.ndarray,
+    v_hover: float,
+    rng: np.random.Generator,
+) -> Quad12Record:
     """Fly the 12-state model (RK4, `substeps` per sample) with a PD pilot plus OU excitation."""
     n = int(round(duration_s * rate_hz))
     dt = 1.0 / rate_hz
     exc = ou_signal(rng, n, np.asarray(excitation_sd, float), dt, tau_s)
-    X, u = simulate_closed_loop(np.asarray(theta, float), np.zeros(12), exc,
-                                np.asarray(gains, float), dt, int(substeps))
+    X, u = simulate_closed_loop(
+        np.asarray(theta, float), np.zeros(12), exc, np.asarray(gains, float), dt, int(substeps)
+    )
     return Quad12Record(np.arange(n) * dt, X, motor_voltages(u, v_hover), v_hover)
 
 
 def euler_rate_matrix(phi, theta):
     """W (..., 3, 3) with body rates omega = W eta_dot (paper's kinematics)."""
     z, o = np.zeros_like(phi), np.ones_like(phi)
-    return np.stack([np.stack([o, z, -np.sin(theta)], -1),
-                     np.stack([z, np.cos(phi), np.sin(phi) * np.cos(theta)], -1),
-                     np.stack([z, -np.sin(phi), np.cos(phi) * np.cos(theta)], -1)], -2)
+    return np.stack(
+        [
+            np.stack([o, z, -np.sin(theta)], -1),
+            np.stack([z, np.cos(phi), np.sin(phi) * np.cos(theta)], -1),
+            np.stack([z, -np.sin(phi), np.cos(phi) * np.cos(theta)], -1),
+        ],
+        -2,
+    )
 
 
 def rotation(phi, theta, psi):
     """Body-to-world rotation matrices (..., 3, 3), ZYX Euler angles."""
-    cf, sf, ct, st, cp, sp_ = (np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta),
-                               np.cos(psi), np.sin(psi))
-    return np.stack([
-        np.stack([cp * ct, cp * st * sf - sp_ * cf, cp * st * cf + sp_ * sf], -1),
-        np.stack([sp_ * ct, sp_ * st * sf + cp * cf, sp_ * st * cf - cp * sf], -1),
-        np.stack([-st, ct * sf, ct * cf], -1)], -2)
+    cf, sf, ct, st, cp, sp_ = (
+        np.cos(phi),
+        np.sin(phi),
+        np.cos(theta),
+        np.sin(theta),
+        np.cos(psi),
+        np.sin(psi),
+    )
+    return np.stack(
+        [
+            np.stack([cp * ct, cp * st * sf - sp_ * cf, cp * st * cf + sp_ * sf], -1),
+            np.stack([sp_ * ct, sp_ * st * sf + cp * cf, sp_ * st * cf - cp * sf], -1),
+            np.stack([-st, ct * sf, ct * cf], -1),
+        ],
+        -2,
+    )
 
 
 def engine_states(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -178,16 +240,30 @@ def to_engine_states(X: np.ndarray) -> np.ndarray:
 def to_flight(rec: Quad12Record, name: str) -> Flight:
     """The record as an engine Flight (NED/FRD) with the motor voltages V_1..V_4 as inputs."""
     quat, vel, rates = engine_states(rec.X)
-    return Flight(name=name, t=rec.t.copy(), quat=quat, vel=vel, rates=rates, inputs=rec.V.copy(),
-                  input_names=VOLTAGES, pos=rec.X[:, [0, 2, 4]].copy(),
-                  meta={"source": "quad12 simulator", "v_hover": rec.v_hover})
+    return Flight(
+        name=name,
+        t=rec.t.copy(),
+        quat=quat,
+        vel=vel,
+        rates=rates,
+        inputs=rec.V.copy(),
+        input_names=VOLTAGES,
+        pos=rec.X[:, [0, 2, 4]].copy(),
+        meta={"source": "quad12 simulator", "v_hover": rec.v_hover},
+    )
 
 
-def fly_windows(theta: np.ndarray, states0: np.ndarray, V: np.ndarray, v_hover: float,
-                dt: float, substeps: int) -> np.ndarray:
+def fly_windows(
+    theta: np.ndarray, states0: np.ndarray, V: np.ndarray, v_hover: float, dt: float, substeps: int
+) -> np.ndarray:
     """Fly from engine states (W, 9) with voltages V (W, n, 4): engine states (W, n+1, 9)."""
     W, n = V.shape[0], V.shape[1]
     u = decoupled_inputs(V.reshape(W * n, 4), v_hover).reshape(W, n, 4)
-    X = replay(np.asarray(theta, float), from_engine_states(states0), np.ascontiguousarray(u),
-               dt, int(substeps))
+    X = replay(
+        np.asarray(theta, float),
+        from_engine_states(states0),
+        np.ascontiguousarray(u),
+        dt,
+        int(substeps),
+    )
     return to_engine_states(X)

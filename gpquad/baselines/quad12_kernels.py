@@ -56,8 +56,7 @@ def simulate_closed_loop(th, x0, excitation, gains, dt, substeps):
     U = np.empty((n, 4))
     x = x0.copy()
     u = np.empty(4)
-    k1, k2, k3, k4, tmp = (np.empty(12), np.empty(12), np.empty(12), np.empty(12),
-                           np.empty(12))
+    k1, k2, k3, k4, tmp = (np.empty(12), np.empty(12), np.empty(12), np.empty(12), np.empty(12))
     h = dt / substeps
     for k in range(n):
         X[k] = x
@@ -76,8 +75,7 @@ def replay(th, x0, u, dt, substeps):
     """Integrate from each start x0 (W, 12) with recorded inputs u (W, n, 4): (W, n + 1, 12)."""
     w, n = u.shape[0], u.shape[1]
     out = np.empty((w, n + 1, 12))
-    k1, k2, k3, k4, tmp = (np.empty(12), np.empty(12), np.empty(12), np.empty(12),
-                           np.empty(12))
+    k1, k2, k3, k4, tmp = (np.empty(12), np.empty(12), np.empty(12), np.empty(12), np.empty(12))
     h = dt / substeps
     for lane in range(w):
         x = x0[lane].copy()

@@ -22,8 +22,11 @@ def write_flights(run_dir: Path, flights: list[Flight], validation_fraction: flo
         rel = Path("flights") / f"{f.name}.parquet"
         write_flight_file(f, run_dir / rel)
         files.append(str(rel))
-    return {"files": files, "inputs": list(flights[0].input_names),
-            "validation_fraction": validation_fraction}
+    return {
+        "files": files,
+        "inputs": list(flights[0].input_names),
+        "validation_fraction": validation_fraction,
+    }
 
 
 def write_run(run_dir: Path, model: dict, config: dict, results: dict, started: float) -> None:
@@ -31,8 +34,13 @@ def write_run(run_dir: Path, model: dict, config: dict, results: dict, started: 
     run_dir.mkdir(parents=True, exist_ok=True)
     write_json(run_dir / "model.json", {"kind": "baseline", **model})
     write_json(run_dir / "config.json", config)
-    info = {"seed": config.get("seed"), "config": config, **results,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
-            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            "wall_time_s": time.time() - started, **provenance()}
+    info = {
+        "seed": config.get("seed"),
+        "config": config,
+        **results,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started)),
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "wall_time_s": time.time() - started,
+        **provenance(),
+    }
     write_json(run_dir / "run.json", info)

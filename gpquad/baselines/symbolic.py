@@ -38,8 +38,10 @@ class ParametricModel:
     rhs: dict[str, sp.Expr]
 
     def __post_init__(self):
-        self.symbols = {n: sp.Symbol(n, real=True)
-                        for n in self.state_names + self.input_names + self.param_names}
+        self.symbols = {
+            n: sp.Symbol(n, real=True)
+            for n in self.state_names + self.input_names + self.param_names
+        }
         known = set(self.symbols)
         for name, expr in self.rhs.items():
             if name not in self.state_names:
@@ -50,14 +52,22 @@ class ParametricModel:
         args = [self.symbols[n] for n in self.state_names + self.input_names + self.param_names]
         self.rows = tuple(self.rhs)
         self._f = [sp.lambdify(args, self.rhs[r], "numpy") for r in self.rows]
-        self.jacobian = {(r, p): sp.diff(self.rhs[r], self.symbols[p])
-                         for r in self.rows for p in self.param_names}
+        self.jacobian = {
+            (r, p): sp.diff(self.rhs[r], self.symbols[p])
+            for r in self.rows
+            for p in self.param_names
+        }
         self._df = {k: sp.lambdify(args, e, "numpy") for k, e in self.jacobian.items()}
 
     @classmethod
-    def from_function(cls, func: Callable, state_names: Sequence[str], input_names: Sequence[str],
-                      param_names: Sequence[str], rows: Sequence[str] | None = None
-                      ) -> ParametricModel:
+    def from_function(
+        cls,
+        func: Callable,
+        state_names: Sequence[str],
+        input_names: Sequence[str],
+        param_names: Sequence[str],
+        rows: Sequence[str] | None = None,
+    ) -> ParametricModel:
         """Build from a Python function f(X, U, theta) -> sequence of dX/dt (one per state).
 
         The function is called once with sympy symbols to obtain its symbolic form (so it
@@ -70,19 +80,23 @@ class ParametricModel:
         ps = [sp.Symbol(n, real=True) for n in param_names]
         out = [sp.sympify(e, strict=True) for e in func(xs, us, ps)]  # no strings
         if len(out) != len(state_names):
-            raise GpquadError(f"f returned {len(out)} rates for {len(state_names)} states",
-                              field="model")
-        rows = rows or [n for n, e in zip(state_names, out, strict=True)
-                        if e.free_symbols & set(ps)]
+            raise GpquadError(
+                f"f returned {len(out)} rates for {len(state_names)} states", field="model"
+            )
+        rows = rows or [
+            n for n, e in zip(state_names, out, strict=True) if e.free_symbols & set(ps)
+        ]
         rhs = {n: e for n, e in zip(state_names, out, strict=True) if n in rows}
         return cls(tuple(state_names), tuple(input_names), tuple(param_names), rhs)
 
     def _args(self, X: np.ndarray, U: np.ndarray, theta: np.ndarray) -> list:
         """Broadcastable arguments: samples along the last axis, individuals along the first."""
         theta = np.atleast_2d(theta)
-        return ([X[:, i][None, :] for i in range(X.shape[1])]
-                + [U[:, i][None, :] for i in range(U.shape[1])]
-                + [theta[:, j][:, None] for j in range(theta.shape[1])])
+        return (
+            [X[:, i][None, :] for i in range(X.shape[1])]
+            + [U[:, i][None, :] for i in range(U.shape[1])]
+            + [theta[:, j][:, None] for j in range(theta.shape[1])]
+        )
 
     def predict(self, X: np.ndarray, U: np.ndarray, theta: np.ndarray) -> np.ndarray:
         """dX/dt of the cost rows: (P, n_rows, N) for theta (P, n_p), X (N, n_x), U (N, n_u)."""
@@ -114,15 +128,20 @@ class ParametricModel:
                 grad[:, j] -= np.einsum("pn,pn->p", res[:, r_i], df)
         return 0.5 * np.einsum("prn,prn->p", res, res), grad
 
-    def equations(self, theta: np.ndarray | None = None, digits: int | None = None
-                  ) -> dict[str, str]:
+    def equations(
+        self, theta: np.ndarray | None = None, digits: int | None = None
+    ) -> dict[str, str]:
         """Sympy-parsable strings of the cost rows, with parameter values substituted if given."""
         out = {}
         for r in self.rows:
             expr = self.rhs[r]
             if theta is not None:
-                expr = expr.xreplace({self.symbols[p]: sp.Float(float(v))
-                                      for p, v in zip(self.param_names, theta, strict=True)})
+                expr = expr.xreplace(
+                    {
+                        self.symbols[p]: sp.Float(float(v))
+                        for p, v in zip(self.param_names, theta, strict=True)
+                    }
+                )
             out[r] = sp.sstr(expr if digits is None else expr.evalf(digits), full_prec=True)
         return out
 
@@ -139,5 +158,6 @@ def finite_difference(X: np.ndarray, dt: float, scheme: str = "forward") -> np.n
         out[0] = (X[1] - X[0]) / dt
         out[1:] = (X[2:] - X[:-2]) / (2 * dt)
         return out
-    raise GpquadError(f"unknown difference scheme '{scheme}'; choose forward or central",
-                      field="ga.difference")
+    raise GpquadError(
+        f"unknown difference scheme '{scheme}'; choose forward or central", field="ga.difference"
+    )

@@ -33,8 +33,9 @@ def load_cell(path: Path, fingerprint: str | None = None) -> dict | None:
         cell = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
-    if not isinstance(cell, dict) or (fingerprint is not None
-                                      and cell.get("fingerprint") != fingerprint):
+    if not isinstance(cell, dict) or (
+        fingerprint is not None and cell.get("fingerprint") != fingerprint
+    ):
         return None
     return cell
 
@@ -48,8 +49,9 @@ def recovery_gpquad(model, scenario) -> dict | None:
     for target in TARGET_NAMES:
         if target in scenario.truth and target in model.equations:
             with np.errstate(all="ignore"):  # protected division evaluated by numpy
-                found = compare_to_truth(model.equations[target], scenario.truth[target],
-                                         scenario.fit)
+                found = compare_to_truth(
+                    model.equations[target], scenario.truth[target], scenario.fit
+                )
             out[target] = bool(found["passed"])
     return out
 
@@ -59,8 +61,9 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
     a scenario with groups is fitted per group, and each window flies its group's model."""
     if not scenario.groups:
         return _fit_one(method, scenario, seed, engine, fit_jobs)
-    fitted = {g: _fit_one(method, sub, seed, engine, fit_jobs)
-              for g, sub in scenario.groups.items()}
+    fitted = {
+        g: _fit_one(method, sub, seed, engine, fit_jobs) for g, sub in scenario.groups.items()
+    }
     offsets = scenario.group_offsets()
 
     def simulate(starts, steps):
@@ -73,8 +76,11 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
         return out
 
     keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit")
-    record = {k: {g: f[2][k] for g, f in fitted.items()} for k in keys
-              if k in next(iter(fitted.values()))[2]}
+    record = {
+        k: {g: f[2][k] for g, f in fitted.items()}
+        for k in keys
+        if k in next(iter(fitted.values()))[2]
+    }
     record["settings"] = next(iter(fitted.values()))[2]["settings"]
     record["recovery"] = None
     record["fitted_per"] = list(scenario.groups)
@@ -90,23 +96,38 @@ def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
         t0 = time.perf_counter()
         model = fit_gpquad(scenario.fit, cfg, fit_jobs)
         fit_time = time.perf_counter() - t0
-        record = {"equations": {t: e.text() for t, e in model.equations.items()},
-                  "equations_raw_inputs": {t: e.text(raw=True)
-                                           for t, e in model.equations.items()},
-                  "settings": {"evolution": cfg.to_dict()["evolution"],
-                               "vehicle": cfg.to_dict()["vehicle"]},
-                  "recovery": recovery_gpquad(model, scenario), "joint_fit": model.joint_fit,
-                  "n_parameters": model.n_parameters}
+        record = {
+            "equations": {t: e.text() for t, e in model.equations.items()},
+            "equations_raw_inputs": {t: e.text(raw=True) for t, e in model.equations.items()},
+            "settings": {
+                "evolution": cfg.to_dict()["evolution"],
+                "vehicle": cfg.to_dict()["vehicle"],
+            },
+            "recovery": recovery_gpquad(model, scenario),
+            "joint_fit": model.joint_fit,
+            "n_parameters": model.n_parameters,
+        }
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
     peer, fit_time = peers.fit_peer(method, scenario.fit, seed)
-    record = {"equations": peer.equations, "settings": peer.settings,
-              "n_parameters": peer.n_parameters,
-              "recovery": peers.recovery(peer, scenario) if scenario.truth else None}
+    record = {
+        "equations": peer.equations,
+        "settings": peer.settings,
+        "n_parameters": peer.n_parameters,
+        "recovery": peers.recovery(peer, scenario) if scenario.truth else None,
+    }
     return (lambda starts, steps: fly(peer.predict, test.arrays, starts, steps)), fit_time, record
 
 
-def run_cell(scenario, method: str, seed: int, out: Path, engine,
-             horizons_s, fingerprint: str | None = None, fit_jobs: int = 1) -> dict:
+def run_cell(
+    scenario,
+    method: str,
+    seed: int,
+    out: Path,
+    engine,
+    horizons_s,
+    fingerprint: str | None = None,
+    fit_jobs: int = 1,
+) -> dict:
     """Fit, fly and score one cell and save it atomically; returns the cell record."""
     cpu0 = time.process_time()
     with PeakRss() as memory:
@@ -115,12 +136,22 @@ def run_cell(scenario, method: str, seed: int, out: Path, engine,
         metrics = evaluate.score(simulate, scenario.test, scenario.measured, horizons_s)
         trace = evaluate.figure_trace(simulate, scenario.test)
         score_time = time.perf_counter() - t0
-    cell = {"scenario": scenario.name, "method": method, "seed": int(seed),
-            "fingerprint": fingerprint,
-            "version": peers.package_version(method) if method != "gpquad" else None,
-            "metrics": metrics, **record, "figure": trace,
-            "cost": {"fit_time_s": fit_time, "score_time_s": score_time,
-                     "cpu_time_s": time.process_time() - cpu0, "peak_memory_mb": memory.peak_mb}}
+    cell = {
+        "scenario": scenario.name,
+        "method": method,
+        "seed": int(seed),
+        "fingerprint": fingerprint,
+        "version": peers.package_version(method) if method != "gpquad" else None,
+        "metrics": metrics,
+        **record,
+        "figure": trace,
+        "cost": {
+            "fit_time_s": fit_time,
+            "score_time_s": score_time,
+            "cpu_time_s": time.process_time() - cpu0,
+            "peak_memory_mb": memory.peak_mb,
+        },
+    }
     write_json(cell_path(out, scenario.name, method, seed), _clean(cell))
     return cell
 

@@ -63,12 +63,19 @@ def score(simulate, test, measured: dict, horizons_s) -> dict:
         div = diverged(pred, bound)
         keep = ~div
         values = rse(pred[keep], data[keep]) if keep.any() else np.full(6, np.nan)
-        per_state = {s: (float(v) if measured[s] and np.isfinite(v) else None)
-                     for s, v in zip(SCORED_STATES, values, strict=True)}
+        per_state = {
+            s: (float(v) if measured[s] and np.isfinite(v) else None)
+            for s, v in zip(SCORED_STATES, values, strict=True)
+        }
         kept = [v for v in per_state.values() if v is not None]
-        out[key] = {"windows": int(len(starts)), "steps": int(steps), "diverged": int(div.sum()),
-                    "rse": per_state, "mean": float(np.mean(kept)) if kept else None,
-                    "window_sse": window_sse(pred, data, div)}
+        out[key] = {
+            "windows": int(len(starts)),
+            "steps": int(steps),
+            "diverged": int(div.sum()),
+            "rse": per_state,
+            "mean": float(np.mean(kept)) if kept else None,
+            "window_sse": window_sse(pred, data, div),
+        }
     return out
 
 
@@ -78,8 +85,9 @@ def window_sse(pred: np.ndarray, data: np.ndarray, div: np.ndarray) -> list:
     compared on the windows both flew (gpquad.benchmark.paired)."""
     with np.errstate(over="ignore", invalid="ignore"):
         sse = ((pred[:, 1:, SCORED_INDEX] - data[:, 1:, SCORED_INDEX]) ** 2).sum(axis=1)
-    return [None if bad else [float(f"{v:.6g}") for v in row]
-            for row, bad in zip(sse, div, strict=True)]
+    return [
+        None if bad else [float(f"{v:.6g}") for v in row] for row, bad in zip(sse, div, strict=True)
+    ]
 
 
 def figure_window(test) -> tuple[int, int] | None:
@@ -97,8 +105,11 @@ def figure_trace(simulate, test) -> dict | None:
         return None
     start, steps = window
     pred = simulate(np.array([start], dtype=np.int64), steps)[0][:, SCORED_INDEX]
-    return {"start": start, "steps": steps,
-            "pred": [[(float(x) if np.isfinite(x) else None) for x in row] for row in pred]}
+    return {
+        "start": start,
+        "steps": steps,
+        "pred": [[(float(x) if np.isfinite(x) else None) for x in row] for row in pred],
+    }
 
 
 def figure_data(test) -> dict | None:
@@ -107,5 +118,5 @@ def figure_data(test) -> dict | None:
     if window is None:
         return None
     start, steps = window
-    states = test.arrays.states[start:start + steps + 1][:, SCORED_INDEX]
+    states = test.arrays.states[start : start + steps + 1][:, SCORED_INDEX]
     return {"dt": float(test.dt), "start": start, "steps": steps, "states": states.tolist()}

@@ -59,13 +59,22 @@ def paired(cells: list[dict]) -> list[dict]:
                     got.append(pair)
             if got:
                 ours_rse = np.array([g[0] for g in got])
-                rows.append({"scenario": scenario, "peer": method, "horizon": h,
-                             "windows": ours[min(ours)]["metrics"][h]["windows"],
-                             "flown": [g[2] for g in got],
-                             "peer_rse": float(np.mean([g[1] for g in got])),
-                             "gpquad_rse": {"mean": float(ours_rse.mean()),
-                                            "min": float(ours_rse.min()),
-                                            "max": float(ours_rse.max()), "n": len(got)}})
+                rows.append(
+                    {
+                        "scenario": scenario,
+                        "peer": method,
+                        "horizon": h,
+                        "windows": ours[min(ours)]["metrics"][h]["windows"],
+                        "flown": [g[2] for g in got],
+                        "peer_rse": float(np.mean([g[1] for g in got])),
+                        "gpquad_rse": {
+                            "mean": float(ours_rse.mean()),
+                            "min": float(ours_rse.min()),
+                            "max": float(ours_rse.max()),
+                            "n": len(got),
+                        },
+                    }
+                )
     return rows
 
 
@@ -73,13 +82,18 @@ def paired_markdown(rows: list[dict]) -> str:
     """The rows as a Markdown table (empty string when no peer diverged)."""
     if not rows:
         return ""
-    lines = ["| scenario | peer | horizon | windows the peer flew | peer mean RSE there "
-             "| gpquad mean RSE there (min-max over seeds) |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| scenario | peer | horizon | windows the peer flew | peer mean RSE there "
+        "| gpquad mean RSE there (min-max over seeds) |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
         g = r["gpquad_rse"]
         spread = f" ({g['min']:.3g}-{g['max']:.3g})" if g["n"] > 1 and g["max"] > g["min"] else ""
         flown = sorted(set(r["flown"]))
-        lines.append(f"| {r['scenario']} | {r['peer']} | {r['horizon']} | "
-                     f"{'/'.join(map(str, flown))} of {r['windows']} | {r['peer_rse']:.3g} | "
-                     f"{g['mean']:.3g}{spread} |")
+        lines.append(
+            f"| {r['scenario']} | {r['peer']} | {r['horizon']} | "
+            f"{'/'.join(map(str, flown))} of {r['windows']} | {r['peer_rse']:.3g} | "
+            f"{g['mean']:.3g}{spread} |"
+        )
     return "\n".join(lines) + "\n"

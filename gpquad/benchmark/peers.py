@@ -32,16 +32,33 @@ PEERS = ("zero", "ols", "sindy", "operon")
 #: The Python package each optional peer needs (pip install -e ".[peers]").
 PEER_PACKAGES = {"sindy": "pysindy", "operon": "pyoperon"}
 THRESHOLDS = (0.01, 0.1, 0.3, 1.0)
-SINDY_SETTINGS = {"library": "PolynomialLibrary(degree=2)", "optimizer": "STLSQ",
-                  "alpha": 0.05, "max_iter": 20, "thresholds": list(THRESHOLDS),
-                  "threshold_selection": "mean RSE of u..r over 7 s validation windows"}
-OPERON_SETTINGS = {"allowed_symbols": "add,sub,mul,div,constant,variable", "max_depth": 5,
-                   "max_length": 30, "population_size": 100, "generations": 25,
-                   "max_evaluations": 1_000_000, "optimizer": "lm", "optimizer_iterations": 5,
-                   "n_threads": 1, "model_selection_criterion": "minimum_description_length"}
+SINDY_SETTINGS = {
+    "library": "PolynomialLibrary(degree=2)",
+    "optimizer": "STLSQ",
+    "alpha": 0.05,
+    "max_iter": 20,
+    "thresholds": list(THRESHOLDS),
+    "threshold_selection": "mean RSE of u..r over 7 s validation windows",
+}
+OPERON_SETTINGS = {
+    "allowed_symbols": "add,sub,mul,div,constant,variable",
+    "max_depth": 5,
+    "max_length": 30,
+    "population_size": 100,
+    "generations": 25,
+    "max_evaluations": 1_000_000,
+    "optimizer": "lm",
+    "optimizer_iterations": 5,
+    "n_threads": 1,
+    "model_selection_criterion": "minimum_description_length",
+}
 #: Every setting a peer's result depends on (recorded with its cells; a change recomputes them).
-PEER_SETTINGS = {"zero": {}, "ols": {"features": "state + inputs lagged 0..MAX_LAG"},
-                 "sindy": SINDY_SETTINGS, "operon": OPERON_SETTINGS}
+PEER_SETTINGS = {
+    "zero": {},
+    "ols": {"features": "state + inputs lagged 0..MAX_LAG"},
+    "sindy": SINDY_SETTINGS,
+    "operon": OPERON_SETTINGS,
+}
 
 
 @dataclasses.dataclass
@@ -49,7 +66,7 @@ class FittedPeer:
     """A fitted peer: predict(features (W, F), idx (W,)) -> (W, 6) and what describes it."""
 
     predict: Callable
-    equations: dict[str, str]   # target -> expression in feature names (lags as u_R_l2)
+    equations: dict[str, str]  # target -> expression in feature names (lags as u_R_l2)
     n_parameters: int
     settings: dict
 
@@ -82,14 +99,16 @@ def package_version(peer: str) -> str | None:
 
 
 def _linear_text(coef: np.ndarray, names: list[str], digits: int = 6) -> str:
-    terms = [f"{c:.{digits}g}*{n}" if n != "1" else f"{c:.{digits}g}"
-             for c, n in zip(coef, names) if c != 0.0]
+    terms = [
+        f"{c:.{digits}g}*{n}" if n != "1" else f"{c:.{digits}g}"
+        for c, n in zip(coef, names)
+        if c != 0.0
+    ]
     return " + ".join(terms) if terms else "0"
 
 
 def fit_zero(dataset, seed: int) -> FittedPeer:
-    return FittedPeer(lambda f, idx: np.zeros((len(idx), 6)),
-                      {t: "0" for t in TARGET_NAMES}, 0, {})
+    return FittedPeer(lambda f, idx: np.zeros((len(idx), 6)), {t: "0" for t in TARGET_NAMES}, 0, {})
 
 
 def fit_ols(dataset, seed: int) -> FittedPeer:
@@ -98,8 +117,12 @@ def fit_ols(dataset, seed: int) -> FittedPeer:
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)  # (1 + F, 6)
     names = ["1"] + feature_names(dataset.input_names)
     eqs = {t: _linear_text(coef[:, k], names) for k, t in enumerate(TARGET_NAMES)}
-    return FittedPeer(lambda f, idx: coef[0] + f @ coef[1:], eqs, int(coef.size),
-                      {"solver": "numpy.linalg.lstsq", "intercept": True})
+    return FittedPeer(
+        lambda f, idx: coef[0] + f @ coef[1:],
+        eqs,
+        int(coef.size),
+        {"solver": "numpy.linalg.lstsq", "intercept": True},
+    )
 
 
 def _sindy_parts(features: np.ndarray) -> np.ndarray:
@@ -182,8 +205,12 @@ def fit_sindy(dataset, seed: int) -> FittedPeer:
     score, threshold, coef, predict = best
     terms = [t.replace(" ", "*") for t in library.get_feature_names(sindy_names)]
     eqs = {t: _linear_text(coef[k], terms) for k, t in enumerate(TARGET_NAMES)}
-    return FittedPeer(predict, eqs, int(np.count_nonzero(coef)),
-                      {**SINDY_SETTINGS, "threshold": threshold, "validation_rse_7s": score})
+    return FittedPeer(
+        predict,
+        eqs,
+        int(np.count_nonzero(coef)),
+        {**SINDY_SETTINGS, "threshold": threshold, "validation_rse_7s": score},
+    )
 
 
 def fit_operon(dataset, seed: int) -> FittedPeer:
@@ -202,8 +229,9 @@ def fit_operon(dataset, seed: int) -> FittedPeer:
     def predict(f, idx):
         return np.column_stack([reg.predict(f) for reg in regressors])
 
-    return FittedPeer(predict, eqs, n_params, {**OPERON_SETTINGS,
-                                               "random_state": "seed * 16 + target index"})
+    return FittedPeer(
+        predict, eqs, n_params, {**OPERON_SETTINGS, "random_state": "seed * 16 + target index"}
+    )
 
 
 FITTERS = {"zero": fit_zero, "ols": fit_ols, "sindy": fit_sindy, "operon": fit_operon}
@@ -224,5 +252,8 @@ def recovery(peer: FittedPeer, scenario) -> dict[str, bool]:
     """Exact-structure recovery of each known equation (gpquad.benchmark.recovery)."""
     from gpquad.benchmark.recovery import recovered
 
-    return {t: recovered(peer.equations[t], scenario.truth[t], t, scenario.fit)
-            for t in TARGET_NAMES if t in scenario.truth}
+    return {
+        t: recovered(peer.equations[t], scenario.truth[t], t, scenario.fit)
+        for t in TARGET_NAMES
+        if t in scenario.truth
+    }

@@ -31,8 +31,10 @@ def _symbols(input_names) -> dict[str, sp.Symbol]:
 def truth_terms(truth: str, input_names) -> dict[str, float]:
     """{term: coefficient} of a truth equation in lagged-feature names (raw inputs)."""
     expr, delays = parse_equation(truth, tuple(input_names))
-    reps = {sp.Symbol(n, real=True): sp.Symbol(f"{base_input(n)}_l{delays.get(n, 0)}", real=True)
-            for n in set(input_names) | set(delays)}
+    reps = {
+        sp.Symbol(n, real=True): sp.Symbol(f"{base_input(n)}_l{delays.get(n, 0)}", real=True)
+        for n in set(input_names) | set(delays)
+    }
     return _terms(sp.expand(expr.xreplace(reps)))
 
 
@@ -49,15 +51,20 @@ def dominant_terms(text: str, target: str, dataset) -> dict[str, float]:
     whose RMS share on the training samples is >= SHARE, in raw inputs."""
     syms = _symbols(dataset.input_names)
     expr = parse_in_symbols(text, syms, caret_power=True)
-    raw = {syms[f"{n}_l{lag}"]: syms[f"{n}_l{lag}"] - dataset.trim.get(n, 0.0)
-           for n in dataset.input_names for lag in range(MAX_LAG + 1)
-           if dataset.trim.get(n, 0.0)}
+    raw = {
+        syms[f"{n}_l{lag}"]: syms[f"{n}_l{lag}"] - dataset.trim.get(n, 0.0)
+        for n in dataset.input_names
+        for lag in range(MAX_LAG + 1)
+        if dataset.trim.get(n, 0.0)
+    }
     expr = sp.expand(expr.xreplace(raw))
-    rows = np.concatenate([np.arange(a + MAX_LAG, b - 1) for a, b in dataset.train
-                           if b - 1 > a + MAX_LAG])
+    rows = np.concatenate(
+        [np.arange(a + MAX_LAG, b - 1) for a, b in dataset.train if b - 1 > a + MAX_LAG]
+    )
     trim = np.array([[dataset.trim.get(n, 0.0)] * (MAX_LAG + 1) for n in dataset.input_names])
-    values = np.hstack([dataset.arrays.states[rows],
-                        lagged_inputs(dataset.arrays.inputs, rows) + trim.reshape(-1)])
+    values = np.hstack(
+        [dataset.arrays.states[rows], lagged_inputs(dataset.arrays.inputs, rows) + trim.reshape(-1)]
+    )
     columns = dict(zip(syms, values.T))
     target_rms = float(np.sqrt(np.mean(dataset.arrays.acc[rows, target_index(target)] ** 2)))
     found = {}
@@ -66,8 +73,9 @@ def dominant_terms(text: str, target: str, dataset) -> dict[str, float]:
         symbols = sorted(rest.free_symbols, key=str)
         func = sp.lambdify(symbols, rest, "numpy")
         with np.errstate(all="ignore"):
-            series = np.broadcast_to(np.asarray(func(*[columns[str(s)] for s in symbols]),
-                                                float), rows.shape)
+            series = np.broadcast_to(
+                np.asarray(func(*[columns[str(s)] for s in symbols]), float), rows.shape
+            )
         rms = float(np.sqrt(np.mean((float(coeff) * series) ** 2)))
         if target_rms > 0 and rms / target_rms >= SHARE:
             found[str(rest)] = found.get(str(rest), 0.0) + float(coeff)

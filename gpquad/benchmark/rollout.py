@@ -1,6 +1,6 @@
 """Fly "acceleration = f(state, lagged inputs)" models through gpquad's integrator.
 
-gpquad's own trees fly through `gpquad.engine.kernels.fitness.rollout`; peer models (linear,
+gpquad's own trees fly through `gpquad.engine.kernels.rollout.rollout`; peer models (linear,
 polynomial, operon expressions) read several lags of one input, which a gpquad tree
 cannot express, so they fly here. Every window is advanced one step at a time, all
 windows at once: at step k the model sees the integrated state x_k = [phi, theta, psi,
@@ -46,8 +46,9 @@ MAX_LAG = 5
 def lanes_state(quat, vel, rates, out):
     """States (W, 9) of every lane: Euler angles of quat (W, 4), vel and rates (W, 3)."""
     for w in range(quat.shape[0]):
-        out[w, 0], out[w, 1], out[w, 2] = euler_from_quat(quat[w, 0], quat[w, 1], quat[w, 2],
-                                                          quat[w, 3])
+        out[w, 0], out[w, 1], out[w, 2] = euler_from_quat(
+            quat[w, 0], quat[w, 1], quat[w, 2], quat[w, 3]
+        )
         for i in range(3):
             out[w, 3 + i] = vel[w, i]
             out[w, 6 + i] = rates[w, i]
@@ -86,8 +87,9 @@ def lanes_stage(y, slope, node, h, ys, alive, out):
     for w in range(y.shape[1]):
         if alive[w]:
             body_stage_state(y, slope, node, h, ys, w, BODY_ROWS)
-            out[w, 0], out[w, 1], out[w, 2] = euler_from_quat(ys[Q, w], ys[Q + 1, w],
-                                                              ys[Q + 2, w], ys[Q + 3, w])
+            out[w, 0], out[w, 1], out[w, 2] = euler_from_quat(
+                ys[Q, w], ys[Q + 1, w], ys[Q + 2, w], ys[Q + 3, w]
+            )
             for i in range(3):
                 out[w, 3 + i] = ys[V + i, w]
                 out[w, 6 + i] = ys[W + i, w]
@@ -98,8 +100,18 @@ def lanes_slope(ys, acc, stage, slope, total, alive):
     """The live lanes' stage slopes under accelerations acc (W, 6), accumulated in total."""
     for w in range(ys.shape[1]):
         if alive[w]:
-            body_derivative(ys, w, acc[w, 0], acc[w, 1], acc[w, 2], acc[w, 3], acc[w, 4],
-                            acc[w, 5], False, slope)
+            body_derivative(
+                ys,
+                w,
+                acc[w, 0],
+                acc[w, 1],
+                acc[w, 2],
+                acc[w, 3],
+                acc[w, 4],
+                acc[w, 5],
+                False,
+                slope,
+            )
             accumulate(total, slope, WEIGHTS[stage], stage, w, BODY_ROWS)
 
 
@@ -133,8 +145,15 @@ def lagged_names(input_names, max_lag: int = MAX_LAG) -> list[str]:
     return [f"{n}_l{lag}" for n in input_names for lag in range(max_lag + 1)]
 
 
-def fly(predict, arrays, starts, n_steps: int, max_lag: int = MAX_LAG, integrator: str = "euler",
-        substeps: int = 1) -> np.ndarray:
+def fly(
+    predict,
+    arrays,
+    starts,
+    n_steps: int,
+    max_lag: int = MAX_LAG,
+    integrator: str = "euler",
+    substeps: int = 1,
+) -> np.ndarray:
     """Fly a model over windows of a dataset's arrays: states (W, n_steps + 1, 9).
 
     predict(features (W, 9 + n_inputs * (max_lag + 1)), idx (W,)) -> accelerations (W, 6);
@@ -173,9 +192,9 @@ def _fly_rk4(predict, arrays, starts, n_steps: int, max_lag: int, substeps: int)
     """fly by RK4: the model asked at every stage's state, the lagged inputs held."""
     n = len(starts)
     y = np.empty((BODY_ROWS, n))
-    y[Q:Q + 4] = arrays.quat[starts].T
-    y[V:V + 3] = arrays.states[starts, 3:6].T
-    y[W:W + 3] = arrays.states[starts, 6:9].T
+    y[Q : Q + 4] = arrays.quat[starts].T
+    y[V : V + 3] = arrays.states[starts, 3:6].T
+    y[W : W + 3] = arrays.states[starts, 6:9].T
     ys, slope, total = np.empty_like(y), np.zeros_like(y), np.empty_like(y)
     alive = np.ones(n, dtype=np.bool_)
     out = np.empty((n, n_steps + 1, 9))
@@ -193,8 +212,9 @@ def _fly_rk4(predict, arrays, starts, n_steps: int, max_lag: int, substeps: int)
                 acc = np.zeros((n, 6))
                 if alive.any():
                     live = idx[alive]
-                    features = np.hstack([state[alive],
-                                          lagged_inputs(arrays.inputs, live, max_lag)])
+                    features = np.hstack(
+                        [state[alive], lagged_inputs(arrays.inputs, live, max_lag)]
+                    )
                     with np.errstate(all="ignore"):
                         acc[alive] = predict(features, live)
                 lanes_slope(ys, acc, stage, slope, total, alive)

@@ -52,10 +52,13 @@ MODES = {"angle": model.CTATT, "rate": model.CTBR}
 #: under the SE3 position loop; 40 is close to its cmd_ctatt damping gain kd_att = 46.6. The
 #: brushless crazyflie's k_w = 5.27 tilts it beyond 60 degrees within a minute of rate-mode
 #: excitation; it gets the same 40.
-FLEETS = {"tuned": {"crazyflie": ("rotorpy.vehicles.crazyflie_params", None),
-                    "hummingbird": ("rotorpy.vehicles.hummingbird_params", 40.0)},
-          "heldout": {"crazyfliebrushless": ("rotorpy.vehicles.crazyfliebrushless_params",
-                                             40.0)}}
+FLEETS = {
+    "tuned": {
+        "crazyflie": ("rotorpy.vehicles.crazyflie_params", None),
+        "hummingbird": ("rotorpy.vehicles.hummingbird_params", 40.0),
+    },
+    "heldout": {"crazyfliebrushless": ("rotorpy.vehicles.crazyfliebrushless_params", 40.0)},
+}
 VEHICLES = FLEETS["tuned"]
 #: Added to the flight seeds of a fleet, so that no two fleets share a seed.
 FLEET_SEED_OFFSET = {"tuned": 0, "heldout": 500}
@@ -67,8 +70,10 @@ ROLES = ("train", "validation", "test")
 PLAN = (("train", 2, 150.0), ("validation", 1, 120.0), ("test", 1, 150.0))
 #: Set-point excitation SD: roll, pitch, yaw (rad, angle mode; rad/s, rate mode) and thrust
 #: (fraction of the weight); low-pass cutoff (Hz); rate mode's attitude-to-rate gain (1/s).
-EXCITATION = {"angle": {"sd": (0.15, 0.15, 0.05, 0.08), "cutoff_hz": 1.0},
-              "rate": {"sd": (1.0, 1.0, 0.5, 0.08), "cutoff_hz": 1.5, "rate_gain": 6.0}}
+EXCITATION = {
+    "angle": {"sd": (0.15, 0.15, 0.05, 0.08), "cutoff_hz": 1.0},
+    "rate": {"sd": (1.0, 1.0, 0.5, 0.08), "cutoff_hz": 1.5, "rate_gain": 6.0},
+}
 RAMP_S = 2.0  # the excitation fades in over the first seconds
 #: Slow reference: hover point (m, z up), amplitudes (m) and period range (s) of x, y, z.
 REFERENCE = {"centre": (0.0, 0.0, 2.0), "amplitude": (0.8, 0.8, 0.3), "period_s": (20.0, 40.0)}
@@ -77,13 +82,28 @@ REFERENCE = {"centre": (0.0, 0.0, 2.0), "amplitude": (0.8, 0.8, 0.3), "period_s"
 NOISE = {"attitude": 0.005, "velocity": 0.03, "rates": 0.02}
 GYRO_BIAS_SD = 0.01
 #: A flight fails (GpquadError) when it leaves these bounds.
-LIMITS = {"min_altitude_m": 0.5, "max_tracking_m": 3.0, "max_tilt_deg": 60.0,
-          "max_rate": 15.0, "max_saturation_fraction": 0.01}
+LIMITS = {
+    "min_altitude_m": 0.5,
+    "max_tracking_m": 3.0,
+    "max_tilt_deg": 60.0,
+    "max_rate": 15.0,
+    "max_saturation_fraction": 0.01,
+}
 #: The [data] fields with which gpquad's pipeline reads these files.
-DATA_CONFIG = {"format": "table", "frame": "NED/FRD", "inputs": list(INPUT_NAMES),
-               "segment": "none", "resample_hz": LOG_HZ, "max_gap_s": 0.2,
-               "filter_taps": 200, "cutoff_hz": 5.0, "filter_inputs": True, "downsample": 4,
-               "rates_from": "quaternion", "trim": "none"}
+DATA_CONFIG = {
+    "format": "table",
+    "frame": "NED/FRD",
+    "inputs": list(INPUT_NAMES),
+    "segment": "none",
+    "resample_hz": LOG_HZ,
+    "max_gap_s": 0.2,
+    "filter_taps": 200,
+    "cutoff_hz": 5.0,
+    "filter_inputs": True,
+    "downsample": 4,
+    "rates_from": "quaternion",
+    "trim": "none",
+}
 
 
 @dataclass(frozen=True)
@@ -113,8 +133,14 @@ def flight_plan(mode: str, fleet: str = "tuned") -> list[FlightSpec]:
     for v, vehicle in enumerate(FLEETS[fleet]):
         for r, (role, count, duration) in enumerate(PLAN):
             for i in range(count):
-                seed = (8000 + FLEET_SEED_OFFSET[fleet] + 1000 * list(MODES).index(mode)
-                        + 100 * v + 10 * r + i)
+                seed = (
+                    8000
+                    + FLEET_SEED_OFFSET[fleet]
+                    + 1000 * list(MODES).index(mode)
+                    + 100 * v
+                    + 10 * r
+                    + i
+                )
                 specs.append(FlightSpec(mode, vehicle, role, i, seed, duration))
     return specs
 
@@ -133,8 +159,9 @@ def reference(rng: np.random.Generator, t: np.ndarray) -> np.ndarray:
     phase = rng.uniform(0.0, 2.0 * np.pi, size=3)
     arg = omega * t[:, None] + phase
     pos = np.asarray(REFERENCE["centre"]) + amp * np.sin(arg)
-    return np.hstack([pos, amp * omega * np.cos(arg), -amp * omega**2 * np.sin(arg),
-                      np.zeros((len(t), 1))])
+    return np.hstack(
+        [pos, amp * omega * np.cos(arg), -amp * omega**2 * np.sin(arg), np.zeros((len(t), 1))]
+    )
 
 
 def excitation(rng: np.random.Generator, n: int, mode: str) -> np.ndarray:
@@ -162,43 +189,63 @@ def simulate_flight(spec: FlightSpec) -> tuple[np.ndarray, np.ndarray, np.ndarra
     s0[9] = 1.0
     s0[16:] = model.hover_rotor_speed(params)
     states, commands = np.zeros((n, 20)), np.zeros((n, 5))
-    flown = model.fly(s0, veh, MODES[spec.mode], ref, exc,
-                      EXCITATION[spec.mode].get("rate_gain", 0.0), SUB_STEPS,
-                      1.0 / (LOG_HZ * SUB_STEPS), states, commands)
-    checks = check_flight(spec, t, states, ref, flown,
-                          (params["rotor_speed_min"], params["rotor_speed_max"]))
+    flown = model.fly(
+        s0,
+        veh,
+        MODES[spec.mode],
+        ref,
+        exc,
+        EXCITATION[spec.mode].get("rate_gain", 0.0),
+        SUB_STEPS,
+        1.0 / (LOG_HZ * SUB_STEPS),
+        states,
+        commands,
+    )
+    checks = check_flight(
+        spec, t, states, ref, flown, (params["rotor_speed_min"], params["rotor_speed_max"])
+    )
     return t, states, commands, checks
 
 
 def check_flight(spec: FlightSpec, t, states, ref, flown: int, rotor_limits) -> dict:
     """Bounds of a flight (dict); GpquadError naming the flight if it crashed or diverged."""
+
     def fail(what: str, k: int | None = None):
         at = "" if k is None else f" at t = {t[k]:.2f} s"
-        raise GpquadError(f"flight {spec.mode}/{spec.name} (seed {spec.seed}) {what}{at}; "
-                          "lower the excitation", field="EXCITATION")
+        raise GpquadError(
+            f"flight {spec.mode}/{spec.name} (seed {spec.seed}) {what}{at}; lower the excitation",
+            field="EXCITATION",
+        )
 
     finite = np.isfinite(states[:flown]).all(axis=1)
     if flown < len(t) or not finite.all():
         fail("diverged (non-finite state)", int(np.argmin(finite)) if not finite.all() else flown)
-    tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (states[:, 6]**2 + states[:, 7]**2),
-                                        -1.0, 1.0)))
+    tilt = np.degrees(
+        np.arccos(np.clip(1.0 - 2.0 * (states[:, 6] ** 2 + states[:, 7] ** 2), -1.0, 1.0))
+    )
     tracking = np.linalg.norm(states[:, 0:3] - ref[:, 0:3], axis=1)
     rates = np.abs(states[:, 10:13]).max(axis=1)
     for value, limit, what, below in (
-            (states[:, 2], LIMITS["min_altitude_m"], "hit the ground (altitude < limit)", True),
-            (tracking, LIMITS["max_tracking_m"], "left the reference (> limit m)", False),
-            (tilt, LIMITS["max_tilt_deg"], "tilted beyond the limit", False),
-            (rates, LIMITS["max_rate"], "spun beyond the rate limit", False)):
+        (states[:, 2], LIMITS["min_altitude_m"], "hit the ground (altitude < limit)", True),
+        (tracking, LIMITS["max_tracking_m"], "left the reference (> limit m)", False),
+        (tilt, LIMITS["max_tilt_deg"], "tilted beyond the limit", False),
+        (rates, LIMITS["max_rate"], "spun beyond the rate limit", False),
+    ):
         bad = np.flatnonzero(value < limit if below else value > limit)
         if bad.size:
             fail(what, int(bad[0]))
-    saturated = ((states[:, 16:] <= rotor_limits[0] + 1e-9)
-                 | (states[:, 16:] >= rotor_limits[1] - 1e-9)).mean()
+    saturated = (
+        (states[:, 16:] <= rotor_limits[0] + 1e-9) | (states[:, 16:] >= rotor_limits[1] - 1e-9)
+    ).mean()
     if saturated > LIMITS["max_saturation_fraction"]:
         fail(f"saturated its rotors {100 * saturated:.1f} % of the time")
-    return {"min_altitude_m": float(states[:, 2].min()), "max_tilt_deg": float(tilt.max()),
-            "max_tracking_m": float(tracking.max()), "max_rate": float(rates.max()),
-            "rotor_saturation_fraction": float(saturated)}
+    return {
+        "min_altitude_m": float(states[:, 2].min()),
+        "max_tilt_deg": float(tilt.max()),
+        "max_tracking_m": float(tracking.max()),
+        "max_rate": float(rates.max()),
+        "rotor_saturation_fraction": float(saturated),
+    }
 
 
 def to_ned_frame(spec: FlightSpec, t, states, commands, weight: float) -> pd.DataFrame:
@@ -213,8 +260,9 @@ def to_ned_frame(spec: FlightSpec, t, states, commands, weight: float) -> pd.Dat
     cols.update(dict(zip(("p", "q", "r"), (states[:, 10:13] * flip).T)))
     cols.update(dict(zip(("x", "y", "z"), (states[:, 0:3] * flip).T)))
     if spec.mode == "angle":
-        cq = np.ascontiguousarray(np.column_stack([commands[:, 4], commands[:, 1],
-                                                   -commands[:, 2], -commands[:, 3]]))
+        cq = np.ascontiguousarray(
+            np.column_stack([commands[:, 4], commands[:, 1], -commands[:, 2], -commands[:, 3]])
+        )
         roll, pitch, yaw = euler_array(cq).T
     else:
         roll, pitch, yaw = (commands[:, 1:4] * flip).T
@@ -241,14 +289,23 @@ def add_sensor_noise(frame: pd.DataFrame, seed: int) -> pd.DataFrame:
 def settings(mode: str, noisy: bool, fleet: str = "tuned") -> dict:
     """Everything that determines the files (compared with a cache's manifest)."""
     vehicles = FLEETS[fleet]
-    return {"generator_version": GENERATOR_VERSION, "mode": mode, "noisy": noisy,
-            **({} if fleet == "tuned" else {"fleet": fleet}),
-            "plan": [asdict(s) for s in flight_plan(mode, fleet)], "vehicles": list(vehicles),
-            "ctbr_k_w_override": {v: k for v, (_, k) in vehicles.items()},
-            "excitation": EXCITATION[mode], "ramp_s": RAMP_S, "reference": REFERENCE,
-            "log_hz": LOG_HZ, "physics_hz": LOG_HZ * SUB_STEPS, "limits": LIMITS,
-            "noise": {**NOISE, "gyro_bias_sd": GYRO_BIAS_SD} if noisy else None,
-            "data_config": DATA_CONFIG}
+    return {
+        "generator_version": GENERATOR_VERSION,
+        "mode": mode,
+        "noisy": noisy,
+        **({} if fleet == "tuned" else {"fleet": fleet}),
+        "plan": [asdict(s) for s in flight_plan(mode, fleet)],
+        "vehicles": list(vehicles),
+        "ctbr_k_w_override": {v: k for v, (_, k) in vehicles.items()},
+        "excitation": EXCITATION[mode],
+        "ramp_s": RAMP_S,
+        "reference": REFERENCE,
+        "log_hz": LOG_HZ,
+        "physics_hz": LOG_HZ * SUB_STEPS,
+        "limits": LIMITS,
+        "noise": {**NOISE, "gyro_bias_sd": GYRO_BIAS_SD} if noisy else None,
+        "data_config": DATA_CONFIG,
+    }
 
 
 def _parquet_bytes(frame: pd.DataFrame) -> bytes:
@@ -258,15 +315,29 @@ def _parquet_bytes(frame: pd.DataFrame) -> bytes:
 
 
 def _result(folder: Path, specs: list[FlightSpec], mode: str, noisy: bool) -> dict:
-    out = {role: [str(folder / f"{s.name}.parquet") for s in specs if s.role == role]
-           for role in ROLES}
-    out.update({"input_names": INPUT_NAMES, "config": dict(DATA_CONFIG),
-                "vehicles": list(dict.fromkeys(s.vehicle for s in specs)),
-                "seeds": [s.seed for s in specs],
-                "flights": [{"path": str(folder / f"{s.name}.parquet"), "vehicle": s.vehicle,
-                             "role": s.role, "seed": s.seed, "duration_s": s.duration_s}
-                            for s in specs],
-                "mode": mode, "noisy": noisy})
+    out = {
+        role: [str(folder / f"{s.name}.parquet") for s in specs if s.role == role] for role in ROLES
+    }
+    out.update(
+        {
+            "input_names": INPUT_NAMES,
+            "config": dict(DATA_CONFIG),
+            "vehicles": list(dict.fromkeys(s.vehicle for s in specs)),
+            "seeds": [s.seed for s in specs],
+            "flights": [
+                {
+                    "path": str(folder / f"{s.name}.parquet"),
+                    "vehicle": s.vehicle,
+                    "role": s.role,
+                    "seed": s.seed,
+                    "duration_s": s.duration_s,
+                }
+                for s in specs
+            ],
+            "mode": mode,
+            "noisy": noisy,
+        }
+    )
     return out
 
 
@@ -279,11 +350,13 @@ def _cached(folder: Path, wanted: dict, specs: list[FlightSpec]) -> bool:
     except (ValueError, KeyError):
         return False
     return stored == json.loads(json.dumps(wanted)) and all(
-        (folder / f"{s.name}.parquet").is_file() for s in specs)
+        (folder / f"{s.name}.parquet").is_file() for s in specs
+    )
 
 
-def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
-                   fleet: str = "tuned") -> dict:
+def ensure_flights(
+    mode: str, noisy: bool, cache_dir: str | Path, progress=None, fleet: str = "tuned"
+) -> dict:
     """The rotorpy flights of a mode and fleet, generated once and cached under
     cache_dir/[<fleet>-]<mode>[-noisy] (no prefix for the tuned fleet).
 
@@ -308,8 +381,9 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
         clean_meta = json.loads((Path(clean["train"][0]).parent / "manifest.json").read_text())
         for s in specs:
             frame = pd.read_parquet(clean_folder / f"{s.name}.parquet")
-            atomic_write_bytes(folder / f"{s.name}.parquet",
-                               _parquet_bytes(add_sensor_noise(frame, s.seed)))
+            atomic_write_bytes(
+                folder / f"{s.name}.parquet", _parquet_bytes(add_sensor_noise(frame, s.seed))
+            )
             flights[s.name] = clean_meta["flights"][s.name]
     else:
         for s in specs:
@@ -321,8 +395,12 @@ def ensure_flights(mode: str, noisy: bool, cache_dir: str | Path, progress=None,
             atomic_write_bytes(folder / f"{s.name}.parquet", _parquet_bytes(frame))
             flights[s.name] = {"seed": s.seed, "role": s.role, "checks": checks}
     result = _result(folder, specs, mode, noisy)
-    manifest = {"settings": wanted, "flights": flights, "provenance": provenance(),
-                "result": {k: list(v) if isinstance(v, tuple) else v for k, v in result.items()}}
+    manifest = {
+        "settings": wanted,
+        "flights": flights,
+        "provenance": provenance(),
+        "result": {k: list(v) if isinstance(v, tuple) else v for k, v in result.items()},
+    }
     atomic_write_text(folder / "check.toml", data_toml())
     atomic_write_text(folder / "manifest.json", json.dumps(manifest, indent=2) + "\n")
     return result

@@ -27,8 +27,25 @@ from gpquad.engine.kernels.quaternion import rotation_matrix
 from gpquad.engine.numba_config import njit
 
 #: Indices into the scalar parameter array of `vehicle_arrays`.
-MASS, GRAV, K_ETA, K_M, K_D, K_Z, K_H, K_FLAP, C_DX, C_DY, C_DZ, TAU_M, W_MIN, W_MAX, \
-    K_W, KP_ATT, KD_ATT = range(17)
+(
+    MASS,
+    GRAV,
+    K_ETA,
+    K_M,
+    K_D,
+    K_Z,
+    K_H,
+    K_FLAP,
+    C_DX,
+    C_DY,
+    C_DZ,
+    TAU_M,
+    W_MIN,
+    W_MAX,
+    K_W,
+    KP_ATT,
+    KD_ATT,
+) = range(17)
 #: Control abstractions (rotorpy names cmd_ctatt, cmd_ctbr).
 CTATT, CTBR = 0, 1
 #: SE3Control's position gains (rotorpy 3.0.0, fixed in its constructor).
@@ -45,22 +62,48 @@ def vehicle_arrays(params: dict, k_w: float | None = None) -> tuple:
     built exactly as rotorpy builds it. `k_w` overrides the body-rate gain of `cmd_ctbr`.
     """
     p = params
-    scal = np.array([
-        p["mass"], GRAVITY, p["k_eta"], p["k_m"], p.get("k_d", 0.0), p.get("k_z", 0.0),
-        p.get("k_h", 0.0), p.get("k_flap", 0.0), p.get("c_Dx", 0.0), p.get("c_Dy", 0.0),
-        p.get("c_Dz", 0.0), p["tau_m"], p["rotor_speed_min"], p["rotor_speed_max"],
-        p.get("k_w", 1.0) if k_w is None else k_w, p.get("kp_att", 3000.0),
-        p.get("kd_att", 360.0)], dtype=float)
-    inertia = np.array([[p["Ixx"], p["Ixy"], p["Ixz"]], [p["Ixy"], p["Iyy"], p["Iyz"]],
-                        [p["Ixz"], p["Iyz"], p["Izz"]]], dtype=float)
+    scal = np.array(
+        [
+            p["mass"],
+            GRAVITY,
+            p["k_eta"],
+            p["k_m"],
+            p.get("k_d", 0.0),
+            p.get("k_z", 0.0),
+            p.get("k_h", 0.0),
+            p.get("k_flap", 0.0),
+            p.get("c_Dx", 0.0),
+            p.get("c_Dy", 0.0),
+            p.get("c_Dz", 0.0),
+            p["tau_m"],
+            p["rotor_speed_min"],
+            p["rotor_speed_max"],
+            p.get("k_w", 1.0) if k_w is None else k_w,
+            p.get("kp_att", 3000.0),
+            p.get("kd_att", 360.0),
+        ],
+        dtype=float,
+    )
+    inertia = np.array(
+        [
+            [p["Ixx"], p["Ixy"], p["Ixz"]],
+            [p["Ixy"], p["Iyy"], p["Iyz"]],
+            [p["Ixz"], p["Iyz"], p["Izz"]],
+        ],
+        dtype=float,
+    )
     geom = np.array([p["rotor_pos"][k] for k in p["rotor_pos"]], dtype=float)
     rotor_dir = np.asarray(p["rotor_directions"], dtype=float)
     if geom.shape != (4, 3):
         raise ValueError("the kernels model quadrotors (4 rotors)")
     e3 = np.array([0.0, 0.0, 1.0])
-    f_to_tm = np.vstack((np.ones((1, 4)),
-                         np.hstack([np.cross(r, e3).reshape(-1, 1)[0:2] for r in geom]),
-                         (p["k_m"] / p["k_eta"] * rotor_dir).reshape(1, -1)))
+    f_to_tm = np.vstack(
+        (
+            np.ones((1, 4)),
+            np.hstack([np.cross(r, e3).reshape(-1, 1)[0:2] for r in geom]),
+            (p["k_m"] / p["k_eta"] * rotor_dir).reshape(1, -1),
+        )
+    )
     return (scal, inertia, np.linalg.inv(inertia), geom, rotor_dir, np.linalg.inv(f_to_tm))
 
 
@@ -123,16 +166,23 @@ def state_derivative(s, cmd_speeds, veh, out):
     out[9] = 0.5 * (-q0 * w[0] - q1 * w[1] - q2 * w[2])
     va = r.T @ (s[3:6] - s[13:16])  # body airspeed
     speed = math.sqrt(va[0] ** 2 + va[1] ** 2 + va[2] ** 2)
-    force = np.array([-speed * scal[C_DX] * va[0], -speed * scal[C_DY] * va[1],
-                      -speed * scal[C_DZ] * va[2]])
+    force = np.array(
+        [-speed * scal[C_DX] * va[0], -speed * scal[C_DY] * va[1], -speed * scal[C_DZ] * va[2]]
+    )
     moment = np.zeros(3)
     for k in range(4):
         rk = geom[k]
         om = s[16 + k]
         loc = va + np.cross(w, rk)
-        f = np.array([-om * scal[K_D] * loc[0], -om * scal[K_D] * loc[1],
-                      scal[K_ETA] * om * om + scal[K_H] * (loc[0] ** 2 + loc[1] ** 2)
-                      - om * scal[K_Z] * loc[2]])
+        f = np.array(
+            [
+                -om * scal[K_D] * loc[0],
+                -om * scal[K_D] * loc[1],
+                scal[K_ETA] * om * om
+                + scal[K_H] * (loc[0] ** 2 + loc[1] ** 2)
+                - om * scal[K_Z] * loc[2],
+            ]
+        )
         force += f
         moment += np.cross(rk, f)
         moment[0] += -scal[K_FLAP] * om * loc[1]
@@ -197,8 +247,12 @@ def se3_setpoint(s, ref, mass, r_des):
 
     ref (10,): position, velocity, acceleration (world, m, m/s, m/s^2) and yaw (rad).
     """
-    f_des = mass * (-SE3_KP_POS * (s[0:3] - ref[0:3]) - SE3_KD_POS * (s[3:6] - ref[3:6])
-                    + ref[6:9] + np.array([0.0, 0.0, GRAVITY]))
+    f_des = mass * (
+        -SE3_KP_POS * (s[0:3] - ref[0:3])
+        - SE3_KD_POS * (s[3:6] - ref[3:6])
+        + ref[6:9]
+        + np.array([0.0, 0.0, GRAVITY])
+    )
     r = np.empty((3, 3))
     quat_matrix(s[6:10], r)
     u1 = f_des[0] * r[0, 2] + f_des[1] * r[1, 2] + f_des[2] * r[2, 2]
@@ -215,8 +269,11 @@ def se3_setpoint(s, ref, mass, r_des):
 @njit
 def euler_zyx(m):
     """(roll, pitch, yaw) of R = Rz(yaw) Ry(pitch) Rx(roll), rad."""
-    return (math.atan2(m[2, 1], m[2, 2]), math.asin(min(1.0, max(-1.0, -m[2, 0]))),
-            math.atan2(m[1, 0], m[0, 0]))
+    return (
+        math.atan2(m[2, 1], m[2, 2]),
+        math.asin(min(1.0, max(-1.0, -m[2, 0]))),
+        math.atan2(m[1, 0], m[0, 0]),
+    )
 
 
 @njit
@@ -261,8 +318,9 @@ def fly(s0, veh, mode, ref, excitation, rate_gain, sub_steps, dt, states, comman
         thrust = u1 + excitation[k, 3] * weight
         if mode == CTATT:
             roll, pitch, yaw = euler_zyx(r_des)
-            zyx_matrix(roll + excitation[k, 0], pitch + excitation[k, 1],
-                       yaw + excitation[k, 2], r_cmd)
+            zyx_matrix(
+                roll + excitation[k, 0], pitch + excitation[k, 1], yaw + excitation[k, 2], r_cmd
+            )
             matrix_quat(r_cmd, cmd)
         else:
             quat_matrix(s[6:10], r)

@@ -30,8 +30,9 @@ def available_peers(requested) -> tuple[list[str], dict[str, str]]:
     ok, skipped = [], {}
     for name in requested:
         if peers.package_version(name) is None:
-            skipped[name] = (f"{peers.PEER_PACKAGES[name]} is not installed "
-                             '(pip install -e ".[peers]")')
+            skipped[name] = (
+                f'{peers.PEER_PACKAGES[name]} is not installed (pip install -e ".[peers]")'
+            )
         else:
             ok.append(name)
     return ok, skipped
@@ -51,8 +52,11 @@ def source_hash() -> str:
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for package in ("engine", "data", "models", "study", "benchmark/engine.py"):
-        for path in sorted((root / package).rglob("*.py")) if (root / package).is_dir() \
-                else [root / package]:
+        for path in (
+            sorted((root / package).rglob("*.py"))
+            if (root / package).is_dir()
+            else [root / package]
+        ):
             digest.update(path.relative_to(root).as_posix().encode())
             digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
@@ -67,10 +71,17 @@ def method_settings(method: str, engine) -> dict:
 
         # the parsed settings, not a file's text: a comment does not recompute the cells
         used = engine_config(0, engine).to_dict()
-        return {"engine": used["evolution"], "vehicle": used["vehicle"],
-                "gpquad": __version__, "sources": source_hash()}
-    return {"settings": peers.PEER_SETTINGS.get(method), "version": peers.package_version(method),
-            "max_lag": MAX_LAG}
+        return {
+            "engine": used["evolution"],
+            "vehicle": used["vehicle"],
+            "gpquad": __version__,
+            "sources": source_hash(),
+        }
+    return {
+        "settings": peers.PEER_SETTINGS.get(method),
+        "version": peers.package_version(method),
+        "max_lag": MAX_LAG,
+    }
 
 
 def check_folder(out: Path, settings: dict) -> None:
@@ -83,12 +94,24 @@ def check_folder(out: Path, settings: dict) -> None:
         except ValueError:
             saved = None  # damaged: rewritten below; the cells carry their own fingerprints
         if saved is not None and saved != settings_fingerprint(settings):
-            raise GpquadError("the folder holds a benchmark scored at other horizons; give "
-                              "another --out", source=str(out), field="--out")
+            raise GpquadError(
+                "the folder holds a benchmark scored at other horizons; give another --out",
+                source=str(out),
+                field="--out",
+            )
 
 
-def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_s=(1, 7, 30),
-                  log=print, engine=None, with_gpquad: bool = True) -> dict:
+def run_benchmark(
+    names,
+    peer_names,
+    n_seeds: int,
+    out,
+    jobs: int = 1,
+    horizons_s=(1, 7, 30),
+    log=print,
+    engine=None,
+    with_gpquad: bool = True,
+) -> dict:
     """Run every missing cell; returns the summary (also written to benchmark.json).
 
     engine: a TOML config whose [evolution] and [vehicle] gpquad uses (default: the
@@ -116,35 +139,53 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
             log(f"gpquad benchmark: skipping scenario {exc}")
             continue
         if sc.name in built:
-            raise GpquadError(f"two scenarios are named {sc.name}; rename a config file",
-                              field="scenario")
+            raise GpquadError(
+                f"two scenarios are named {sc.name}; rename a config file", field="scenario"
+            )
         built[sc.name] = sc
-        log(f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
+        log(
+            f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
             f"and {sc.test.summary()['validation_samples']} test samples "
-            f"({time.perf_counter() - t0:.1f} s to build)")
+            f"({time.perf_counter() - t0:.1f} s to build)"
+        )
     # a cell is reused only if made with the same method settings on the same flights
-    fingerprints = {n: {m: settings_fingerprint({"method": method_settings(m, engine_cfg),
-                                                 "scenario": sc.source}) for m in methods}
-                    for n, sc in built.items()}
-    todo = [(sc, m, s) for sc in built.values() for m in run_methods
-            for s in seeds_of(m, n_seeds)]
-    missing = [(sc, m, s) for sc, m, s in todo
-               if cells.load_cell(cells.cell_path(out, sc.name, m, s),
-                                  fingerprints[sc.name][m]) is None]
+    fingerprints = {
+        n: {
+            m: settings_fingerprint(
+                {"method": method_settings(m, engine_cfg), "scenario": sc.source}
+            )
+            for m in methods
+        }
+        for n, sc in built.items()
+    }
+    todo = [(sc, m, s) for sc in built.values() for m in run_methods for s in seeds_of(m, n_seeds)]
+    missing = [
+        (sc, m, s)
+        for sc, m, s in todo
+        if cells.load_cell(cells.cell_path(out, sc.name, m, s), fingerprints[sc.name][m]) is None
+    ]
     from gpquad.benchmark.evaluate import figure_data
 
-    info = {"fingerprint": settings_fingerprint(settings), "settings": settings,
-            "scenarios": {n: sc.source for n, sc in built.items()},
-            "skipped_scenarios": skipped, "skipped_peers": skipped_peers, "methods": methods,
-            "seeds": {m: seeds_of(m, n_seeds) for m in methods},
-            "method_settings": {m: method_settings(m, engine_cfg) for m in methods},
-            "fingerprints": fingerprints,
-            "peer_versions": {p: peers.package_version(p) for p in use_peers},
-            "engine_config": engine_source,
-            "figures": {n: figure_data(sc.test) for n, sc in built.items()}, **provenance()}
+    info = {
+        "fingerprint": settings_fingerprint(settings),
+        "settings": settings,
+        "scenarios": {n: sc.source for n, sc in built.items()},
+        "skipped_scenarios": skipped,
+        "skipped_peers": skipped_peers,
+        "methods": methods,
+        "seeds": {m: seeds_of(m, n_seeds) for m in methods},
+        "method_settings": {m: method_settings(m, engine_cfg) for m in methods},
+        "fingerprints": fingerprints,
+        "peer_versions": {p: peers.package_version(p) for p in use_peers},
+        "engine_config": engine_source,
+        "figures": {n: figure_data(sc.test) for n, sc in built.items()},
+        **provenance(),
+    }
     write_json(out / "benchmark.json", info)
-    log(f"gpquad benchmark: {len(todo) - len(missing)} of {len(todo)} cells done earlier; "
-        f"running {len(missing)} with {jobs} job(s); results in {out}")
+    log(
+        f"gpquad benchmark: {len(todo) - len(missing)} of {len(todo)} cells done earlier; "
+        f"running {len(missing)} with {jobs} job(s); results in {out}"
+    )
     t0 = time.perf_counter()
     if missing:
         from joblib import Parallel, delayed
@@ -155,17 +196,27 @@ def run_benchmark(names, peer_names, n_seeds: int, out, jobs: int = 1, horizons_
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
         # the cores a cell's gpquad fit may use for its six searches (same equations)
         fit_jobs = max(1, (os.cpu_count() or 1) // jobs)
-        for cell in parallel(delayed(cells.run_cell)(sc, m, s, out, engine_cfg, horizons_s,
-                                                     fingerprints[sc.name][m], fit_jobs)
-                             for sc, m, s in missing):
-            h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean")
-                      is not None), None)
+        for cell in parallel(
+            delayed(cells.run_cell)(
+                sc, m, s, out, engine_cfg, horizons_s, fingerprints[sc.name][m], fit_jobs
+            )
+            for sc, m, s in missing
+        ):
+            h = next(
+                (k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean") is not None),
+                None,
+            )
             shown = f"mean RSE {h} {cell['metrics'][h]['mean']:.4g}" if h else "no score"
-            log(f"  done {cell['scenario']:<20} {cell['method']:<7} seed {cell['seed']}: "
+            log(
+                f"  done {cell['scenario']:<20} {cell['method']:<7} seed {cell['seed']}: "
                 f"{shown}, fit {cell['cost']['fit_time_s']:.1f} s "
-                f"({time.perf_counter() - t0:.0f} s elapsed)")
-    info.update(wall_time_s=time.perf_counter() - t0, jobs=jobs,
-                finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+                f"({time.perf_counter() - t0:.0f} s elapsed)"
+            )
+    info.update(
+        wall_time_s=time.perf_counter() - t0,
+        jobs=jobs,
+        finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    )
     write_json(out / "benchmark.json", info)
     return info
 
@@ -176,11 +227,14 @@ def collect(out, info: dict) -> list[dict]:
     for name in info["scenarios"]:
         for m in info["methods"]:
             for s in info["seeds"][m]:
-                cell = cells.load_cell(cells.cell_path(Path(out), name, m, s),
-                                       info["fingerprints"][name][m])
+                cell = cells.load_cell(
+                    cells.cell_path(Path(out), name, m, s), info["fingerprints"][name][m]
+                )
                 if cell is not None:
                     found.append(cell)
                 else:
-                    print(f"gpquad benchmark: warning: cell {name}/{m}/seed{s} missing",
-                          file=sys.stderr)
+                    print(
+                        f"gpquad benchmark: warning: cell {name}/{m}/seed{s} missing",
+                        file=sys.stderr,
+                    )
     return found

@@ -48,14 +48,30 @@ NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
 TEST_SEEDS = (1001, 1002)
 TEST_DURATION_S = 180.0
 TRAIN_FRACTION = 0.7
-SCENARIOS = ("median", "median-noisy", "rigid-body", "rigid-body-noisy", "rotorpy-angle",
-             "rotorpy-angle-noisy", "rotorpy-rate", "rotorpy-rate-noisy",
-             "rotorpy-heldout-angle", "rotorpy-heldout-angle-noisy", "rotorpy-heldout-rate",
-             "rotorpy-heldout-rate-noisy", "px4-s250", "px4-aquaquad", "betaflight-gecko")
+SCENARIOS = (
+    "median",
+    "median-noisy",
+    "rigid-body",
+    "rigid-body-noisy",
+    "rotorpy-angle",
+    "rotorpy-angle-noisy",
+    "rotorpy-rate",
+    "rotorpy-rate-noisy",
+    "rotorpy-heldout-angle",
+    "rotorpy-heldout-angle-noisy",
+    "rotorpy-heldout-rate",
+    "rotorpy-heldout-rate-noisy",
+    "px4-s250",
+    "px4-aquaquad",
+    "betaflight-gecko",
+)
 #: rotorpy scenario -> (mode, noisy, fleet of gpquad.benchmark.rotorpy_flights.FLEETS).
-ROTORPY = {f"rotorpy-{prefix}{mode}{suffix}": (mode, bool(suffix), fleet)
-           for prefix, fleet in (("", "tuned"), ("heldout-", "heldout"))
-           for mode in ("angle", "rate") for suffix in ("", "-noisy")}
+ROTORPY = {
+    f"rotorpy-{prefix}{mode}{suffix}": (mode, bool(suffix), fleet)
+    for prefix, fleet in (("", "tuned"), ("heldout-", "heldout"))
+    for mode in ("angle", "rate")
+    for suffix in ("", "-noisy")
+}
 
 
 class Skipped(Exception):
@@ -67,9 +83,9 @@ class Scenario:
     name: str
     fit: Dataset
     test: Dataset
-    truth: dict[str, str] | None          # known equations (raw inputs), or None
-    measured: dict[str, bool]             # u..r: scored only when measured
-    source: dict                          # what the flights are (recorded with results)
+    truth: dict[str, str] | None  # known equations (raw inputs), or None
+    measured: dict[str, bool]  # u..r: scored only when measured
+    source: dict  # what the flights are (recorded with results)
     #: Sub-scenarios fitted separately (one per vehicle), or empty. When given, `test` is
     #: their test flights concatenated in this order and `fit` their training flights
     #: (for summaries only: every method is fitted per group).
@@ -82,8 +98,10 @@ class Scenario:
             out[name] = (a, a + g.test.n_samples)
             a += g.test.n_samples
         if a != self.test.n_samples:
-            raise GpquadError(f"scenario {self.name}: the groups' test flights ({a} samples) "
-                              f"are not the scenario's ({self.test.n_samples})")
+            raise GpquadError(
+                f"scenario {self.name}: the groups' test flights ({a} samples) "
+                f"are not the scenario's ({self.test.n_samples})"
+            )
         return out
 
 
@@ -95,28 +113,39 @@ def _trim_values(flights: list[Flight], mode: str, given: dict) -> tuple[str, di
     """Trim from the training flights only: mode for build_dataset and its values."""
     if mode == "mean":
         stacked = np.vstack([f.inputs for f in flights])
-        return "given", {n: float(stacked[:, j].mean()) for j, n in
-                         enumerate(flights[0].input_names)}
+        return "given", {
+            n: float(stacked[:, j].mean()) for j, n in enumerate(flights[0].input_names)
+        }
     return mode, dict(given)
 
 
-def make_scenario(name: str, train: list[Flight], test: list[Flight], *, trim: str,
-                  trim_values: dict | None = None, validation: list[Flight] | None = None,
-                  validation_fraction: float = 2000 / 13800, truth=None, source=None
-                  ) -> Scenario:
+def make_scenario(
+    name: str,
+    train: list[Flight],
+    test: list[Flight],
+    *,
+    trim: str,
+    trim_values: dict | None = None,
+    validation: list[Flight] | None = None,
+    validation_fraction: float = 2000 / 13800,
+    truth=None,
+    source=None,
+) -> Scenario:
     """Scenario from flight lists; `validation` flights (if given) replace the held-out
     fraction of the training flights for model selection."""
     if not train or not test:
         raise GpquadError(f"scenario {name}: needs training and test flights", field="data.files")
     mode, values = _trim_values(train, trim, trim_values or {})
     if validation:
-        fit = build_dataset(train + validation, validation_fraction=0.0, trim=mode,
-                            trim_values=values)
+        fit = build_dataset(
+            train + validation, validation_fraction=0.0, trim=mode, trim_values=values
+        )
         n = len(train)
         fit = dataclasses.replace(fit, train=fit.segments[:n], validation=fit.segments[n:])
     else:
-        fit = build_dataset(train, validation_fraction=validation_fraction, trim=mode,
-                            trim_values=values)
+        fit = build_dataset(
+            train, validation_fraction=validation_fraction, trim=mode, trim_values=values
+        )
     test_ds = build_dataset(test, validation_fraction=1.0, trim="given", trim_values=fit.trim)
     measured = {s: not (fit.unmeasured(s) or test_ds.unmeasured(s)) for s in SCORED_STATES}
     return Scenario(name, fit, test_ds, truth, measured, source or {})
@@ -125,9 +154,17 @@ def make_scenario(name: str, train: list[Flight], test: list[Flight], *, trim: s
 def slice_flight(flight: Flight, a: int, b: int, suffix: str) -> Flight:
     """Samples a..b-1 of a flight as a flight of its own."""
     pos = None if flight.pos is None else flight.pos[a:b]
-    return Flight(f"{flight.name}{suffix}", flight.t[a:b], flight.quat[a:b], flight.vel[a:b],
-                  flight.rates[a:b], flight.inputs[a:b], flight.input_names, pos,
-                  dict(flight.meta))
+    return Flight(
+        f"{flight.name}{suffix}",
+        flight.t[a:b],
+        flight.quat[a:b],
+        flight.vel[a:b],
+        flight.rates[a:b],
+        flight.inputs[a:b],
+        flight.input_names,
+        pos,
+        dict(flight.meta),
+    )
 
 
 def time_split(flights: list[Flight], fraction: float) -> tuple[list[Flight], list[Flight]]:
@@ -156,15 +193,27 @@ def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
         sim = dataclasses.replace(sim, measurement_noise=dict(NOISE))
     train = [simulate(sim, cfg.data.inputs)]
     duration = min(TEST_DURATION_S, sim.duration_s)
-    test = [simulate(dataclasses.replace(sim, seed=s, duration_s=duration), cfg.data.inputs)
-            for s in TEST_SEEDS]
-    return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
-                         validation_fraction=cfg.data.validation_fraction,
-                         truth=dict(sim.equations),
-                         source={"kind": "simulator", "train_seed": sim.seed,
-                                 "test_seeds": list(TEST_SEEDS), "test_duration_s":
-                                 duration, "measurement_noise": dict(sim.measurement_noise),
-                                 "equations": dict(sim.equations)})
+    test = [
+        simulate(dataclasses.replace(sim, seed=s, duration_s=duration), cfg.data.inputs)
+        for s in TEST_SEEDS
+    ]
+    return make_scenario(
+        name,
+        train,
+        test,
+        trim=cfg.data.trim,
+        trim_values=cfg.data.trim_values,
+        validation_fraction=cfg.data.validation_fraction,
+        truth=dict(sim.equations),
+        source={
+            "kind": "simulator",
+            "train_seed": sim.seed,
+            "test_seeds": list(TEST_SEEDS),
+            "test_duration_s": duration,
+            "measurement_noise": dict(sim.measurement_noise),
+            "equations": dict(sim.equations),
+        },
+    )
 
 
 def _from_log(name: str, path: Path, named: bool = True) -> Scenario:
@@ -176,26 +225,41 @@ def _from_log(name: str, path: Path, named: bool = True) -> Scenario:
     cfg = load_config(path)
     missing = [p for p in cfg.data_paths() + held_out_paths(cfg) if not Path(p).exists()]
     if named and missing:
-        raise Skipped(f"{name}: its log {missing[0]} is not on this machine (the public logs "
-                      "of ../shared/data)")
+        raise Skipped(
+            f"{name}: its log {missing[0]} is not on this machine (the public logs "
+            "of ../shared/data)"
+        )
     flights = load_flights(cfg)
     held = {str(p) for p in held_out_paths(cfg)}
     if held:
         train = [f for f in flights if f.meta.get("file") not in held]
         test = [f for f in flights if f.meta.get("file") in held]
         if not train or not test:
-            raise GpquadError(f"no usable flight in the {'test' if train else 'training'} "
-                              "files (data.validation lists the test files)",
-                              source=str(path), field="data.validation")
+            raise GpquadError(
+                f"no usable flight in the {'test' if train else 'training'} "
+                "files (data.validation lists the test files)",
+                source=str(path),
+                field="data.validation",
+            )
         split = f"{', '.join(cfg.data.files)} train; {', '.join(cfg.data.validation)} test"
     else:
         train, test = time_split(flights, TRAIN_FRACTION)
         split = f"first {TRAIN_FRACTION:.0%} of the samples train"
-    return make_scenario(name, train, test, trim=cfg.data.trim, trim_values=cfg.data.trim_values,
-                         validation_fraction=cfg.data.validation_fraction,
-                         source={"kind": "log", "config": str(path), "config_text":
-                                 Path(path).read_text(), "files": list(cfg.data.files),
-                                 "split": split})
+    return make_scenario(
+        name,
+        train,
+        test,
+        trim=cfg.data.trim,
+        trim_values=cfg.data.trim_values,
+        validation_fraction=cfg.data.validation_fraction,
+        source={
+            "kind": "log",
+            "config": str(path),
+            "config_text": Path(path).read_text(),
+            "files": list(cfg.data.files),
+            "split": split,
+        },
+    )
 
 
 def _rotorpy(name: str, cache_dir: Path) -> Scenario:
@@ -222,19 +286,35 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
     trim = dict(trim=data.get("trim", "none"), trim_values=data.get("trim_values"))
     groups, roles = {}, {"train": [], "test": [], "validation": []}
     for vehicle in made["vehicles"]:
-        paths = {role: [f["path"] for f in made["flights"]
-                        if f["vehicle"] == vehicle and f["role"] == role] for role in roles}
+        paths = {
+            role: [
+                f["path"] for f in made["flights"] if f["vehicle"] == vehicle and f["role"] == role
+            ]
+            for role in roles
+        }
         flights = {role: read(ps) for role, ps in paths.items()}
         for role in roles:
             roles[role] += flights[role]
-        groups[vehicle] = make_scenario(f"{name}/{vehicle}", flights["train"], flights["test"],
-                                        validation=flights["validation"], **trim)
-    source = {"kind": "rotorpy", "mode": mode, "noisy": noisy,
-              **({} if fleet == "tuned" else {"fleet": fleet}),  # the tuned cells' fingerprint
-              "vehicles": made.get("vehicles"),
-              "seeds": made.get("seeds"), "config": data, "fitted": "per vehicle"}
-    pooled = make_scenario(name, roles["train"], roles["test"], validation=roles["validation"],
-                           source=source, **trim)
+        groups[vehicle] = make_scenario(
+            f"{name}/{vehicle}",
+            flights["train"],
+            flights["test"],
+            validation=flights["validation"],
+            **trim,
+        )
+    source = {
+        "kind": "rotorpy",
+        "mode": mode,
+        "noisy": noisy,
+        **({} if fleet == "tuned" else {"fleet": fleet}),  # the tuned cells' fingerprint
+        "vehicles": made.get("vehicles"),
+        "seeds": made.get("seeds"),
+        "config": data,
+        "fitted": "per vehicle",
+    }
+    pooled = make_scenario(
+        name, roles["train"], roles["test"], validation=roles["validation"], source=source, **trim
+    )
     pooled = dataclasses.replace(pooled, groups=groups)
     pooled.group_offsets()  # the test flights are the groups' in order
     return pooled
@@ -251,9 +331,12 @@ def user_scenario(path: Path) -> Scenario:
     if held_out_paths(cfg):
         return _from_log(path.stem, path, named=False)
     if cfg.data.validation_fraction <= 0:
-        raise GpquadError("the benchmark tests on the held-out part of each flight; set "
-                          "data.validation_fraction > 0", source=str(path),
-                          field="data.validation_fraction")
+        raise GpquadError(
+            "the benchmark tests on the held-out part of each flight; set "
+            "data.validation_fraction > 0",
+            source=str(path),
+            field="data.validation_fraction",
+        )
     train, test = [], []
     for f in load_flights(cfg):
         cut = len(f) - int(round(cfg.data.validation_fraction * len(f)))
@@ -261,10 +344,15 @@ def user_scenario(path: Path) -> Scenario:
             train.append(slice_flight(f, 0, cut, "[train]"))
         if cut < len(f):
             test.append(slice_flight(f, cut, len(f), "[test]"))
-    return make_scenario(path.stem, train, test, trim=cfg.data.trim,
-                         trim_values=cfg.data.trim_values,
-                         validation_fraction=cfg.data.validation_fraction,
-                         source={"kind": "user config", "config": str(path)})
+    return make_scenario(
+        path.stem,
+        train,
+        test,
+        trim=cfg.data.trim,
+        trim_values=cfg.data.trim_values,
+        validation_fraction=cfg.data.validation_fraction,
+        source={"kind": "user config", "config": str(path)},
+    )
 
 
 def build_scenario(name: str, cache_dir: Path) -> Scenario:
@@ -274,11 +362,13 @@ def build_scenario(name: str, cache_dir: Path) -> Scenario:
         return user_scenario(Path(name))
     if name in ("median", "median-noisy"):
         cfg = load_config(root / "experiments" / "quickstart.toml")
-        return _simulated(name, dataclasses.replace(cfg, simulator=Config().simulator),
-                          name.endswith("noisy"))
+        return _simulated(
+            name, dataclasses.replace(cfg, simulator=Config().simulator), name.endswith("noisy")
+        )
     if name in ("rigid-body", "rigid-body-noisy"):
-        return _simulated(name, load_config(root / "experiments" / "rigid_body.toml"),
-                          name.endswith("noisy"))
+        return _simulated(
+            name, load_config(root / "experiments" / "rigid_body.toml"), name.endswith("noisy")
+        )
     if name in ROTORPY:
         return _rotorpy(name, cache_dir)
     if name == "px4-s250":
@@ -287,5 +377,7 @@ def build_scenario(name: str, cache_dir: Path) -> Scenario:
         return _from_log(name, root / "experiments" / "px4_aquaquad.toml")
     if name == "betaflight-gecko":
         return _from_log(name, root / "experiments" / "betaflight_gecko.toml")
-    raise GpquadError(f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a "
-                      "config .toml", field="scenario")
+    raise GpquadError(
+        f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a config .toml",
+        field="scenario",
+    )

@@ -20,8 +20,12 @@ def _stats(values) -> dict | None:
     if not vals:
         return None
     arr = np.array(vals, dtype=float)
-    return {"mean": float(arr.mean()), "min": float(arr.min()), "max": float(arr.max()),
-            "n": len(vals)}
+    return {
+        "mean": float(arr.mean()),
+        "min": float(arr.min()),
+        "max": float(arr.max()),
+        "n": len(vals),
+    }
 
 
 def parameters(cell: dict) -> int | None:
@@ -47,23 +51,33 @@ def aggregate(cells: list[dict]) -> dict:
             for h in group[0]["metrics"]:
                 ms = [c["metrics"][h] for c in group]
                 horizons[h] = {
-                    "windows": ms[0]["windows"], "steps": ms[0]["steps"],
+                    "windows": ms[0]["windows"],
+                    "steps": ms[0]["steps"],
                     "diverged": int(sum(m["diverged"] for m in ms)),
                     "rse": {s: _stats([m["rse"].get(s) for m in ms]) for s in SCORED_STATES},
-                    "mean": _stats([m["mean"] for m in ms])}
+                    "mean": _stats([m["mean"] for m in ms]),
+                }
             recovery, exact_per_seed = None, None
             if group[0].get("recovery"):
-                recovery = {t: int(sum(bool(c["recovery"].get(t)) for c in group))
-                            for t in TARGET_NAMES if t in group[0]["recovery"]}
-                exact_per_seed = [int(sum(bool(v) for v in c["recovery"].values()))
-                                  for c in group]
+                recovery = {
+                    t: int(sum(bool(c["recovery"].get(t)) for c in group))
+                    for t in TARGET_NAMES
+                    if t in group[0]["recovery"]
+                }
+                exact_per_seed = [int(sum(bool(v) for v in c["recovery"].values())) for c in group]
             result[scenario][method] = {
-                "seeds": [c["seed"] for c in group], "version": group[0].get("version"),
-                "horizons": horizons, "recovery": recovery, "exact_per_seed": exact_per_seed,
+                "seeds": [c["seed"] for c in group],
+                "version": group[0].get("version"),
+                "horizons": horizons,
+                "recovery": recovery,
+                "exact_per_seed": exact_per_seed,
                 "parameters": _stats([parameters(c) for c in group]),
-                "cost": {"fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
-                         "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
-                         "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group])}}
+                "cost": {
+                    "fit_time_s": _stats([c["cost"]["fit_time_s"] for c in group]),
+                    "cpu_time_s": _stats([c["cost"].get("cpu_time_s") for c in group]),
+                    "peak_memory_mb": _stats([c["cost"]["peak_memory_mb"] for c in group]),
+                },
+            }
     return result
 
 
@@ -80,10 +94,15 @@ def summary_markdown(agg: dict) -> str:
     """One compact table of every scenario: mean RSE per horizon (mean over seeds, min-max),
     diverged windows, exact equations per seed (where the truth is known), fitted numbers
     (summed over the six equations and, per-vehicle scenarios, the vehicles) and fit time."""
-    horizons = sorted({h for ms in agg.values() for m in ms.values() for h in m["horizons"]},
-                      key=lambda h: float(h.rstrip("s")))
-    head = ["scenario", "method"] + [f"mean RSE {h}" for h in horizons] + ["exact equations",
-                                                                            "parameters", "fit s"]
+    horizons = sorted(
+        {h for ms in agg.values() for m in ms.values() for h in m["horizons"]},
+        key=lambda h: float(h.rstrip("s")),
+    )
+    head = (
+        ["scenario", "method"]
+        + [f"mean RSE {h}" for h in horizons]
+        + ["exact equations", "parameters", "fit s"]
+    )
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for scenario, methods in agg.items():
         for method, m in methods.items():
@@ -101,8 +120,11 @@ def summary_markdown(agg: dict) -> str:
             if m["recovery"]:
                 n = len(m["seeds"])
                 per_seed = m.get("exact_per_seed")
-                rec = (", ".join(f"{k}/6" for k in per_seed) if per_seed
-                       else f"{sum(m['recovery'].values())}/{6 * n}")
+                rec = (
+                    ", ".join(f"{k}/6" for k in per_seed)
+                    if per_seed
+                    else f"{sum(m['recovery'].values())}/{6 * n}"
+                )
             cells += [rec, _num(m.get("parameters"), spread=True), _num(m["cost"]["fit_time_s"])]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -110,12 +132,14 @@ def summary_markdown(agg: dict) -> str:
 
 def markdown(agg: dict) -> str:
     """One table per scenario: rows method x horizon."""
-    head = (["method", "horizon"] + [f"RSE {s}" for s in SCORED_STATES]
-            + ["mean RSE (min-max over seeds)", "diverged", "fit s", "peak MB", "recovered"])
+    head = (
+        ["method", "horizon"]
+        + [f"RSE {s}" for s in SCORED_STATES]
+        + ["mean RSE (min-max over seeds)", "diverged", "fit s", "peak MB", "recovered"]
+    )
     lines = []
     for scenario, methods in agg.items():
-        lines += [f"### {scenario}", "", "| " + " | ".join(head) + " |",
-                  "|" + "---|" * len(head)]
+        lines += [f"### {scenario}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for method, m in methods.items():
             rec = "-"
             if m["recovery"]:
@@ -125,9 +149,13 @@ def markdown(agg: dict) -> str:
                 if not hm["windows"]:
                     continue
                 cells = [method, h] + [_num(hm["rse"][s]) for s in SCORED_STATES]
-                cells += [_num(hm["mean"], spread=True),
-                          f"{hm['diverged']}/{hm['windows'] * len(m['seeds'])}",
-                          _num(m["cost"]["fit_time_s"]), _num(m["cost"]["peak_memory_mb"]), rec]
+                cells += [
+                    _num(hm["mean"], spread=True),
+                    f"{hm['diverged']}/{hm['windows'] * len(m['seeds'])}",
+                    _num(m["cost"]["fit_time_s"]),
+                    _num(m["cost"]["peak_memory_mb"]),
+                    rec,
+                ]
                 lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     return "\n".join(lines)
@@ -135,5 +163,7 @@ def markdown(agg: dict) -> str:
 
 def comparable(agg: dict) -> dict:
     """The aggregate without timings and memory (identical for any --jobs)."""
-    return {s: {m: {k: v for k, v in d.items() if k != "cost"} for m, d in ms.items()}
-            for s, ms in agg.items()}
+    return {
+        s: {m: {k: v for k, v in d.items() if k != "cost"} for m, d in ms.items()}
+        for s, ms in agg.items()
+    }

@@ -11,8 +11,11 @@ METHODS = ("ga-gradient", "ga", "pem")
 
 
 def _cmd_baseline(args) -> int:
-    out = Path(args.out) if args.out else Path("results") / (
-        f"baseline-{args.method}-{time.strftime('%Y%m%d-%H%M%S')}")
+    out = (
+        Path(args.out)
+        if args.out
+        else Path("results") / (f"baseline-{args.method}-{time.strftime('%Y%m%d-%H%M%S')}")
+    )
     if args.method == "pem":
         from gpquad.baselines.pem_config import load_pem_config
         from gpquad.baselines.pem_run import run_pem_baseline
@@ -50,10 +53,12 @@ def _cmd_compare(args) -> int:
     unscored = [r for r in rows if r.get("note")]
     if unscored:
         first = unscored[0]
-        raise GpquadError(f"{len(unscored)} of {len(rows)} runs could not be scored on common "
-                          f"data ({Path(first['run']).name}: {first['note']}); compare runs "
-                          "made on the same flights and inputs, or give --data-from",
-                          field="compare")
+        raise GpquadError(
+            f"{len(unscored)} of {len(rows)} runs could not be scored on common "
+            f"data ({Path(first['run']).name}: {first['note']}); compare runs "
+            "made on the same flights and inputs, or give --data-from",
+            field="compare",
+        )
     return 0
 
 
@@ -63,8 +68,9 @@ def register(subparsers) -> None:
     b.add_argument("method", choices=METHODS)
     b.add_argument("config", help="baseline TOML (experiments/baseline_*.toml)")
     b.add_argument("--out", help="run folder (default results/baseline-<method>-<time>)")
-    b.add_argument("--no-study", action="store_true",
-                   help="GA: skip the 20-seed convergence comparison")
+    b.add_argument(
+        "--no-study", action="store_true", help="GA: skip the 20-seed convergence comparison"
+    )
     b.set_defaults(func=_cmd_baseline)
 
     c = subparsers.add_parser("compare", help="score run folders (GP or baseline) in one table")

@@ -26,8 +26,9 @@ def parse_horizons(text: str) -> list[float]:
     try:
         values = [float(x) for x in parse_list(text, "--horizons")]
     except ValueError:
-        raise GpquadError(f"'{text}' is not a list of seconds such as 1,7,30",
-                          field="--horizons") from None
+        raise GpquadError(
+            f"'{text}' is not a list of seconds such as 1,7,30", field="--horizons"
+        ) from None
     if min(values) <= 0:
         raise GpquadError("horizons must be > 0 s", field="--horizons")
     return values
@@ -47,8 +48,10 @@ def check_arguments(args) -> tuple[list[str], list[str], list[float]]:
 
             load_config(name)  # a bad config fails here, before any work
         elif name not in SCENARIOS:
-            raise GpquadError(f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or "
-                              "give a config .toml", field="scenario")
+            raise GpquadError(
+                f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a config .toml",
+                field="scenario",
+            )
     if len(set(names)) != len(names):
         raise GpquadError("a scenario is named twice", field="scenario")
     peer_names = parse_list(args.peers, "--peers")
@@ -76,17 +79,23 @@ def write_report(out: Path, info: dict) -> dict:
     summary = {k: v for k, v in info.items() if k not in ("figures",)}
     pairs = paired(found)
     write_json(out / "results.json", {"results": agg, "paired": pairs, "benchmark": summary})
-    head = [f"gpquad benchmark, git {info['git_revision']}, engine settings from "
-            f"{info['engine_config']}; gpquad and operon: mean over seeds "
-            f"{info['seeds'].get('gpquad')} (min-max); zero, ols, sindy are deterministic.", ""]
+    head = [
+        f"gpquad benchmark, git {info['git_revision']}, engine settings from "
+        f"{info['engine_config']}; gpquad and operon: mean over seeds "
+        f"{info['seeds'].get('gpquad')} (min-max); zero, ols, sindy are deterministic.",
+        "",
+    ]
     if info["skipped_scenarios"] or info["skipped_peers"]:
         head += [f"Skipped: {why}" for why in info["skipped_scenarios"].values()]
         head += [f"Skipped peer {p}: {why}" for p, why in info["skipped_peers"].items()]
         head.append("")
     head += ["## Summary", "", table.summary_markdown(agg)]
     if pairs:
-        head += ["## Where a peer diverged: gpquad on the windows the peer flew", "",
-                 paired_markdown(pairs)]
+        head += [
+            "## Where a peer diverged: gpquad on the windows the peer flew",
+            "",
+            paired_markdown(pairs),
+        ]
     head += ["## Per state", ""]
     atomic_write_text(out / "benchmark.md", "\n".join(head) + table.markdown(agg))
     for name in info["scenarios"]:
@@ -99,30 +108,58 @@ def _cmd_benchmark(args) -> int:
 
     names, peer_names, horizons = check_arguments(args)
     out = Path(args.out)
-    info = run_benchmark(names, peer_names, args.seeds, out, jobs=args.jobs, horizons_s=horizons,
-                         with_gpquad=not args.skip_gpquad, engine=args.engine)
+    info = run_benchmark(
+        names,
+        peer_names,
+        args.seeds,
+        out,
+        jobs=args.jobs,
+        horizons_s=horizons,
+        with_gpquad=not args.skip_gpquad,
+        engine=args.engine,
+    )
     write_report(out, info)
     print((out / "benchmark.md").read_text())
-    print(f"tables: {out / 'benchmark.md'}; JSON: {out / 'results.json'}; figures: "
-          f"{out / 'figures'}")
+    print(
+        f"tables: {out / 'benchmark.md'}; JSON: {out / 'results.json'}; figures: {out / 'figures'}"
+    )
     return 0
 
 
 def register(subparsers) -> None:
-    b = subparsers.add_parser("benchmark", help="head-to-head identification benchmark: gpquad "
-                              "against peers, flown and scored the same way (resumable)")
-    b.add_argument("scenarios", nargs="*", help="scenario names or an experiment .toml "
-                   "(default: every scenario)")
-    b.add_argument("--peers", default="zero,ols,sindy,operon",
-                   help="comma-separated peers (default zero,ols,sindy,operon)")
+    b = subparsers.add_parser(
+        "benchmark",
+        help="head-to-head identification benchmark: gpquad "
+        "against peers, flown and scored the same way (resumable)",
+    )
+    b.add_argument(
+        "scenarios",
+        nargs="*",
+        help="scenario names or an experiment .toml (default: every scenario)",
+    )
+    b.add_argument(
+        "--peers",
+        default="zero,ols,sindy,operon",
+        help="comma-separated peers (default zero,ols,sindy,operon)",
+    )
     b.add_argument("--seeds", type=int, default=3, help="gpquad and operon seeds 1..N (default 3)")
-    b.add_argument("--out", default="results/benchmark",
-                   help="benchmark folder (default results/benchmark); the same command resumes")
+    b.add_argument(
+        "--out",
+        default="results/benchmark",
+        help="benchmark folder (default results/benchmark); the same command resumes",
+    )
     b.add_argument("--jobs", type=int, default=1, help="parallel cells (default 1)")
-    b.add_argument("--engine", default=None, metavar="CONFIG",
-                   help="a TOML config whose [evolution] and [vehicle] gpquad uses (default: "
-                        "gpquad's defaults, the recommended engine)")
+    b.add_argument(
+        "--engine",
+        default=None,
+        metavar="CONFIG",
+        help="a TOML config whose [evolution] and [vehicle] gpquad uses (default: "
+        "gpquad's defaults, the recommended engine)",
+    )
     b.add_argument("--horizons", default="1,7,30", help="prediction horizons in s (default 1,7,30)")
-    b.add_argument("--skip-gpquad", action="store_true",
-                   help="run the peers only (gpquad's finished cells in --out are still reported)")
+    b.add_argument(
+        "--skip-gpquad",
+        action="store_true",
+        help="run the peers only (gpquad's finished cells in --out are still reported)",
+    )
     b.set_defaults(func=_cmd_benchmark)

@@ -9,6 +9,7 @@ import os
 import sys
 from pathlib import Path
 
+from gpquad.cli.parsing import EXAMPLES, Parser, Version, WarningLines, add_examples
 from gpquad.errors import GpquadError
 
 
@@ -16,16 +17,24 @@ def _cmd_run(args) -> int:
     from gpquad.study.config import load_config, override
     from gpquad.study.runner import default_run_dir, run_experiment
 
-    cfg = override(load_config(args.config), files=args.data, targets=args.target,
-                   iterations=args.iterations, seed=args.seed,
-                   out=None)
+    cfg = override(
+        load_config(args.config),
+        files=args.data,
+        targets=args.target,
+        iterations=args.iterations,
+        seed=args.seed,
+        out=None,
+    )
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     try:
         model = run_experiment(cfg, run_dir, progress=not args.quiet)
     except KeyboardInterrupt:
         return 130
-    print("\nDiscovered equations (inputs minus trim):" if any(model.trim.values())
-          else "\nDiscovered equations:")
+    print(
+        "\nDiscovered equations (inputs minus trim):"
+        if any(model.trim.values())
+        else "\nDiscovered equations:"
+    )
     print(model)
     if any(model.trim.values()):
         print("\nThe same in the log's raw inputs:")
@@ -67,8 +76,10 @@ def _cmd_export(args) -> int:
         return 0
     result = export(model, args.format, **({"raw": True} if args.raw_inputs else {}))
     if isinstance(result, dict):  # c: the header, then the source
-        result = "".join(f"/* ---- {name} ---- */\n{text}\n"
-                         for name, text in sorted(result.items(), key=lambda kv: kv[0][-1]))
+        result = "".join(
+            f"/* ---- {name} ---- */\n{text}\n"
+            for name, text in sorted(result.items(), key=lambda kv: kv[0][-1])
+        )
     print(result, end="" if result.endswith("\n") else "\n")
     return 0
 
@@ -76,8 +87,11 @@ def _cmd_export(args) -> int:
 def _warn_interrupted(model, run) -> None:
     """One warning line when the model is that of an interrupted run."""
     if model.interrupted:
-        print(f"gpquad: warning: {run}: the run was interrupted; these are the equations found "
-              "so far (the same `gpquad run` command resumes it)", file=sys.stderr)
+        print(
+            f"gpquad: warning: {run}: the run was interrupted; these are the equations found "
+            "so far (the same `gpquad run` command resumes it)",
+            file=sys.stderr,
+        )
 
 
 def _cmd_fly(args) -> int:
@@ -98,29 +112,49 @@ def _cmd_fly(args) -> int:
 
         require("pyarrow", "reading Parquet files")
     try:
-        table = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else \
-            pd.read_csv(path)
-    except (ValueError, OSError, UnicodeDecodeError, pd.errors.ParserError,
-            pd.errors.EmptyDataError) as exc:
-        raise GpquadError(f"not a readable table ({type(exc).__name__}); give a UTF-8 CSV or a "
-                          "Parquet file with a column per input", source=str(path)) from None
+        table = (
+            pd.read_parquet(path)
+            if path.suffix.lower() in (".parquet", ".pq")
+            else pd.read_csv(path)
+        )
+    except (
+        ValueError,
+        OSError,
+        UnicodeDecodeError,
+        pd.errors.ParserError,
+        pd.errors.EmptyDataError,
+    ) as exc:
+        raise GpquadError(
+            f"not a readable table ({type(exc).__name__}); give a UTF-8 CSV or a "
+            "Parquet file with a column per input",
+            source=str(path),
+        ) from None
     missing = [n for n in model.input_names if n not in table.columns]
     if missing:
         raise GpquadError(f"missing input columns {missing}", source=str(path), field=missing[0])
     absent = [t for t in TARGET_NAMES if t not in model.equations]
     if absent and not args.zero_missing:
-        raise GpquadError(f"the run has no equation for {absent}; identify all six targets, or "
-                          "give --zero-missing to fly them as zero acceleration",
-                          source=str(args.run), field="targets")
+        raise GpquadError(
+            f"the run has no equation for {absent}; identify all six targets, or "
+            "give --zero-missing to fly them as zero acceleration",
+            source=str(args.run),
+            field="targets",
+        )
     try:
         clock = table["t"].to_numpy(dtype=float) if "t" in table.columns else None
         inputs = table[list(model.input_names)].to_numpy(dtype=float)
     except (ValueError, TypeError):
-        raise GpquadError("the time and input columns must hold numbers", source=str(path),
-                          field=model.input_names[0]) from None
+        raise GpquadError(
+            "the time and input columns must hold numbers",
+            source=str(path),
+            field=model.input_names[0],
+        ) from None
     if len(inputs) < 2:
-        raise GpquadError(f"{len(inputs)} rows; give at least 2 samples of the inputs",
-                          source=str(path), field=model.input_names[0])
+        raise GpquadError(
+            f"{len(inputs)} rows; give at least 2 samples of the inputs",
+            source=str(path),
+            field=model.input_names[0],
+        )
     if clock is not None:
         _check_input_clock(clock, model.dt, str(path))
     if not np.all(np.isfinite(inputs)):
@@ -130,12 +164,15 @@ def _cmd_fly(args) -> int:
         try:
             initial = [float(x) for x in args.initial.split(",")]
         except ValueError:
-            raise GpquadError("--initial takes 9 numbers: phi,theta,psi,u,v,w,p,q,r",
-                              field="--initial") from None
+            raise GpquadError(
+                "--initial takes 9 numbers: phi,theta,psi,u,v,w,p,q,r", field="--initial"
+            ) from None
     flight = model.fly(inputs, initial, raw_inputs=not args.trimmed)
     out = write_flight_file(flight, args.out)
-    print(f"flew {len(flight)} samples ({len(flight) * model.dt:.1f} s) with the equations of "
-          f"{args.run}; wrote {out}")
+    print(
+        f"flew {len(flight)} samples ({len(flight) * model.dt:.1f} s) with the equations of "
+        f"{args.run}; wrote {out}"
+    )
     return 0
 
 
@@ -144,11 +181,17 @@ def _check_input_clock(t, dt: float, source: str) -> None:
     import numpy as np
 
     steps = np.diff(t)
-    if len(steps) and (not np.all(np.isfinite(steps))
-                       or np.max(np.abs(steps - dt)) > 1e-6 * max(dt, 1.0) + 1e-9 * abs(t).max()):
-        raise GpquadError(f"the inputs are not sampled every {dt:g} s, the model's sample time "
-                          f"(steps {np.min(steps):.6g} to {np.max(steps):.6g} s); resample them "
-                          "to the model's rate", source=source, field="t")
+    if len(steps) and (
+        not np.all(np.isfinite(steps))
+        or np.max(np.abs(steps - dt)) > 1e-6 * max(dt, 1.0) + 1e-9 * abs(t).max()
+    ):
+        raise GpquadError(
+            f"the inputs are not sampled every {dt:g} s, the model's sample time "
+            f"(steps {np.min(steps):.6g} to {np.max(steps):.6g} s); resample them "
+            "to the model's rate",
+            source=source,
+            field="t",
+        )
 
 
 def _cmd_bench(args) -> int:
@@ -159,70 +202,41 @@ def _cmd_bench(args) -> int:
     return 0
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with a "did you mean" for a mistyped command or choice."""
-
-    def error(self, message: str):
-        import difflib
-        import re
-
-        found = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
-        if found:
-            choices = re.findall(r"'([^']*)'", found.group(2))
-            close = difflib.get_close_matches(found.group(1), choices, n=1)
-            if close:
-                message += f"; did you mean '{close[0]}'?"
-        super().error(message)
-
-
-class _Version(argparse.Action):
-    """--version: the version and the source's git revision."""
-
-    def __init__(self, option_strings, dest, **kwargs):
-        super().__init__(option_strings, dest, nargs=0, help="print the version and exit")
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        from gpquad._version import __version__
-        from gpquad.study.store import git_revision
-
-        print(f"gpquad {__version__} (git {git_revision()})")
-        parser.exit()
-
-
-EXAMPLES = """examples:
-  gpquad run experiments/quickstart.toml          identify the reference flight's equations
-  gpquad run my.toml --data flight.ulg            the same engine on your log
-  gpquad score results/RUN --data other.ulg       RSE on another flight, beside the zero model
-  gpquad export results/RUN --format c --out m.c  C99 code that flies the model
-  gpquad data check flight.ulg                    is the log fit for identification?
-  gpquad sweep experiments/paper.toml --jobs 2    the paper's full study
-"""
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="gpquad", description="Discover multirotor acceleration equations from flight logs "
-        "by coevolutionary genetic programming.", epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action=_Version)
-    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
+    parser = Parser(
+        prog="gpquad",
+        description="Discover multirotor acceleration equations from flight logs "
+        "by coevolutionary genetic programming.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action=Version)
+    sub = parser.add_subparsers(dest="command", parser_class=Parser)
 
-    run = sub.add_parser("run", help="identify equations from a config",
-                         formatter_class=argparse.RawDescriptionHelpFormatter,
-                         epilog="examples:\n  gpquad run experiments/quickstart.toml\n"
-                         "  gpquad run my.toml --data a.ulg --data b.ulg --seed 2 --out res/ab\n"
-                         "  gpquad run my.toml --target p_dot --iterations 3   (a quick look)")
+    run = sub.add_parser(
+        "run",
+        help="identify equations from a config",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  gpquad run experiments/quickstart.toml\n"
+        "  gpquad run my.toml --data a.ulg --data b.ulg --seed 2 --out res/ab\n"
+        "  gpquad run my.toml --target p_dot --iterations 3   (a quick look)",
+    )
     run.add_argument("config", help="experiment TOML file")
-    run.add_argument("--data", action="append",
-                     help="flight file (repeatable); replaces data.files")
-    run.add_argument("--target", action="append",
-                     help="target equation (repeatable; default all six)")
+    run.add_argument(
+        "--data", action="append", help="flight file (repeatable); replaces data.files"
+    )
+    run.add_argument(
+        "--target", action="append", help="target equation (repeatable; default all six)"
+    )
     run.add_argument("--iterations", type=int, help="coevolution iterations per target")
     run.add_argument("--seed", type=int, help="master seed")
     run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
     run.add_argument("--quiet", action="store_true", help="no progress lines")
-    run.add_argument("--no-figures", action="store_true",
-                     help="skip the report figures (convergence, prediction) in RUN/report/")
+    run.add_argument(
+        "--no-figures",
+        action="store_true",
+        help="skip the report figures (convergence, prediction) in RUN/report/",
+    )
     run.set_defaults(func=_cmd_run)
 
     sim = sub.add_parser("simulate", help="write the reference simulator's flight to a file")
@@ -233,20 +247,25 @@ def build_parser() -> argparse.ArgumentParser:
     from gpquad.models.exports import FORMATS
 
     exp = sub.add_parser(
-        "export", help="a run's model as text, LaTeX, sympy, python, C or casadi",
+        "export",
+        help="a run's model as text, LaTeX, sympy, python, C or casadi",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Every format states dt (delays are in samples of dt), the lags and the "
-        "trim; python, c and casadi fly as `gpquad fly`.\nformats:\n" + "\n".join(
-            f"  {f.name:9s}{f.about}" for f in FORMATS.values()),
+        "trim; python, c and casadi fly as `gpquad fly`.\nformats:\n"
+        + "\n".join(f"  {f.name:9s}{f.about}" for f in FORMATS.values()),
         epilog="examples:\n  gpquad export results/run --format text\n"
         "  gpquad export results/run --format python --out model.py\n"
         "  gpquad export results/run --format c --out model.c   (writes model.c and model.h)\n"
-        "  cc -std=c99 -O2 -c model.c")
+        "  cc -std=c99 -O2 -c model.c",
+    )
     exp.add_argument("run", help="run folder or model.json")
     exp.add_argument("--format", choices=list(FORMATS), default="text")
     exp.add_argument("--out", help="file to write (c: PATH.c and PATH.h); default: print")
-    exp.add_argument("--raw-inputs", action="store_true",
-                     help="text, latex, sympy: write equations in untrimmed inputs")
+    exp.add_argument(
+        "--raw-inputs",
+        action="store_true",
+        help="text, latex, sympy: write equations in untrimmed inputs",
+    )
     exp.set_defaults(func=_cmd_export)
 
     fly = sub.add_parser("fly", help="fly a run's equations with given inputs")
@@ -254,10 +273,14 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--inputs", required=True, help="CSV/Parquet with the input columns")
     fly.add_argument("--out", required=True, help="flight file to write (.csv or .parquet)")
     fly.add_argument("--initial", help="initial state phi,theta,psi,u,v,w,p,q,r (default 0)")
-    fly.add_argument("--trimmed", action="store_true",
-                     help="the inputs are already trim-subtracted")
-    fly.add_argument("--zero-missing", action="store_true",
-                     help="fly targets the run has no equation for as zero acceleration")
+    fly.add_argument(
+        "--trimmed", action="store_true", help="the inputs are already trim-subtracted"
+    )
+    fly.add_argument(
+        "--zero-missing",
+        action="store_true",
+        help="fly targets the run has no equation for as zero acceleration",
+    )
     fly.set_defaults(func=_cmd_fly)
 
     bench = sub.add_parser("bench", help="fitness-kernel throughput and paper-scale timing")
@@ -267,32 +290,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     for register in _extensions():
         register(sub)
-    _add_examples(parser, [])
+    add_examples(parser, [])
     return parser
-
-
-def _add_examples(parser: argparse.ArgumentParser, path: list[str]) -> None:
-    """Every (sub)command's --help ends with its examples (gpquad.cli.examples)."""
-    from gpquad.cli.examples import EXAMPLES
-
-    for action in parser._actions:
-        if not isinstance(action, argparse._SubParsersAction):
-            continue
-        for name, child in action.choices.items():
-            key = " ".join(path + [name])
-            if not child.epilog and key in EXAMPLES:
-                child.epilog = "examples:\n" + "\n".join(f"  {e}" for e in EXAMPLES[key])
-                child.formatter_class = argparse.RawDescriptionHelpFormatter
-            _add_examples(child, path + [name])
 
 
 def _extensions():
     """Sub-command groups contributed by other packages of gpquad (data, baselines, sweeps)."""
     registers = []
-    for module, name in (("gpquad.cli.data", "register"), ("gpquad.cli.baselines", "register"),
-                         ("gpquad.cli.sweep", "register"), ("gpquad.cli.score", "register"),
-                         ("gpquad.cli.control", "register"), ("gpquad.cli.physics", "register"),
-                         ("gpquad.cli.benchmark", "register")):
+    for module, name in (
+        ("gpquad.cli.data", "register"),
+        ("gpquad.cli.baselines", "register"),
+        ("gpquad.cli.sweep", "register"),
+        ("gpquad.cli.score", "register"),
+        ("gpquad.cli.control", "register"),
+        ("gpquad.cli.physics", "register"),
+        ("gpquad.cli.benchmark", "register"),
+    ):
         try:
             mod = __import__(module, fromlist=[name])
         except ModuleNotFoundError as exc:
@@ -301,32 +314,6 @@ def _extensions():
             raise
         registers.append(getattr(mod, name))
     return registers
-
-
-class WarningLines:
-    """Python warnings as gpquad lines: the first of each kind (the message with its numbers
-    blanked) printed when it happens, one line at the end for the rest of that kind; no
-    source paths."""
-
-    def __init__(self, stream=None):
-        self.stream = stream
-        self.kinds: dict[tuple[str, str], list] = {}
-
-    def show(self, message, category, filename, lineno, file=None, line=None):
-        import re
-
-        text = " ".join(str(message).split())
-        key = (category.__name__, re.sub(r"\d+(\.\d+)?(e-?\d+)?", "#", text))
-        seen = self.kinds.setdefault(key, [text, 0])
-        seen[1] += 1
-        if seen[1] == 1:
-            print(f"gpquad: warning: {text}", file=self.stream or sys.stderr, flush=True)
-
-    def summary(self) -> None:
-        for first, count in self.kinds.values():
-            if count > 1:
-                print(f"gpquad: warning: {count - 1} more warning(s) like \"{first}\"",
-                      file=self.stream or sys.stderr)
 
 
 def main(argv=None) -> int:
@@ -362,12 +349,16 @@ def _run(args) -> int:
         return 141
     except OSError as exc:
         if exc.errno == errno.ENOSPC:
-            return _fail(f"{exc.filename or 'a file'}: no space left on the device; free some "
-                         "and run the same command again")
+            return _fail(
+                f"{exc.filename or 'a file'}: no space left on the device; free some "
+                "and run the same command again"
+            )
         if exc.filename is None:
             raise
-        return _fail(f"{exc.filename}: {exc.strerror or exc}; check the path and that it is a "
-                     "writable folder (or a readable file)")
+        return _fail(
+            f"{exc.filename}: {exc.strerror or exc}; check the path and that it is a "
+            "writable folder (or a readable file)"
+        )
 
 
 def _fail(message: str) -> int:

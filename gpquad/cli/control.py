@@ -20,8 +20,15 @@ def _cmd_pid(args) -> int:
     cfg = load_control_config(args.config)
     out = _out_dir(args, "pid")
     say = (lambda *a, **k: None) if args.json else print
-    summary = run_pid(args.run, cfg, out, courses=args.courses, seed=args.seed, say=say,
-                      figures=not args.no_figures)
+    summary = run_pid(
+        args.run,
+        cfg,
+        out,
+        courses=args.courses,
+        seed=args.seed,
+        say=say,
+        figures=not args.no_figures,
+    )
     if args.json:
         print(json.dumps(summary))
     else:
@@ -31,11 +38,15 @@ def _cmd_pid(args) -> int:
 
 
 def _pid_text(s: dict) -> str:
-    lines = [f"model: position RMSE from the course {s['model_rmse_m']:.3f} m, completion "
-             f"{s['model_completion']:.1%}, diverged flights {s['model_diverged']}"]
+    lines = [
+        f"model: position RMSE from the course {s['model_rmse_m']:.3f} m, completion "
+        f"{s['model_completion']:.1%}, diverged flights {s['model_diverged']}"
+    ]
     if s["truth_rmse_m"] is not None:
-        lines.append(f"truth plant: position RMSE {s['truth_rmse_m']:.3f} m "
-                     f"({s['rmse_ratio']:.2f} x the model's), completion {s['completion']:.1%}")
+        lines.append(
+            f"truth plant: position RMSE {s['truth_rmse_m']:.3f} m "
+            f"({s['rmse_ratio']:.2f} x the model's), completion {s['completion']:.1%}"
+        )
     return "\n".join(lines)
 
 
@@ -58,8 +69,11 @@ def register(subparsers) -> None:
     """Add `control pid` and `control lq` to gpquad's command line."""
     c = subparsers.add_parser("control", help="fly identified models in closed loop (PID, LQ)")
     sub = c.add_subparsers(dest="control_command", required=True)
-    pid = sub.add_parser("pid", help="evolve PID waypoint gains on a discovered model "
-                         "(CMA-ES) and fly them on the model and the truth plant")
+    pid = sub.add_parser(
+        "pid",
+        help="evolve PID waypoint gains on a discovered model "
+        "(CMA-ES) and fly them on the model and the truth plant",
+    )
     pid.add_argument("run", help="run folder of `gpquad run`")
     pid.add_argument("--courses", type=int, default=1, help="test courses (default 1)")
     pid.add_argument("--seed", type=int, help="seed (default: the config's, 1)")

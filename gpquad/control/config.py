@@ -13,8 +13,21 @@ from dataclasses import dataclass, field
 from gpquad.baselines.schema import build, read_toml, require
 
 #: Names of the evolved PID gains, in the kernel's order (see gpquad.control.pid_kernel).
-GAIN_NAMES = ("kp_roll", "kd_roll", "kp_pitch", "kd_pitch", "kp_yaw", "kd_yaw",
-              "kp_x", "kd_x", "kp_y", "kd_y", "kp_z", "ki_z", "kd_z")
+GAIN_NAMES = (
+    "kp_roll",
+    "kd_roll",
+    "kp_pitch",
+    "kd_pitch",
+    "kp_yaw",
+    "kd_yaw",
+    "kp_x",
+    "kd_x",
+    "kp_y",
+    "kd_y",
+    "kp_z",
+    "ki_z",
+    "kd_z",
+)
 
 
 @dataclass(frozen=True)
@@ -42,8 +55,21 @@ class PidConfig:
     integral_limit: float = 5.0  # |altitude error integral| limit, m s
     command_limit: float = 0.0  # > 0: |roll, pitch, yaw input - hover| limit (input units)
     # Nominal gains: CMA-ES searches log10(gain / nominal) in [-span, +span].
-    nominal_gains: tuple[float, ...] = (30.0, 8.0, 30.0, 8.0, 10.0, 4.0,
-                                        0.5, 1.0, 0.5, 1.0, 2.0, 0.2, 2.0)
+    nominal_gains: tuple[float, ...] = (
+        30.0,
+        8.0,
+        30.0,
+        8.0,
+        10.0,
+        4.0,
+        0.5,
+        1.0,
+        0.5,
+        1.0,
+        2.0,
+        0.2,
+        2.0,
+    )
     log10_span: float = 2.0
     sigma0: float = 0.5  # CMA-ES initial step, in decades
     popsize: int = 12
@@ -79,38 +105,72 @@ class ControlConfig:
 
 def validate(cfg: ControlConfig, source: str) -> ControlConfig:
     p, c, q = cfg.pid, cfg.pid.course, cfg.lq
-    require(p.input_level in ("rate", "angle"), "choose rate or angle", source,
-            "pid.input_level")
-    require(p.model_form in ("simplified", "tree"), "choose simplified or tree", source,
-            "pid.model_form")
-    require(len(p.nominal_gains) == len(GAIN_NAMES) and all(g > 0 for g in p.nominal_gains),
-            f"give {len(GAIN_NAMES)} positive gains {list(GAIN_NAMES)}", source,
-            "pid.nominal_gains")
-    require(0.0 < p.max_angle_rad < math.pi / 2, "must be in (0, pi/2)", source,
-            "pid.max_angle_rad")
+    require(p.input_level in ("rate", "angle"), "choose rate or angle", source, "pid.input_level")
+    require(
+        p.model_form in ("simplified", "tree"),
+        "choose simplified or tree",
+        source,
+        "pid.model_form",
+    )
+    require(
+        len(p.nominal_gains) == len(GAIN_NAMES) and all(g > 0 for g in p.nominal_gains),
+        f"give {len(GAIN_NAMES)} positive gains {list(GAIN_NAMES)}",
+        source,
+        "pid.nominal_gains",
+    )
+    require(
+        0.0 < p.max_angle_rad < math.pi / 2, "must be in (0, pi/2)", source, "pid.max_angle_rad"
+    )
     require(0.0 <= p.input_noise < 1.0, "must be in [0, 1)", source, "pid.input_noise")
     require(p.input_margin >= 0.0, "must be >= 0", source, "pid.input_margin")
     require(p.log10_span > 0 and p.sigma0 > 0, "must be > 0", source, "pid.sigma0")
-    require(p.popsize >= 2 and p.generations >= 1 and p.courses_per_generation >= 1
-            and p.repetitions >= 1, "popsize >= 2, generations, courses and repetitions >= 1",
-            source, "pid.popsize")
+    require(
+        p.popsize >= 2
+        and p.generations >= 1
+        and p.courses_per_generation >= 1
+        and p.repetitions >= 1,
+        "popsize >= 2, generations, courses and repetitions >= 1",
+        source,
+        "pid.popsize",
+    )
     require(p.command_limit >= 0, "must be >= 0 (0: no limit)", source, "pid.command_limit")
-    require(p.deviation_scale_m > 0 and p.integral_limit >= 0, "must be > 0", source,
-            "pid.deviation_scale_m")
+    require(
+        p.deviation_scale_m > 0 and p.integral_limit >= 0,
+        "must be > 0",
+        source,
+        "pid.deviation_scale_m",
+    )
     require(c.legs >= 1, "must be >= 1", source, "pid.course.legs")
-    require(0 < c.leg_min_m <= c.leg_max_m, "need 0 < leg_min_m <= leg_max_m", source,
-            "pid.course.leg_min_m")
-    require(c.speed_m_s > 0 and c.waypoint_radius_m > 0 and c.climb_max_m >= 0,
-            "speed and radius must be > 0", source, "pid.course.speed_m_s")
+    require(
+        0 < c.leg_min_m <= c.leg_max_m,
+        "need 0 < leg_min_m <= leg_max_m",
+        source,
+        "pid.course.leg_min_m",
+    )
+    require(
+        c.speed_m_s > 0 and c.waypoint_radius_m > 0 and c.climb_max_m >= 0,
+        "speed and radius must be > 0",
+        source,
+        "pid.course.speed_m_s",
+    )
     require(0 <= c.max_turn_deg <= 180, "must be in [0, 180]", source, "pid.course.max_turn_deg")
     require(q.dt > 0 and q.r > 0, "must be > 0", source, "lq.dt")
-    require(len(q.q_y) == 4 and all(v >= 0 for v in q.q_y), "give 4 non-negative weights "
-            "[psi, a_x, a_y, a_z]", source, "lq.q_y")
-    require(q.step_s > 0 and q.joystick_s > 0 and q.joystick_tau_s > 0, "must be > 0", source,
-            "lq.step_s")
+    require(
+        len(q.q_y) == 4 and all(v >= 0 for v in q.q_y),
+        "give 4 non-negative weights [psi, a_x, a_y, a_z]",
+        source,
+        "lq.q_y",
+    )
+    require(
+        q.step_s > 0 and q.joystick_s > 0 and q.joystick_tau_s > 0,
+        "must be > 0",
+        source,
+        "lq.step_s",
+    )
     require(0 < q.settle_band < 1, "must be in (0, 1)", source, "lq.settle_band")
-    require(q.max_ref_m_s2 > 0 and q.joystick_sd_m_s2 >= 0, "must be > 0", source,
-            "lq.max_ref_m_s2")
+    require(
+        q.max_ref_m_s2 > 0 and q.joystick_sd_m_s2 >= 0, "must be > 0", source, "lq.max_ref_m_s2"
+    )
     return cfg
 
 

@@ -92,16 +92,23 @@ class PathScore:
         return f - 1.0 if self.diverged else f
 
     def to_dict(self) -> dict:
-        return {"rmse_m": self.rmse_m, "covered_m": self.covered_m, "length_m": self.length_m,
-                "completion": self.completion, "diverged": self.diverged}
+        return {
+            "rmse_m": self.rmse_m,
+            "covered_m": self.covered_m,
+            "length_m": self.length_m,
+            "completion": self.completion,
+            "diverged": self.diverged,
+        }
 
 
-def score_path(pos: np.ndarray, target: np.ndarray, waypoints: np.ndarray, flown: int,
-               n_steps: int) -> PathScore:
+def score_path(
+    pos: np.ndarray, target: np.ndarray, waypoints: np.ndarray, flown: int, n_steps: int
+) -> PathScore:
     """Score the flown part pos[: flown + 1] of a flight of n_steps."""
     p = pos[: flown + 1]
     w = target[: flown + 1]
     dev = deviation(p, waypoints)
     prog = progress(p, w, waypoints)
-    return PathScore(float(np.sqrt(np.mean(dev ** 2))), float(prog[-1]),
-                     course_length(waypoints), flown < n_steps)
+    return PathScore(
+        float(np.sqrt(np.mean(dev**2))), float(prog[-1]), course_length(waypoints), flown < n_steps
+    )

@@ -37,12 +37,19 @@ def gains_of(x, cfg: PidConfig) -> np.ndarray:
 
 def evaluate(plant: Plant, controller: Controller, courses, noises, d0: float) -> float:
     """Mean fitness of one controller over courses with their noise."""
-    return float(np.mean([fly(plant, controller, w, n).score.fitness(d0)
-                          for w, n in zip(courses, noises, strict=True)]))
+    return float(
+        np.mean(
+            [
+                fly(plant, controller, w, n).score.fitness(d0)
+                for w, n in zip(courses, noises, strict=True)
+            ]
+        )
+    )
 
 
-def evolve_gains(plant: Plant, start: Controller, cfg: PidConfig, noise_sd: np.ndarray,
-                 seed: int, say=None) -> Evolution:
+def evolve_gains(
+    plant: Plant, start: Controller, cfg: PidConfig, noise_sd: np.ndarray, seed: int, say=None
+) -> Evolution:
     """Run CMA-ES for cfg.generations. The result is the better, on 4 fresh courses, of the
     final distribution mean and the best candidate seen (on its own generation's courses)."""
     from gpquad.extras import require
@@ -52,35 +59,62 @@ def evolve_gains(plant: Plant, start: Controller, cfg: PidConfig, noise_sd: np.n
     seq = np.random.SeedSequence([seed, 12])
     course_rng, cma_rng = (np.random.default_rng(s) for s in seq.spawn(2))
     n = len(cfg.nominal_gains)
-    opts = {"seed": int(seed) + 1, "popsize": cfg.popsize, "maxiter": cfg.generations,
-            "bounds": [[-cfg.log10_span] * n, [cfg.log10_span] * n], "verbose": -9,
-            "randn": lambda *shape: cma_rng.standard_normal(shape), "tolfun": 0.0,
-            "tolx": 0.0, "tolfunhist": 0.0, "tolstagnation": 10 ** 9}
+    opts = {
+        "seed": int(seed) + 1,
+        "popsize": cfg.popsize,
+        "maxiter": cfg.generations,
+        "bounds": [[-cfg.log10_span] * n, [cfg.log10_span] * n],
+        "verbose": -9,
+        "randn": lambda *shape: cma_rng.standard_normal(shape),
+        "tolfun": 0.0,
+        "tolx": 0.0,
+        "tolfunhist": 0.0,
+        "tolstagnation": 10**9,
+    }
     es = cma.CMAEvolutionStrategy(np.zeros(n), cfg.sigma0, opts)
     started = time.perf_counter()
     best_x, best_f, history, evals = np.zeros(n), -np.inf, [], 0
     for gen in range(cfg.generations):
-        courses = [random_course(cfg.course, course_rng)
-                   for _ in range(cfg.courses_per_generation)]
+        courses = [random_course(cfg.course, course_rng) for _ in range(cfg.courses_per_generation)]
         noises = [input_noise(course_rng, w, cfg, plant.dt, noise_sd) for w in courses]
         xs = es.ask()
-        fits = [evaluate(plant, start.with_gains(gains_of(x, cfg)), courses, noises,
-                         cfg.deviation_scale_m) for x in xs]
+        fits = [
+            evaluate(
+                plant, start.with_gains(gains_of(x, cfg)), courses, noises, cfg.deviation_scale_m
+            )
+            for x in xs
+        ]
         evals += len(xs)
         es.tell(xs, [-f for f in fits])
         i = int(np.argmax(fits))
         if fits[i] > best_f:
             best_f, best_x = fits[i], np.asarray(xs[i], float)
-        history.append({"generation": gen + 1, "best": float(fits[i]),
-                        "median": float(np.median(fits)), "sigma": float(es.sigma)})
+        history.append(
+            {
+                "generation": gen + 1,
+                "best": float(fits[i]),
+                "median": float(np.median(fits)),
+                "sigma": float(es.sigma),
+            }
+        )
         if say is not None and ((gen + 1) % 10 == 0 or gen + 1 == cfg.generations):
-            say(f"  generation {gen + 1:3d}/{cfg.generations}: best fitness {fits[i]:.4f}, "
-                f"median {np.median(fits):.4f}")
+            say(
+                f"  generation {gen + 1:3d}/{cfg.generations}: best fitness {fits[i]:.4f}, "
+                f"median {np.median(fits):.4f}"
+            )
     courses = [random_course(cfg.course, course_rng) for _ in range(4)]
     noises = [input_noise(course_rng, w, cfg, plant.dt, noise_sd) for w in courses]
     finalists = [np.asarray(es.result.xfavorite, float), best_x]
-    scores = [evaluate(plant, start.with_gains(gains_of(x, cfg)), courses, noises,
-                       cfg.deviation_scale_m) for x in finalists]
+    scores = [
+        evaluate(plant, start.with_gains(gains_of(x, cfg)), courses, noises, cfg.deviation_scale_m)
+        for x in finalists
+    ]
     k = int(np.argmax(scores))
-    return Evolution(start.with_gains(gains_of(finalists[k], cfg)), float(scores[k]), history,
-                     evals + 2 * len(courses), time.perf_counter() - started, cma.__version__)
+    return Evolution(
+        start.with_gains(gains_of(finalists[k], cfg)),
+        float(scores[k]),
+        history,
+        evals + 2 * len(courses),
+        time.perf_counter() - started,
+        cma.__version__,
+    )

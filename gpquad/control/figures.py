@@ -22,8 +22,7 @@ def paths_figure(test: dict, path: Path, title: str = "", dt: float = 1.0) -> Pa
     """Top view (east, north) and altitude of the course, the model path and the truth paths
     (paper Fig. 3: model continuous, repetitions on the other plant dashed)."""
     plt = _plt()
-    fig, (top, alt) = plt.subplots(1, 2, figsize=(11, 4.8),
-                                   gridspec_kw={"width_ratios": [1.4, 1]})
+    fig, (top, alt) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [1.4, 1]})
     v = vertices(test["waypoints"])
     top.plot(v[:, 1], v[:, 0], "k:", lw=1, label="course")
     top.plot(v[1:, 1], v[1:, 0], "ks", ms=5)
@@ -34,8 +33,14 @@ def paths_figure(test: dict, path: Path, title: str = "", dt: float = 1.0) -> Pa
         alt.plot(np.arange(len(p)) * dt, -p[:, 2], "-", color="tab:blue", lw=1.8)
     for i, f in enumerate(test["truth"]):
         p = f.pos[: f.flown + 1]
-        top.plot(p[:, 1], p[:, 0], "--", color=styles[i % len(styles)], lw=1.2,
-                 label=f"truth plant, repetition {i + 1}")
+        top.plot(
+            p[:, 1],
+            p[:, 0],
+            "--",
+            color=styles[i % len(styles)],
+            lw=1.2,
+            label=f"truth plant, repetition {i + 1}",
+        )
         alt.plot(np.arange(len(p)) * dt, -p[:, 2], "--", color=styles[i % len(styles)], lw=1.2)
     top.set_xlabel("east (m)")
     top.set_ylabel("north (m)")
@@ -65,8 +70,14 @@ def evolution_figure(history: list[dict], path: Path) -> Path:
     return path
 
 
-def tracking_figure(t: np.ndarray, ref: np.ndarray, acc: np.ndarray, path: Path,
-                    title: str = "", angles: np.ndarray | None = None) -> Path:
+def tracking_figure(
+    t: np.ndarray,
+    ref: np.ndarray,
+    acc: np.ndarray,
+    path: Path,
+    title: str = "",
+    angles: np.ndarray | None = None,
+) -> Path:
     """Reference and flown body accelerations a_x, a_y, a_z (paper Figs. 8-9); angles, if
     given, [phi, theta] in a fourth panel."""
     plt = _plt()

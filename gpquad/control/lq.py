@@ -30,25 +30,42 @@ from gpquad.errors import GpquadError
 #: sixth (r) is zero in every row.
 TABLE_A1 = {
     "Phi": np.block([[np.eye(3), 1e-3 * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]]),
-    "Gamma": 1e-3 * np.array([[0.0, -0.0002, 0.0, 0.0002],
-                              [0.0001, 0.0, -0.0001, 0.0],
-                              [0.0, 0.0, 0.0, 0.0],
-                              [0.0, -0.3305, 0.0, 0.3305],
-                              [0.295, 0.0, -0.295, 0.0],
-                              [-0.0143, 0.0143, -0.0143, 0.0143]]),
-    "C": np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
-                   [0.0, -9.805, 0.0, 0.0, 0.0, 0.0],
-                   [9.805, 0.0, 0.0, 0.0, 0.0, 0.0],
-                   [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]]),
+    "Gamma": 1e-3
+    * np.array(
+        [
+            [0.0, -0.0002, 0.0, 0.0002],
+            [0.0001, 0.0, -0.0001, 0.0],
+            [0.0, 0.0, 0.0, 0.0],
+            [0.0, -0.3305, 0.0, 0.3305],
+            [0.295, 0.0, -0.295, 0.0],
+            [-0.0143, 0.0143, -0.0143, 0.0143],
+        ]
+    ),
+    "C": np.array(
+        [
+            [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            [0.0, -9.805, 0.0, 0.0, 0.0, 0.0],
+            [9.805, 0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ]
+    ),
     "D": np.vstack([np.zeros((3, 4)), np.full((1, 4), -0.0116)]),
-    "K": np.array([[0.0, 530.32, -211.61, 0.0, 42.4, -86.12],
-                   [-529.93, 0.0, 211.61, -40.04, 0.0, 86.12],
-                   [0.0, -530.32, -211.61, 0.0, -42.4, -86.12],
-                   [529.93, 0.0, 211.61, 40.04, 0.0, 86.12]]),
-    "F": np.array([[-211.61, -54.09, 0.0, -21.52],
-                   [211.61, 0.0, -54.05, -21.52],
-                   [-211.61, 54.09, 0.0, -21.52],
-                   [211.61, 0.0, 54.05, -21.52]]),
+    "K": np.array(
+        [
+            [0.0, 530.32, -211.61, 0.0, 42.4, -86.12],
+            [-529.93, 0.0, 211.61, -40.04, 0.0, 86.12],
+            [0.0, -530.32, -211.61, 0.0, -42.4, -86.12],
+            [529.93, 0.0, 211.61, 40.04, 0.0, 86.12],
+        ]
+    ),
+    "F": np.array(
+        [
+            [-211.61, -54.09, 0.0, -21.52],
+            [211.61, 0.0, -54.05, -21.52],
+            [-211.61, 54.09, 0.0, -21.52],
+            [211.61, 0.0, 54.05, -21.52],
+        ]
+    ),
     "Q_y": np.diag([180e3, 5e3, 5e3, 5e3]),
     "R": np.eye(4),
 }
@@ -63,8 +80,12 @@ class Tracker:
     closed_loop_poles: np.ndarray
 
     def to_dict(self) -> dict:
-        return {"K": self.K.tolist(), "F": self.F.tolist(), "Pi": self.Pi.tolist(),
-                "closed_loop_pole_radius_max": float(np.abs(self.closed_loop_poles).max())}
+        return {
+            "K": self.K.tolist(),
+            "F": self.F.tolist(),
+            "Pi": self.Pi.tolist(),
+            "closed_loop_pole_radius_max": float(np.abs(self.closed_loop_poles).max()),
+        }
 
 
 def lq_tracker(Phi, Gamma, C, D, Q_y, R) -> Tracker:
@@ -81,8 +102,9 @@ def lq_tracker(Phi, Gamma, C, D, Q_y, R) -> Tracker:
     try:
         K, P, poles = control.dlqr(Phi, Gamma, Q, R_bar, N)
     except (ValueError, np.linalg.LinAlgError, control.ControlArgument) as exc:
-        raise GpquadError(f"no stabilising LQ solution ({exc}); check Q_y and R",
-                          field="lq.q_y") from None
+        raise GpquadError(
+            f"no stabilising LQ solution ({exc}); check Q_y and R", field="lq.q_y"
+        ) from None
     K = np.asarray(K)
     n = Phi.shape[0]
     closed = np.eye(n) - Phi + Gamma @ K
@@ -100,11 +122,26 @@ def _f(theta, vehicle, x, u):
     """(x_dot (6,), y (4,)) of eq. (10)/(24) with Euler kinematics eq. (1)."""
     phi, th, psi, p, q, r = x
     acc = np.empty(6)
-    model_accelerations(np.asarray(theta, float), np.asarray(vehicle, float), phi, th,
-                        np.array([p, q, r]), np.asarray(u, float), acc)
+    model_accelerations(
+        np.asarray(theta, float),
+        np.asarray(vehicle, float),
+        phi,
+        th,
+        np.array([p, q, r]),
+        np.asarray(u, float),
+        acc,
+    )
     t, s, c = np.tan(th), np.sin(phi), np.cos(phi)
-    xdot = np.array([p + q * t * s + r * t * c, q * c - r * s,
-                     (q * s + r * c) / np.cos(th), acc[3], acc[4], acc[5]])
+    xdot = np.array(
+        [
+            p + q * t * s + r * t * c,
+            q * c - r * s,
+            (q * s + r * c) / np.cos(th),
+            acc[3],
+            acc[4],
+            acc[5],
+        ]
+    )
     return xdot, np.array([psi, acc[0], acc[1], acc[2]])
 
 

@@ -1,7 +1,7 @@
 """Numba kernels: the nested PID waypoint controller flying a plant of six prefix trees.
 
 Plant (flat arrays): codes (6, M), values (6, M), sizes (6,), delays (6, n_in) as in
-gpquad.engine.kernels.fitness.rollout, plus trim (n_in,), subtracted from the raw input before the
+gpquad.engine.kernels.rollout.rollout, plus trim (n_in,), subtracted from the raw input before the
 trees read it (a discovered model's inputs are trim-subtracted; a truth model has trim 0).
 A tree of size 1 holding the constant 0 gives zero acceleration.
 
@@ -59,8 +59,9 @@ N_GAINS = 13
 
 
 @njit
-def plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc, features,
-                        stack, pred):
+def plant_accelerations(
+    codes, values, sizes, delays, trim, state, history, row, acc, features, stack, pred
+):
     """acc (6,) from state (9,) and history (rows, n_in) of raw applied inputs; row is the
     current step's row (the delayed input of delay d is history[row - d]). delays (6, K n_in)
     may hold K taps per input (gpquad.engine.taps): slot s reads input s % n_in; features
@@ -77,8 +78,24 @@ def plant_accelerations(codes, values, sizes, delays, trim, state, history, row,
 
 
 @njit
-def plant_rk4_sample(codes, values, sizes, delays, trim, alphas, history, row, y, work, dt,
-                     substeps, acc, features, stack, pred):
+def plant_rk4_sample(
+    codes,
+    values,
+    sizes,
+    delays,
+    trim,
+    alphas,
+    history,
+    row,
+    y,
+    work,
+    dt,
+    substeps,
+    acc,
+    features,
+    stack,
+    pred,
+):
     """Advance the plant over one control step by RK4 with the inputs history[row] held.
 
     y (PLANT_ROWS + 6, 1): q, V, omega, x (gpquad.engine.kernels.step rows) and the six lag
@@ -91,13 +108,15 @@ def plant_rk4_sample(codes, values, sizes, delays, trim, alphas, history, row, y
     for _ in range(substeps):
         for stage in range(N_STAGES):
             body_stage_state(y, slope, NODES[stage], h, ys, 0, n_rows)
-            state[0], state[1], state[2] = euler_from_quat(ys[Q, 0], ys[Q + 1, 0], ys[Q + 2, 0],
-                                                           ys[Q + 3, 0])
+            state[0], state[1], state[2] = euler_from_quat(
+                ys[Q, 0], ys[Q + 1, 0], ys[Q + 2, 0], ys[Q + 3, 0]
+            )
             for i in range(3):
                 state[3 + i] = ys[V + i, 0]
                 state[6 + i] = ys[W + i, 0]
-            plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc,
-                                features, stack, pred)
+            plant_accelerations(
+                codes, values, sizes, delays, trim, state, history, row, acc, features, stack, pred
+            )
             for t in range(6):
                 slope[PLANT_ROWS + t, 0] = 0.0
                 if alphas[t] < 1.0:
@@ -117,9 +136,20 @@ def constant_input_accelerations(codes, values, sizes, delays, trim, state, inpu
     for r in range(hist.shape[0]):
         hist[r] = inputs
     acc = np.empty(6)
-    plant_accelerations(codes, values, sizes, delays, trim, state, hist, hist.shape[0] - 1, acc,
-                        np.empty((9 + delays.shape[1], 1)), np.empty((STACK_ROWS, 1)),
-                        np.empty(1))
+    plant_accelerations(
+        codes,
+        values,
+        sizes,
+        delays,
+        trim,
+        state,
+        hist,
+        hist.shape[0] - 1,
+        acc,
+        np.empty((9 + delays.shape[1], 1)),
+        np.empty((STACK_ROWS, 1)),
+        np.empty(1),
+    )
     return acc
 
 
@@ -146,8 +176,27 @@ def pid_command(gains, ctrl, err, vel, angles, rates, integral, cmd):
 
 
 @njit
-def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan, scale, hover,
-               lo, hi, waypoints, noise, n_steps, scheme, substeps):
+def fly_course(
+    codes,
+    values,
+    sizes,
+    delays,
+    alphas,
+    trim,
+    dt,
+    gains,
+    ctrl,
+    chan,
+    scale,
+    hover,
+    lo,
+    hi,
+    waypoints,
+    noise,
+    n_steps,
+    scheme,
+    substeps,
+):
     """Fly the plant through waypoints (n_wp, 3) NED from rest at the origin, level.
 
     noise (n_steps, n_in) is added to the clipped inputs. Returns pos (n_steps + 1, 3),
@@ -243,15 +292,32 @@ def fly_course(codes, values, sizes, delays, alphas, trim, dt, gains, ctrl, chan
                 y[Q + i, 0] = quat[i]
             for i in range(3):
                 y[V + i, 0], y[W + i, 0], y[X + i, 0] = vel[i], rates[i], pos[i]
-            plant_rk4_sample(codes, values, sizes, delays, trim, alphas, history, row, y, work,
-                             dt, substeps, acc, features, stack, pred)
+            plant_rk4_sample(
+                codes,
+                values,
+                sizes,
+                delays,
+                trim,
+                alphas,
+                history,
+                row,
+                y,
+                work,
+                dt,
+                substeps,
+                acc,
+                features,
+                stack,
+                pred,
+            )
             for i in range(4):
                 quat[i] = y[Q + i, 0]
             for i in range(3):
                 vel[i], rates[i], pos[i] = y[V + i, 0], y[W + i, 0], y[X + i, 0]
             continue
-        plant_accelerations(codes, values, sizes, delays, trim, state, history, row, acc,
-                            features, stack, pred)
+        plant_accelerations(
+            codes, values, sizes, delays, trim, state, history, row, acc, features, stack, pred
+        )
         for t in range(6):
             if alphas[t] < 1.0:
                 applied[t] += alphas[t] * (acc[t] - applied[t])

@@ -51,19 +51,34 @@ class Plant:
 
     def accelerations(self, state, inputs) -> np.ndarray:
         """The six accelerations in `state` (9,) with raw `inputs` held constant."""
-        return constant_input_accelerations(self.codes, self.values, self.sizes, self.delays,
-                                            self.trim, np.asarray(state, float),
-                                            np.asarray(inputs, float))
+        return constant_input_accelerations(
+            self.codes,
+            self.values,
+            self.sizes,
+            self.delays,
+            self.trim,
+            np.asarray(state, float),
+            np.asarray(inputs, float),
+        )
 
 
 def plant_from_trees(name: str, trees: dict[str, Tree], input_names, trim, dt: float) -> Plant:
     """A plant of one tree per target; a target without a tree has zero acceleration.
     Trees may read several taps of an input (gpquad.engine.taps)."""
     codes, values, sizes, delays = stack_rows(
-        {target_index(t): tree for t, tree in trees.items()}, 6, min_slots=len(input_names))
+        {target_index(t): tree for t, tree in trees.items()}, 6, min_slots=len(input_names)
+    )
     check_stack(codes, sizes)
-    return Plant(name, tuple(input_names), codes, values, sizes, delays,
-                 np.asarray(trim, dtype=float), float(dt))
+    return Plant(
+        name,
+        tuple(input_names),
+        codes,
+        values,
+        sizes,
+        delays,
+        np.asarray(trim, dtype=float),
+        float(dt),
+    )
 
 
 def model_plant(model, form: str = "simplified") -> Plant:
@@ -78,8 +93,10 @@ def model_plant(model, form: str = "simplified") -> Plant:
     if form == "tree":
         trees = {t: e.tree for t, e in model.equations.items()}
     else:
-        trees = {t: from_sympy(e.sympy(), e.delays, model.input_names)
-                 for t, e in model.equations.items()}
+        trees = {
+            t: from_sympy(e.sympy(), e.delays, model.input_names)
+            for t, e in model.equations.items()
+        }
     trim = [model.trim.get(n, 0.0) for n in model.input_names]
     plant = plant_from_trees("model", trees, model.input_names, trim, model.dt)
     for t, e in model.equations.items():
@@ -91,8 +108,11 @@ def model_plant(model, form: str = "simplified") -> Plant:
 def truth_plant(equations: dict[str, str], input_names, dt: float) -> Plant:
     """The reference simulator's true equations (raw inputs) as a plant."""
     truth = TruthModel(equations, input_names)
-    trees = {t: from_sympy(truth.exprs[t], truth.delays[t], input_names)
-             for t in TARGET_NAMES if t in truth.exprs}
+    trees = {
+        t: from_sympy(truth.exprs[t], truth.delays[t], input_names)
+        for t in TARGET_NAMES
+        if t in truth.exprs
+    }
     return plant_from_trees("truth", trees, input_names, np.zeros(len(input_names)), dt)
 
 
@@ -111,10 +131,13 @@ class DesignPoint:
         return 1.0 / self.gain
 
     def to_dict(self, input_names) -> dict:
-        return {"channels": {a: input_names[c] for a, c in zip(AXES, self.chan, strict=True)},
-                "sensitivity": {a: float(g) for a, g in zip(AXES, self.gain, strict=True)},
-                "hover_inputs": dict(zip(input_names, self.hover.tolist(), strict=True)),
-                "g_x": self.g_x, "g_y": self.g_y}
+        return {
+            "channels": {a: input_names[c] for a, c in zip(AXES, self.chan, strict=True)},
+            "sensitivity": {a: float(g) for a, g in zip(AXES, self.gain, strict=True)},
+            "hover_inputs": dict(zip(input_names, self.hover.tolist(), strict=True)),
+            "g_x": self.g_x,
+            "g_y": self.g_y,
+        }
 
 
 def _jacobian(plant: Plant, state, inputs, step: np.ndarray) -> np.ndarray:
@@ -133,8 +156,11 @@ def design_point(plant: Plant, input_span: np.ndarray, source: str = "model") ->
     onto roll, pitch, yaw and thrust."""
     n_in = len(plant.input_names)
     if n_in < 4:
-        raise GpquadError(f"the model has {n_in} inputs; the PID needs roll, pitch, yaw and "
-                          "thrust inputs", source=source, field="input_names")
+        raise GpquadError(
+            f"the model has {n_in} inputs; the PID needs roll, pitch, yaw and thrust inputs",
+            source=source,
+            field="input_names",
+        )
     rest = np.zeros(9)
     step = 1e-3 * np.maximum(np.asarray(input_span, float), 1e-6)
     hover = plant.trim.copy()
@@ -146,7 +172,10 @@ def design_point(plant: Plant, input_span: np.ndarray, source: str = "model") ->
         raise GpquadError(
             "the model's inputs do not map one-to-one onto roll (p_dot), pitch (q_dot), yaw "
             f"(r_dot) and thrust (a_z): largest sensitivities on {names}; identify all four "
-            "equations with their inputs", source=source, field="targets")
+            "equations with their inputs",
+            source=source,
+            field="targets",
+        )
     for _ in range(5):  # Newton: p_dot = q_dot = r_dot = a_z = 0 at rest
         acc = plant.accelerations(rest, hover)[rows]
         sub = _jacobian(plant, rest, hover, step)[np.ix_(rows, chan)]
@@ -161,14 +190,19 @@ def design_point(plant: Plant, input_span: np.ndarray, source: str = "model") ->
     gy = _state_derivative(plant, hover, 0, 1, tilt)
     for name, g in (("d a_x / d theta", gx), ("d a_y / d phi", gy)):
         if not abs(g) > 1e-3:
-            raise GpquadError(f"the model has {name} = {g:.3g} at hover: tilting does not move "
-                              "it, so the outer loops cannot steer it", source=source,
-                              field="targets")
+            raise GpquadError(
+                f"the model has {name} = {g:.3g} at hover: tilting does not move "
+                "it, so the outer loops cannot steer it",
+                source=source,
+                field="targets",
+            )
     return DesignPoint(chan, gain, hover, gx, gy)
 
 
 def _state_derivative(plant: Plant, hover, state_index: int, target: int, h: float) -> float:
     up, down = np.zeros(9), np.zeros(9)
     up[state_index], down[state_index] = h, -h
-    return float((plant.accelerations(up, hover)[target]
-                  - plant.accelerations(down, hover)[target]) / (2 * h))
+    return float(
+        (plant.accelerations(up, hover)[target] - plant.accelerations(down, hover)[target])
+        / (2 * h)
+    )

@@ -39,19 +39,22 @@ def _uniform(t, x, rate_hz, source):
     x = np.asarray(x, dtype=float)
     x = x[:, None] if x.ndim == 1 else x
     if len(t) != len(x) or len(t) < 4:
-        raise GpquadError("need at least 4 samples with matching time and signal lengths",
-                          source=source, field="t")
+        raise GpquadError(
+            "need at least 4 samples with matching time and signal lengths",
+            source=source,
+            field="t",
+        )
     if np.any(np.diff(t) <= 0) or not np.isfinite(t).all():
-        raise GpquadError("time must be finite and strictly increasing", source=source,
-                          field="t")
+        raise GpquadError("time must be finite and strictly increasing", source=source, field="t")
     ok = np.isfinite(x).all(axis=1)
     t, x = t[ok], x[ok]
     grid = np.arange(t[0], t[-1], 1.0 / rate_hz)
     return grid, np.column_stack([np.interp(grid, t, x[:, j]) for j in range(x.shape[1])])
 
 
-def estimate_offset(t_a, x_a, t_b, x_b, rate_hz: float = 100.0,
-                    max_lag_s: float | None = None) -> Alignment:
+def estimate_offset(
+    t_a, x_a, t_b, x_b, rate_hz: float = 100.0, max_lag_s: float | None = None
+) -> Alignment:
     """Clock offset of log B relative to log A from a shared signal.
 
     t_a (Na,), x_a (Na,) or (Na, k); t_b, x_b likewise with the same k; s and any unit.
@@ -60,8 +63,9 @@ def estimate_offset(t_a, x_a, t_b, x_b, rate_hz: float = 100.0,
     ga, ya = _uniform(t_a, x_a, rate_hz, "log A")
     gb, yb = _uniform(t_b, x_b, rate_hz, "log B")
     if ya.shape[1] != yb.shape[1]:
-        raise GpquadError(f"log A has {ya.shape[1]} shared channels, log B {yb.shape[1]}",
-                          field="columns")
+        raise GpquadError(
+            f"log A has {ya.shape[1]} shared channels, log B {yb.shape[1]}", field="columns"
+        )
     za = (ya - ya.mean(0)) / np.where(ya.std(0) > 0, ya.std(0), 1.0)
     zb = (yb - yb.mean(0)) / np.where(yb.std(0) > 0, yb.std(0), 1.0)
     if not (ya.std(0) > 0).any() or not (yb.std(0) > 0).any():
@@ -84,11 +88,18 @@ def estimate_offset(t_a, x_a, t_b, x_b, rate_hz: float = 100.0,
     t_common = ga[(ga + offset >= gb[0]) & (ga + offset <= gb[-1])]
     if len(t_common) < 2:
         raise GpquadError("the logs do not overlap after alignment", field="t")
-    resid = np.column_stack([np.interp(t_common + offset, gb, yb[:, j]) -
-                             np.interp(t_common, ga, ya[:, j]) for j in range(ya.shape[1])])
-    rmse = float(np.sqrt(np.mean(resid ** 2)))
-    pairs = [(np.interp(t_common + offset, gb, yb[:, j]), np.interp(t_common, ga, ya[:, j]))
-             for j in range(ya.shape[1])]
-    corr = float(np.mean([np.corrcoef(b, a)[0, 1] for b, a in pairs
-                          if b.std() > 0 and a.std() > 0]))
+    resid = np.column_stack(
+        [
+            np.interp(t_common + offset, gb, yb[:, j]) - np.interp(t_common, ga, ya[:, j])
+            for j in range(ya.shape[1])
+        ]
+    )
+    rmse = float(np.sqrt(np.mean(resid**2)))
+    pairs = [
+        (np.interp(t_common + offset, gb, yb[:, j]), np.interp(t_common, ga, ya[:, j]))
+        for j in range(ya.shape[1])
+    ]
+    corr = float(
+        np.mean([np.corrcoef(b, a)[0, 1] for b, a in pairs if b.std() > 0 and a.std() > 0])
+    )
     return Alignment(float(offset), corr, rmse, float(t_common[-1] - t_common[0]))

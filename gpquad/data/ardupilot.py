@@ -57,19 +57,24 @@ def seconds(d: dict, name: str, source: str) -> np.ndarray:
         return np.asarray(d["TimeUS"], dtype=float) * 1e-6
     if "TimeMS" in d:
         return np.asarray(d["TimeMS"], dtype=float) * 1e-3
-    raise GpquadError(f"message {name} has no timestamp (neither TimeUS nor TimeMS)",
-                      source=source, field=f"{name}.TimeUS")
+    raise GpquadError(
+        f"message {name} has no timestamp (neither TimeUS nor TimeMS)",
+        source=source,
+        field=f"{name}.TimeUS",
+    )
 
 
 def _stream(log, name, d, fields, columns, kind, scale=1.0, offset=0.0, required=True):
     t = seconds(d, name, str(log.path))
     missing = [f for f in fields if f not in d]
     if missing:
-        raise GpquadError(f"message {name} has no field '{missing[0]}'", source=str(log.path),
-                          field=f"{name}.{missing[0]}")
+        raise GpquadError(
+            f"message {name} has no field '{missing[0]}'",
+            source=str(log.path),
+            field=f"{name}.{missing[0]}",
+        )
     values = (np.column_stack([np.asarray(d[f], dtype=float) for f in fields]) - offset) * scale
-    return Stream(name, t, values, tuple(columns), kind, str(log.path), f"{name}.TimeUS",
-                  required)
+    return Stream(name, t, values, tuple(columns), kind, str(log.path), f"{name}.TimeUS", required)
 
 
 def _armed_stream(log, ev) -> Stream | None:
@@ -94,30 +99,42 @@ def ardupilot_log_table(path, data) -> LogTable:
     measured = {}
     q_name, q = _first(log, ("XKQ", "NKQ1"))
     if q_name:
-        streams = [_stream(log, q_name, q, ("Q1", "Q2", "Q3", "Q4"), ("qw", "qx", "qy", "qz"),
-                            "quat")]
-        measured.update({a: f"measured (EKF quaternion {q_name})" for a in ("phi", "theta",
-                                                                            "psi")})
+        streams = [
+            _stream(log, q_name, q, ("Q1", "Q2", "Q3", "Q4"), ("qw", "qx", "qy", "qz"), "quat")
+        ]
+        measured.update({a: f"measured (EKF quaternion {q_name})" for a in ("phi", "theta", "psi")})
     else:
         _, att = _first(log, ("ATT",))
         if not att:
-            raise GpquadError("no attitude: neither XKQ, NKQ1 nor ATT messages", source=src,
-                              field="ATT")
+            raise GpquadError(
+                "no attitude: neither XKQ, NKQ1 nor ATT messages", source=src, field="ATT"
+            )
         eul = np.radians(np.column_stack([att["Roll"], att["Pitch"], att["Yaw"]]))
         quat = np.array([quat_from_euler(*e) for e in eul])
-        streams = [Stream("ATT", seconds(att, "ATT", src), quat, ("qw", "qx", "qy", "qz"),
-                          "quat", src, "ATT.TimeUS")]
+        streams = [
+            Stream(
+                "ATT",
+                seconds(att, "ATT", src),
+                quat,
+                ("qw", "qx", "qy", "qz"),
+                "quat",
+                src,
+                "ATT.TimeUS",
+            )
+        ]
         measured.update({a: "measured (ATT Euler angles)" for a in ("phi", "theta", "psi")})
     g_name, gyro = _first(log, ("IMU",))
     if g_name and "GyrX" in gyro:
-        fields, rates = ("GyrX", "GyrY", "GyrZ"), _stream(log, g_name, gyro, ("GyrX", "GyrY",
-                                                                              "GyrZ"),
-                                                          ("p", "q", "r"), "state")
+        fields, rates = (
+            ("GyrX", "GyrY", "GyrZ"),
+            _stream(log, g_name, gyro, ("GyrX", "GyrY", "GyrZ"), ("p", "q", "r"), "state"),
+        )
     else:
         g_name, gyro = _first(log, ("RATE",))
         if not g_name:
-            raise GpquadError("no body rates: neither IMU nor RATE messages", source=src,
-                              field="IMU")
+            raise GpquadError(
+                "no body rates: neither IMU nor RATE messages", source=src, field="IMU"
+            )
         fields = ("R", "P", "Y")
         rates = _stream(log, g_name, gyro, fields, ("p", "q", "r"), "state", np.pi / 180)
     check_rate_peak(rates.values, src, fields)
@@ -125,8 +142,7 @@ def ardupilot_log_table(path, data) -> LogTable:
     measured.update({a: f"measured (gyro, {g_name})" for a in ("p", "q", "r")})
     v_name, vel = _first(log, ("XKF1", "NKF1"))
     if not v_name:
-        raise GpquadError("no velocity: neither XKF1 nor NKF1 messages", source=src,
-                          field="XKF1")
+        raise GpquadError("no velocity: neither XKF1 nor NKF1 messages", source=src, field="XKF1")
     streams.append(_stream(log, v_name, vel, ("VN", "VE", "VD"), ("vx", "vy", "vz"), "state"))
     gps = log.get("GPS")
     how = "with GPS" if gps and np.max(gps.get("Status", [0])) >= 3 else "no GPS fix logged"
@@ -153,37 +169,88 @@ def ardupilot_log_table(path, data) -> LogTable:
     thrust = table["thrust_out"].to_numpy() if "thrust_out" in table.columns else None
     is_armed = table["armed"].to_numpy() > 0.5 if "armed" in table.columns else None
     mask = in_flight_mask(t, is_armed, thrust, data, src)
-    return LogTable(name=log.path.stem, source=src, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(inputs), measured=measured,
-                    streams=info, notes=notes, levels=supported, input_level=chosen,
-                    input_columns=inputs, units=UNITS)
+    return LogTable(
+        name=log.path.stem,
+        source=src,
+        table=table,
+        valid=valid,
+        in_flight=mask,
+        rate_hz=data.resample_hz,
+        input_names=tuple(inputs),
+        measured=measured,
+        streams=info,
+        notes=notes,
+        levels=supported,
+        input_level=chosen,
+        input_columns=inputs,
+        units=UNITS,
+    )
 
 
 def _input_streams(log) -> list[Stream]:
     out = []
     rate = log.get("RATE")
     if rate and all(f in rate for f in ("RDes", "PDes", "YDes", "ROut", "POut", "YOut")):
-        out.append(_stream(log, "RATE", rate, ("RDes", "PDes", "YDes"), ("p_sp", "q_sp", "r_sp"),
-                           "hold", np.pi / 180, required=False))
-        out.append(Stream("RATE.Out", seconds(rate, "RATE", str(log.path)),
-                          np.column_stack([rate["ROut"], rate["POut"], rate["YOut"]]),
-                          ("roll_out", "pitch_out", "yaw_out"), "hold", str(log.path),
-                          "RATE.TimeUS", False))
+        out.append(
+            _stream(
+                log,
+                "RATE",
+                rate,
+                ("RDes", "PDes", "YDes"),
+                ("p_sp", "q_sp", "r_sp"),
+                "hold",
+                np.pi / 180,
+                required=False,
+            )
+        )
+        out.append(
+            Stream(
+                "RATE.Out",
+                seconds(rate, "RATE", str(log.path)),
+                np.column_stack([rate["ROut"], rate["POut"], rate["YOut"]]),
+                ("roll_out", "pitch_out", "yaw_out"),
+                "hold",
+                str(log.path),
+                "RATE.TimeUS",
+                False,
+            )
+        )
     ctun = log.get("CTUN")
     if ctun and "ThO" in ctun:
         out.append(_stream(log, "CTUN", ctun, ("ThO",), ("thrust_out",), "hold", required=False))
     rcin = log.get("RCIN")
     if rcin:
         chans = [c for c in (f"C{i}" for i in range(1, 9)) if c in rcin]
-        out.append(_stream(log, "RCIN", rcin, chans, tuple(f"rc_{i}" for i in range(len(chans))),
-                           "hold", 1 / 500, 1500.0, required=False))
+        out.append(
+            _stream(
+                log,
+                "RCIN",
+                rcin,
+                chans,
+                tuple(f"rc_{i}" for i in range(len(chans))),
+                "hold",
+                1 / 500,
+                1500.0,
+                required=False,
+            )
+        )
     rcou = log.get("RCOU")
     if rcou and all(f"C{i}" in rcou for i in range(1, 5)):
         p = log.params()
         lo, hi = p.get("MOT_PWM_MIN", 0.0) or 1000.0, p.get("MOT_PWM_MAX", 0.0) or 2000.0
-        out.append(_stream(log, "RCOU", rcou, ("C1", "C2", "C3", "C4"),
-                           tuple(f"motor_{i}" for i in range(4)), "hold", 1 / (hi - lo), lo,
-                           required=False))
+        out.append(
+            _stream(
+                log,
+                "RCOU",
+                rcou,
+                ("C1", "C2", "C3", "C4"),
+                tuple(f"motor_{i}" for i in range(4)),
+                "hold",
+                1 / (hi - lo),
+                lo,
+                required=False,
+            )
+        )
     return out
 
 
@@ -194,8 +261,10 @@ def _levels(columns, params) -> dict[str, dict[str, str]]:
         out["rates"] = paper_names("q_sp", "p_sp", "r_sp", "thrust_out")
     if {"roll_out", "pitch_out", "yaw_out", "thrust_out"} <= cols:
         out["torque"] = paper_names("pitch_out", "roll_out", "yaw_out", "thrust_out")
-    rc = [int(params.get(f"RCMAP_{k}", d)) for k, d in (("PITCH", 2), ("ROLL", 1), ("YAW", 4),
-                                                         ("THROTTLE", 3))]
+    rc = [
+        int(params.get(f"RCMAP_{k}", d))
+        for k, d in (("PITCH", 2), ("ROLL", 1), ("YAW", 4), ("THROTTLE", 3))
+    ]
     if all(f"rc_{m - 1}" in cols for m in rc):
         out["sticks"] = paper_names(*(f"rc_{m - 1}" for m in rc))
     if {f"motor_{i}" for i in range(4)} <= cols:

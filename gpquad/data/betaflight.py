@@ -39,8 +39,19 @@ from gpquad.engine.kernels.quaternion import quat_from_euler
 from gpquad.errors import GpquadError
 
 G = 9.80665
-HEADER_KEYS = ("Firmware revision", "Craft name", "looptime", "P interval", "motorOutput",
-               "minthrottle", "maxthrottle", "acc_1G", "rates", "rc_rates", "gyro_lowpass_hz")
+HEADER_KEYS = (
+    "Firmware revision",
+    "Craft name",
+    "looptime",
+    "P interval",
+    "motorOutput",
+    "minthrottle",
+    "maxthrottle",
+    "acc_1G",
+    "rates",
+    "rc_rates",
+    "gyro_lowpass_hz",
+)
 
 
 def _open(path: Path):
@@ -55,8 +66,10 @@ def _open(path: Path):
         parser = Parser.load(str(path))
         count = parser.reader.log_count
     except Exception as exc:
-        raise GpquadError(f"not a readable Betaflight blackbox log ({type(exc).__name__}: "
-                          f"{exc})", source=str(path)) from None
+        raise GpquadError(
+            f"not a readable Betaflight blackbox log ({type(exc).__name__}: {exc})",
+            source=str(path),
+        ) from None
     if count < 1:
         raise GpquadError("no blackbox log in the file", source=str(path))
     return parser, count
@@ -68,8 +81,11 @@ def read_frames(path, index: int) -> tuple[pd.DataFrame, dict, str | None]:
     keeps the frames decoded before it."""
     parser, count = _open(Path(path))
     if not 1 <= index <= count:
-        raise GpquadError(f"log {index} does not exist; the file has {count}", source=str(path),
-                          field="data.log_index")
+        raise GpquadError(
+            f"log {index} does not exist; the file has {count}",
+            source=str(path),
+            field="data.log_index",
+        )
     parser.set_log_index(index)
     names = list(parser.field_names)
     rows, stop = [], None
@@ -89,8 +105,7 @@ def read_frames(path, index: int) -> tuple[pd.DataFrame, dict, str | None]:
 
 def _column(df: pd.DataFrame, name: str, source: str) -> np.ndarray:
     if name not in df.columns:
-        raise GpquadError(f"missing field '{name}' in the blackbox log", source=source,
-                          field=name)
+        raise GpquadError(f"missing field '{name}' in the blackbox log", source=source, field=name)
     return df[name].to_numpy(dtype=float)
 
 
@@ -125,7 +140,7 @@ def _gyro_attitude(table: pd.DataFrame, valid: np.ndarray, dt: float) -> np.ndar
     for a, b in runs(valid):
         if b - a < 2:
             continue
-        f = acc[a: min(b, a + 25)].mean(axis=0)  # specific force in FRD: -g on z when level
+        f = acc[a : min(b, a + 25)].mean(axis=0)  # specific force in FRD: -g on z when level
         phi = np.arctan2(-f[1], -f[2])
         theta = np.arctan2(f[0], np.hypot(f[1], f[2]))
         q0 = np.array(quat_from_euler(phi, theta, 0.0))
@@ -141,39 +156,52 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
     gyro = np.column_stack([_column(df, f"gyroADC[{i}]", source) for i in range(3)])
     peak = np.nanmax(np.abs(gyro)) if gyro.size else 0.0
     if np.deg2rad(peak) > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"gyro reaches {peak:.0f} deg/s: not a plausible gyro in deg/s",
-                          source=source, field="gyroADC[0]")
+        raise GpquadError(
+            f"gyro reaches {peak:.0f} deg/s: not a plausible gyro in deg/s",
+            source=source,
+            field="gyroADC[0]",
+        )
     one_g = float(headers.get("acc_1G", 2048) or 2048)
     acc = np.column_stack([_column(df, f"accSmooth[{i}]", source) for i in range(3)]) * G / one_g
     rc = np.column_stack([_column(df, f"rcCommand[{i}]", source) for i in range(4)])
     sticks = np.column_stack([rc[:, :3] / 500.0, (rc[:, 3] - 1000.0) / 1000.0])
     streams = [
-        Stream("gyroADC", t, flip_body(np.deg2rad(gyro)), ("p", "q", "r"), "state", source,
-               "time"),
+        Stream("gyroADC", t, flip_body(np.deg2rad(gyro)), ("p", "q", "r"), "state", source, "time"),
         Stream("accSmooth", t, flip_body(acc), ("ax", "ay", "az"), "state", source, "time"),
-        Stream("rcCommand", t, sticks, ("roll_stick", "pitch_stick", "yaw_stick", "throttle"),
-               "hold", source, "time"),
+        Stream(
+            "rcCommand",
+            t,
+            sticks,
+            ("roll_stick", "pitch_stick", "yaw_stick", "throttle"),
+            "hold",
+            source,
+            "time",
+        ),
     ]
     extra = {}
     if all(f"setpoint[{i}]" in df for i in range(4)):
         sp = np.column_stack([df[f"setpoint[{i}]"].to_numpy(float) for i in range(4)])
         # rate set-points in FRD, like the gyro they command (Betaflight's PID compares them
         # in its own FLU axes)
-        extra["setpoint"] = (np.column_stack([flip_body(np.deg2rad(sp[:, :3])),
-                                              sp[:, 3] / 1000.0]),
-                             ("p_sp", "q_sp", "r_sp", "throttle_sp"))
+        extra["setpoint"] = (
+            np.column_stack([flip_body(np.deg2rad(sp[:, :3])), sp[:, 3] / 1000.0]),
+            ("p_sp", "q_sp", "r_sp", "throttle_sp"),
+        )
     lo, hi = (headers.get("motorOutput") or [0, 2047])[:2]
     motors = [c for c in (f"motor[{i}]" for i in range(8)) if c in df]
     if motors:
-        extra["motor"] = ((df[motors].to_numpy(float) - lo) / (hi - lo),
-                          tuple(f"motor_{i}" for i in range(len(motors))))
+        extra["motor"] = (
+            (df[motors].to_numpy(float) - lo) / (hi - lo),
+            tuple(f"motor_{i}" for i in range(len(motors))),
+        )
     pid = [c for c in df.columns if c.startswith(("axisP", "axisI", "axisD", "axisF"))]
     if pid:
         extra["pid"] = (df[pid].to_numpy(float), tuple(pid))
     if "vbatLatest" in df:
         extra["vbat"] = (df[["vbatLatest"]].to_numpy(float) / 100.0, ("vbat",))
-    available = [c for st in streams for c in st.columns] + [c for _, cs in extra.values()
-                                                              for c in cs]
+    available = [c for st in streams for c in st.columns] + [
+        c for _, cs in extra.values() for c in cs
+    ]
     supported = {"sticks": paper_names("pitch_stick", "roll_stick", "yaw_stick", "throttle")}
     if "setpoint" in extra:
         supported["rates"] = paper_names("q_sp", "p_sp", "r_sp", "throttle_sp")
@@ -198,14 +226,29 @@ def _log_table(df: pd.DataFrame, headers: dict, data, source: str, name: str) ->
     armed = np.ones(len(tt), dtype=bool)  # a blackbox log records one arming
     mask = in_flight_mask(tt, armed, table["throttle"].to_numpy(), data, source)
     measured = {a: "measured (gyroADC)" for a in ("p", "q", "r")}
-    measured.update({a: "derived (integrated from the gyro, levelled once by "
-                     "the accelerometer; drifts)" for a in ("phi", "theta", "psi")})
+    measured.update(
+        {
+            a: "derived (integrated from the gyro, levelled once by the accelerometer; drifts)"
+            for a in ("phi", "theta", "psi")
+        }
+    )
     measured.update({a: "not measured (Betaflight logs no velocity; zero)" for a in "uvw"})
     notes = [f"header {k}: {headers[k]}" for k in HEADER_KEYS if k in headers]
-    return LogTable(name=name, source=source, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(inputs), measured=measured,
-                    streams=info, notes=notes, levels=supported, input_level=chosen,
-                    input_columns=inputs)
+    return LogTable(
+        name=name,
+        source=source,
+        table=table,
+        valid=valid,
+        in_flight=mask,
+        rate_hz=data.resample_hz,
+        input_names=tuple(inputs),
+        measured=measured,
+        streams=info,
+        notes=notes,
+        levels=supported,
+        input_level=chosen,
+        input_columns=inputs,
+    )
 
 
 def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:
@@ -219,8 +262,9 @@ def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:
         try:
             df, headers, stop = read_frames(path, index)
             if stop:
-                skipped.append(f"{source}: truncated or corrupt, {stop}; the frames before "
-                               "are used")
+                skipped.append(
+                    f"{source}: truncated or corrupt, {stop}; the frames before are used"
+                )
         except GpquadError:
             raise
         except Exception as exc:  # a damaged log inside the file
@@ -233,15 +277,16 @@ def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:
         pieces = _pieces(t, data.max_gap_s)
         if len(pieces) > 1:
             skipped.append(f"{source}: clock jumps or gaps, split into {len(pieces)} pieces")
-        tiny = [k for k, (a, b) in enumerate(pieces)
-                if len(pieces) > 1 and t[b - 1] - t[a] < 1.0]
+        tiny = [k for k, (a, b) in enumerate(pieces) if len(pieces) > 1 and t[b - 1] - t[a] < 1.0]
         if tiny:
             skipped.append(f"{source}: {len(tiny)} piece(s) shorter than 1 s dropped")
         for k in _overlapping(pieces, t):
             if k not in tiny:
                 a, b = pieces[k]
-                skipped.append(f"{source}: piece {k} ({t[a]:.2f}..{t[b - 1]:.2f} s) overlaps "
-                               "a longer piece of the same log in time: damaged frames, dropped")
+                skipped.append(
+                    f"{source}: piece {k} ({t[a]:.2f}..{t[b - 1]:.2f} s) overlaps "
+                    "a longer piece of the same log in time: damaged frames, dropped"
+                )
                 tiny.append(k)
         for k, (a, b) in enumerate(pieces):
             if k in tiny:
@@ -256,8 +301,9 @@ def read_betaflight_logs(path, data) -> tuple[list[LogTable], list[str]]:
     for w in skipped:
         warnings.warn(w, stacklevel=2)
     if not tables:
-        raise GpquadError(f"no decodable log among {len(indices)} ({'; '.join(skipped[:3])})",
-                          source=str(path))
+        raise GpquadError(
+            f"no decodable log among {len(indices)} ({'; '.join(skipped[:3])})", source=str(path)
+        )
     return tables, skipped
 
 
@@ -271,6 +317,9 @@ def read_betaflight(path, data) -> list[Flight]:
         except GpquadError as exc:
             errors.append((len(log.table), str(exc)))
     if not flights:  # the reason of the longest log
-        raise GpquadError(f"no usable flight in any of {len(tables)} log(s); longest: "
-                          f"{max(errors)[1]}", source=str(path), field="data.segment")
+        raise GpquadError(
+            f"no usable flight in any of {len(tables)} log(s); longest: {max(errors)[1]}",
+            source=str(path),
+            field="data.segment",
+        )
     return flights

@@ -27,11 +27,26 @@ FMT_LENGTH = 89
 _FMT = struct.Struct("<BB4s16s64s")
 #: Format character -> (numpy dtype, scale or None).
 _TYPES = {
-    "b": ("<i1", None), "B": ("<u1", None), "h": ("<i2", None), "H": ("<u2", None),
-    "i": ("<i4", None), "I": ("<u4", None), "q": ("<i8", None), "Q": ("<u8", None),
-    "f": ("<f4", None), "d": ("<f8", None), "n": ("S4", None), "N": ("S16", None),
-    "Z": ("S64", None), "c": ("<i2", 0.01), "C": ("<u2", 0.01), "e": ("<i4", 0.01),
-    "E": ("<u4", 0.01), "L": ("<i4", 1e-7), "M": ("<u1", None), "a": (("<i2", (32,)), None),
+    "b": ("<i1", None),
+    "B": ("<u1", None),
+    "h": ("<i2", None),
+    "H": ("<u2", None),
+    "i": ("<i4", None),
+    "I": ("<u4", None),
+    "q": ("<i8", None),
+    "Q": ("<u8", None),
+    "f": ("<f4", None),
+    "d": ("<f8", None),
+    "n": ("S4", None),
+    "N": ("S16", None),
+    "Z": ("S64", None),
+    "c": ("<i2", 0.01),
+    "C": ("<u2", 0.01),
+    "e": ("<i4", 0.01),
+    "E": ("<u4", 0.01),
+    "L": ("<i4", 1e-7),
+    "M": ("<u1", None),
+    "a": (("<i2", (32,)), None),
 }
 
 
@@ -48,8 +63,9 @@ class DataFlashLog:
         self.skipped = 0
         self._scan()
         if not self.formats:
-            raise GpquadError("not an ArduPilot DataFlash log (no FMT records)",
-                              source=str(self.path))
+            raise GpquadError(
+                "not an ArduPilot DataFlash log (no FMT records)", source=str(self.path)
+            )
 
     def _scan(self) -> None:
         buf, n, pos = self.buf, len(self.buf), 0
@@ -82,8 +98,9 @@ class DataFlashLog:
         return sorted(self.formats[k][0] for k in self.offsets)
 
     def _type(self, name: str) -> int | None:
-        return next((k for k, f in self.formats.items() if f[0] == name and k in self.offsets),
-                    None)
+        return next(
+            (k for k, f in self.formats.items() if f[0] == name and k in self.offsets), None
+        )
 
     def columns(self, name: str) -> list[str]:
         k = self._type(name)
@@ -98,11 +115,16 @@ class DataFlashLog:
         try:
             dtype = np.dtype([(c, _TYPES[ch][0]) for c, ch in zip(cols, fmt, strict=True)])
         except (KeyError, ValueError):
-            raise GpquadError(f"cannot decode message {name} (format '{fmt}')",
-                              source=str(self.path), field=name) from None
+            raise GpquadError(
+                f"cannot decode message {name} (format '{fmt}')", source=str(self.path), field=name
+            ) from None
         if dtype.itemsize != length - 3:
-            raise GpquadError(f"message {name}: format '{fmt}' is {dtype.itemsize} bytes, the "
-                              f"FMT record says {length - 3}", source=str(self.path), field=name)
+            raise GpquadError(
+                f"message {name}: format '{fmt}' is {dtype.itemsize} bytes, the "
+                f"FMT record says {length - 3}",
+                source=str(self.path),
+                field=name,
+            )
         starts = np.asarray(self.offsets[k], dtype=np.int64)
         raw = np.frombuffer(self.buf, dtype=np.uint8)[starts[:, None] + np.arange(length - 3)]
         rec = np.ascontiguousarray(raw).view(dtype).reshape(-1)

@@ -60,8 +60,11 @@ class Dataset:
 
     def unmeasured(self, state: str) -> list[str]:
         """Flights whose log does not measure `state` (phi, theta, psi, u, v, w, p, q, r)."""
-        return [info["name"] for info in self.flight_info
-                if not info.get("measured", {}).get(state, "measured").startswith("measured")]
+        return [
+            info["name"]
+            for info in self.flight_info
+            if not info.get("measured", {}).get(state, "measured").startswith("measured")
+        ]
 
 
 def flight_arrays(flight: Flight) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -84,14 +87,20 @@ def _trim(flights: list[Flight], mode: str, given: dict, input_names) -> dict[st
         return {name: float(stacked[:, i].mean()) for i, name in enumerate(input_names)}
     missing = [n for n in input_names if n not in given]
     if missing:
-        raise GpquadError(f"data.trim = 'given' but no value for {missing}",
-                          field="data.trim_values")
+        raise GpquadError(
+            f"data.trim = 'given' but no value for {missing}", field="data.trim_values"
+        )
     return {name: float(given[name]) for name in input_names}
 
 
-def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: str = "none",
-                  trim_values: dict | None = None, held_out: list[bool] | None = None
-                  ) -> Dataset:
+def build_dataset(
+    flights: list[Flight],
+    *,
+    validation_fraction: float,
+    trim: str = "none",
+    trim_values: dict | None = None,
+    held_out: list[bool] | None = None,
+) -> Dataset:
     """Concatenate flights, compute accelerations and rotations, split train/validation.
 
     held_out: per flight, True = validation whole, False = training whole; None = the last
@@ -105,8 +114,11 @@ def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: st
         if f.input_names != input_names:
             raise GpquadError(f"inputs {f.input_names} differ from {input_names}", source=f.name)
         if abs(f.dt - dt) > DT_MATCH * dt:
-            raise GpquadError(f"sample period {f.dt:.5g} s differs from {dt:.5g} s; resample to "
-                              "one rate", source=f.name, field="t")
+            raise GpquadError(
+                f"sample period {f.dt:.5g} s differs from {dt:.5g} s; resample to one rate",
+                source=f.name,
+                field="t",
+            )
     trim_map = _trim(flights, trim, trim_values or {}, input_names)
     offsets = np.array([trim_map[n] for n in input_names])
     parts = [flight_arrays(f) for f in flights]
@@ -130,14 +142,30 @@ def build_dataset(flights: list[Flight], *, validation_fraction: float, trim: st
         if cut < stop:
             validation.append((cut, stop))
         start = stop
-    return Dataset(arrays=arrays, input_names=tuple(input_names), segments=segments, train=train,
-                   validation=validation, names=[f.name for f in flights], trim=trim_map,
-                   flight_info=[_info(f) for f in flights])
+    return Dataset(
+        arrays=arrays,
+        input_names=tuple(input_names),
+        segments=segments,
+        train=train,
+        validation=validation,
+        names=[f.name for f in flights],
+        trim=trim_map,
+        flight_info=[_info(f) for f in flights],
+    )
 
 
 #: Flight.meta entries worth recording with a run (the rest are arrays).
-_INFO_KEYS = ("source", "log", "segment", "t_start_s", "t_stop_s", "measured", "pipeline",
-              "equations", "input_level")
+_INFO_KEYS = (
+    "source",
+    "log",
+    "segment",
+    "t_start_s",
+    "t_stop_s",
+    "measured",
+    "pipeline",
+    "equations",
+    "input_level",
+)
 
 
 def _info(flight: Flight) -> dict:

@@ -31,15 +31,15 @@ def export_frame(flights: list[Flight]) -> pd.DataFrame:
     for k, f in enumerate(flights):
         frame = f.to_frame()
         acc = np.zeros((len(f), 6))
-        acc[:-1] = body_accelerations(np.ascontiguousarray(f.vel), np.ascontiguousarray(f.rates),
-                                      f.dt)
+        acc[:-1] = body_accelerations(
+            np.ascontiguousarray(f.vel), np.ascontiguousarray(f.rates), f.dt
+        )
         for j, name in enumerate(TARGET_NAMES):
             frame[name] = acc[:, j]
         frame[SEGMENT] = k
         measured = f.meta.get("measured", {})
         for state in MEASURED_STATES:  # 1 where the log measures the state, 0 where not
-            frame[f"measured_{state}"] = int(measured.get(state, "measured")
-                                             .startswith("measured"))
+            frame[f"measured_{state}"] = int(measured.get(state, "measured").startswith("measured"))
         parts.append(frame)
     return pd.concat(parts, ignore_index=True)
 
@@ -68,11 +68,13 @@ def export_flights(path, fmt: str | None, config=None) -> tuple[list[Flight], li
     path, cfg, data = resolve_log(path, fmt, config)
     fmt = data.format
     if fmt not in READERS:
-        raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
-                          field="--format")
+        raise GpquadError(
+            f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path), field="--format"
+        )
     flights = READERS[fmt](path, data)
     dropped: list[str] = []
     if data.check_before_run:
-        flights, dropped, _ = screen_segments(flights, data.check_steps, data.check_max_rse,
-                                              source=str(path))
+        flights, dropped, _ = screen_segments(
+            flights, data.check_steps, data.check_max_rse, source=str(path)
+        )
     return flights, dropped

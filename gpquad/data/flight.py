@@ -80,12 +80,15 @@ _Q_BODY = np.array([0.0, 1.0, 0.0, 0.0])  # pi about x
 def _quat_mul_rows(a, b):
     a0, a1, a2, a3 = np.moveaxis(np.broadcast_to(a, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
     b0, b1, b2, b3 = np.moveaxis(np.broadcast_to(b, np.broadcast_shapes(a.shape, b.shape)), -1, 0)
-    return np.stack([
-        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
-        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
-    ], axis=-1)
+    return np.stack(
+        [
+            a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+        ],
+        axis=-1,
+    )
 
 
 def enu_flu_quat(quat):
@@ -117,23 +120,34 @@ def _read_table(path: Path) -> pd.DataFrame:
     except GpquadError:
         raise
     except Exception as exc:  # truncated or corrupt files
-        raise GpquadError(f"cannot read the file ({type(exc).__name__}: {exc})",
-                          source=str(path)) from None
-    raise GpquadError(f"unknown file type '{suffix}'; the generic format is .csv or .parquet "
-                      "(set data.format for PX4 or Betaflight logs)", source=str(path))
+        raise GpquadError(
+            f"cannot read the file ({type(exc).__name__}: {exc})", source=str(path)
+        ) from None
+    raise GpquadError(
+        f"unknown file type '{suffix}'; the generic format is .csv or .parquet "
+        "(set data.format for PX4 or Betaflight logs)",
+        source=str(path),
+    )
 
 
 def _column(df: pd.DataFrame, name: str, columns: dict, source: str) -> np.ndarray:
     col = columns.get(name, name)
     if col not in df.columns:
-        raise GpquadError(f"missing column '{col}'; map it with [data.columns] {name} = \"...\"",
-                          source=source, field=col)
+        raise GpquadError(
+            f"missing column '{col}'; map it with [data.columns] {name} = \"...\"",
+            source=source,
+            field=col,
+        )
     values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
     bad = ~np.isfinite(values)
     if bad.any():
         first = int(np.argmax(bad))
-        raise GpquadError(f"{int(bad.sum())} NaN or non-numeric values (first at row {first}); "
-                          "clean or cut the log", source=source, field=col)
+        raise GpquadError(
+            f"{int(bad.sum())} NaN or non-numeric values (first at row {first}); "
+            "clean or cut the log",
+            source=source,
+            field=col,
+        )
     return values
 
 
@@ -144,13 +158,21 @@ def check_time(t: np.ndarray, source: str, column: str = "t") -> float:
     steps = np.diff(t)
     if (steps <= 0).any():
         i = int(np.argmax(steps <= 0))
-        raise GpquadError(f"time is not increasing at row {i + 1} ({t[i]} then {t[i + 1]}); "
-                          "sort the log or drop duplicate rows", source=source, field=column)
+        raise GpquadError(
+            f"time is not increasing at row {i + 1} ({t[i]} then {t[i + 1]}); "
+            "sort the log or drop duplicate rows",
+            source=source,
+            field=column,
+        )
     dt = float(np.median(steps))
     if np.abs(steps - dt).max() > DT_TOLERANCE * dt:
-        raise GpquadError(f"sampling is not uniform (dt from {steps.min():.4g} to "
-                          f"{steps.max():.4g} s); resample the log first "
-                          "(gpquad's PX4/Betaflight readers do this)", source=source, field=column)
+        raise GpquadError(
+            f"sampling is not uniform (dt from {steps.min():.4g} to "
+            f"{steps.max():.4g} s); resample the log first "
+            "(gpquad's PX4/Betaflight readers do this)",
+            source=source,
+            field=column,
+        )
     return dt
 
 
@@ -158,26 +180,38 @@ def check_units(quat, rates, source: str):
     """Catch quaternions that are not unit and rates that look like deg/s."""
     norm = np.linalg.norm(quat, axis=1)
     if np.abs(norm - 1.0).max() > 1e-2:
-        raise GpquadError(f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
-                          "give a unit quaternion (w, x, y, z)", source=source, field="qw")
+        raise GpquadError(
+            f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
+            "give a unit quaternion (w, x, y, z)",
+            source=source,
+            field="qw",
+        )
     peaks = np.abs(rates).max(axis=0)
     if peaks.max() > MAX_PLAUSIBLE_RATE:
         column = RATE_COLUMNS[int(np.argmax(peaks))]
-        raise GpquadError(f"body rate reaches {peaks.max():.1f}, implausible in rad/s; "
-                          "convert deg/s to rad/s", source=source, field=column)
+        raise GpquadError(
+            f"body rate reaches {peaks.max():.1f}, implausible in rad/s; convert deg/s to rad/s",
+            source=source,
+            field=column,
+        )
 
 
-def read_flight_file(path, input_names, frame: str = "NED/FRD", columns: dict | None = None
-                     ) -> Flight:
+def read_flight_file(
+    path, input_names, frame: str = "NED/FRD", columns: dict | None = None
+) -> Flight:
     """Read and validate one generic flight file (CSV or Parquet)."""
     path = Path(path)
-    return flight_from_frame(_read_table(path), input_names, frame, columns, str(path),
-                             path.name)
+    return flight_from_frame(_read_table(path), input_names, frame, columns, str(path), path.name)
 
 
-def flight_from_frame(df: pd.DataFrame, input_names, frame: str = "NED/FRD",
-                      columns: dict | None = None, source: str = "DataFrame",
-                      name: str = "flight") -> Flight:
+def flight_from_frame(
+    df: pd.DataFrame,
+    input_names,
+    frame: str = "NED/FRD",
+    columns: dict | None = None,
+    source: str = "DataFrame",
+    name: str = "flight",
+) -> Flight:
     """Validate a table of the generic columns (module notes) and make it a Flight."""
     columns = columns or {}
     t = _column(df, "t", columns, source)
@@ -190,8 +224,11 @@ def flight_from_frame(df: pd.DataFrame, input_names, frame: str = "NED/FRD",
     has_body = all(columns.get(c, c) in df.columns for c in BODY_VEL_COLUMNS)
     has_world = all(columns.get(c, c) in df.columns for c in WORLD_VEL_COLUMNS)
     if not (has_body or has_world):
-        raise GpquadError("needs body velocity columns u, v, w or world velocity vx, vy, vz",
-                          source=source, field="u")
+        raise GpquadError(
+            "needs body velocity columns u, v, w or world velocity vx, vy, vz",
+            source=source,
+            field="u",
+        )
     vel_cols = BODY_VEL_COLUMNS if has_body else WORLD_VEL_COLUMNS
     vel = np.column_stack([_column(df, c, columns, source) for c in vel_cols])
     pos = None
@@ -207,12 +244,26 @@ def flight_from_frame(df: pd.DataFrame, input_names, frame: str = "NED/FRD",
         raise GpquadError(f"unknown frame '{frame}'", source=source, field="frame")
     if not has_body:
         vel = world_to_body(np.ascontiguousarray(quat), np.ascontiguousarray(vel))
-    check_rates_follow_quaternion(quat, rates, dt, source, tuple(columns.get(c, c) for c in
-                                                                   RATE_COLUMNS),
-                                  columns.get("qw", "qw"))
+    check_rates_follow_quaternion(
+        quat,
+        rates,
+        dt,
+        source,
+        tuple(columns.get(c, c) for c in RATE_COLUMNS),
+        columns.get("qw", "qw"),
+    )
     check_excitation(rates, vel, inputs, [columns.get(c, c) for c in input_names], source)
-    return Flight(name=name, t=t - t[0], quat=quat, vel=vel, rates=rates, inputs=inputs,
-                  input_names=tuple(input_names), pos=pos, meta={"source": source, "dt": dt})
+    return Flight(
+        name=name,
+        t=t - t[0],
+        quat=quat,
+        vel=vel,
+        rates=rates,
+        inputs=inputs,
+        input_names=tuple(input_names),
+        pos=pos,
+        meta={"source": source, "dt": dt},
+    )
 
 
 def write_flight_file(flight: Flight, path) -> Path:
@@ -220,8 +271,12 @@ def write_flight_file(flight: Flight, path) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".parquet", ".pq"):
-        raise GpquadError(f"cannot tell the format from '{path.suffix or 'no suffix'}'; name the "
-                          "file .csv or .parquet", source=str(path), field="--out")
+        raise GpquadError(
+            f"cannot tell the format from '{path.suffix or 'no suffix'}'; name the "
+            "file .csv or .parquet",
+            source=str(path),
+            field="--out",
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     frame = flight.to_frame()
     if suffix == ".csv":

@@ -22,11 +22,17 @@ MEASURED_STATES = ("u", "v", "w", "p", "q", "r")
 def _exact_flight(df: pd.DataFrame, path: Path, seg, input_names, columns) -> Flight:
     """One segment of an export, values as stored (checked like any generic file)."""
     source = f"{path} (segment {seg})"
-    missing = [c for c in ("t", *QUAT_COLUMNS, *BODY_VEL_COLUMNS, *RATE_COLUMNS, *input_names)
-               if columns.get(c, c) not in df.columns]
+    missing = [
+        c
+        for c in ("t", *QUAT_COLUMNS, *BODY_VEL_COLUMNS, *RATE_COLUMNS, *input_names)
+        if columns.get(c, c) not in df.columns
+    ]
     if missing:
-        raise GpquadError(f"missing column '{columns.get(missing[0], missing[0])}' in an "
-                          "exported file", source=source, field=missing[0])
+        raise GpquadError(
+            f"missing column '{columns.get(missing[0], missing[0])}' in an exported file",
+            source=source,
+            field=missing[0],
+        )
 
     def col(name):
         values = pd.to_numeric(df[columns.get(name, name)], errors="coerce").to_numpy(float)
@@ -39,25 +45,38 @@ def _exact_flight(df: pd.DataFrame, path: Path, seg, input_names, columns) -> Fl
     quat = np.column_stack([col(c) for c in QUAT_COLUMNS])
     norm = np.linalg.norm(quat, axis=1)
     if np.abs(norm - 1.0).max() > 1e-9:
-        raise GpquadError(f"quaternion norm ranges {norm.min():.6f}..{norm.max():.6f}; an "
-                          "exported file holds unit quaternions", source=source, field="qw")
-    return Flight(name=f"{path.name}#{seg}", t=t,
-                  quat=np.ascontiguousarray(quat),
-                  vel=np.ascontiguousarray(np.column_stack([col(c) for c in BODY_VEL_COLUMNS])),
-                  rates=np.ascontiguousarray(np.column_stack([col(c) for c in RATE_COLUMNS])),
-                  inputs=np.ascontiguousarray(np.column_stack([col(c) for c in input_names])),
-                  input_names=tuple(input_names), meta={"source": str(path), "dt": dt,
-                                                        **_measured(df)})
+        raise GpquadError(
+            f"quaternion norm ranges {norm.min():.6f}..{norm.max():.6f}; an "
+            "exported file holds unit quaternions",
+            source=source,
+            field="qw",
+        )
+    return Flight(
+        name=f"{path.name}#{seg}",
+        t=t,
+        quat=np.ascontiguousarray(quat),
+        vel=np.ascontiguousarray(np.column_stack([col(c) for c in BODY_VEL_COLUMNS])),
+        rates=np.ascontiguousarray(np.column_stack([col(c) for c in RATE_COLUMNS])),
+        inputs=np.ascontiguousarray(np.column_stack([col(c) for c in input_names])),
+        input_names=tuple(input_names),
+        meta={"source": str(path), "dt": dt, **_measured(df)},
+    )
 
 
 def _measured(df: pd.DataFrame) -> dict:
     """{"measured": {...}} from an export's measured_<state> columns ({} without them)."""
-    flags = {s: df[f"measured_{s}"].iloc[0] for s in MEASURED_STATES
-             if f"measured_{s}" in df.columns and len(df)}
+    flags = {
+        s: df[f"measured_{s}"].iloc[0]
+        for s in MEASURED_STATES
+        if f"measured_{s}" in df.columns and len(df)
+    }
     if not flags:
         return {}
-    return {"measured": {s: "measured (export)" if int(v) else "not measured (export)"
-                         for s, v in flags.items()}}
+    return {
+        "measured": {
+            s: "measured (export)" if int(v) else "not measured (export)" for s, v in flags.items()
+        }
+    }
 
 
 def read_generic(path, data) -> list[Flight]:
@@ -72,5 +91,7 @@ def read_generic(path, data) -> list[Flight]:
     if not np.isfinite(seg).all():
         raise GpquadError("NaN or non-numeric segment ids", source=str(path), field=SEGMENT)
     order = list(dict.fromkeys(seg.tolist()))
-    return [_exact_flight(df[seg == s].reset_index(drop=True), path, int(s), data.inputs,
-                          data.columns) for s in order]
+    return [
+        _exact_flight(df[seg == s].reset_index(drop=True), path, int(s), data.inputs, data.columns)
+        for s in order
+    ]

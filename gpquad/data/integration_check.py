@@ -80,32 +80,44 @@ class CheckResult:
 
     def table(self) -> str:
         """The result as a fixed-width text table."""
-        lines = [f"Integration check: {self.n_windows} window(s) of {self.window_steps} steps; "
-                 f"pass when RSE < {self.threshold:.0%} for every measured u, v, w, p, q, r",
-                 f"{'state':<6} {'RSE':>9} {'worst win':>10} {'vs raw':>9} {'round trip':>11}  "
-                 f"{'status':<13} signal"]
+        lines = [
+            f"Integration check: {self.n_windows} window(s) of {self.window_steps} steps; "
+            f"pass when RSE < {self.threshold:.0%} for every measured u, v, w, p, q, r",
+            f"{'state':<6} {'RSE':>9} {'worst win':>10} {'vs raw':>9} {'round trip':>11}  "
+            f"{'status':<13} signal",
+        ]
         for r in self.rows:
-            lines.append(f"{r.name:<6} {r.rse:>9.3%} {r.worst:>10.3%} {r.rse_raw:>9.3%} "
-                         f"{r.round_trip:>11.2e}  "
-                         f"{r.status:<13} {r.measured}")
-        lines.append("RSE: integrated states vs the log's measurements after the same low-pass "
-                     "(rates as means over each step), pooled over windows; vs raw: vs the "
-                     "unfiltered measurements (includes what the filter removes); round trip: "
-                     "max |error| vs the processed data (self-test)")
+            lines.append(
+                f"{r.name:<6} {r.rse:>9.3%} {r.worst:>10.3%} {r.rse_raw:>9.3%} "
+                f"{r.round_trip:>11.2e}  "
+                f"{r.status:<13} {r.measured}"
+            )
+        lines.append(
+            "RSE: integrated states vs the log's measurements after the same low-pass "
+            "(rates as means over each step), pooled over windows; vs raw: vs the "
+            "unfiltered measurements (includes what the filter removes); round trip: "
+            "max |error| vs the processed data (self-test)"
+        )
         lines.append(f"verdict: {'PASS' if self.passed else 'FAIL'}")
         lines.extend(self.notes)
         return "\n".join(lines)
 
     def failure(self) -> str:
         bad = [f"{r.name} {r.rse:.1%}" for r in self.rows if r.status == "FAIL"]
-        return (f"integration check failed: RSE over {self.window_steps}-step windows "
-                f"{', '.join(bad)} (limit {self.threshold:.0%})"
-                + (f"; {self.diagnosis}" if self.diagnosis else ""))
+        return (
+            f"integration check failed: RSE over {self.window_steps}-step windows "
+            f"{', '.join(bad)} (limit {self.threshold:.0%})"
+            + (f"; {self.diagnosis}" if self.diagnosis else "")
+        )
 
     def to_dict(self) -> dict:
-        return {"window_steps": self.window_steps, "n_windows": self.n_windows,
-                "threshold": self.threshold, "passed": self.passed,
-                "rows": [r.__dict__ for r in self.rows]}
+        return {
+            "window_steps": self.window_steps,
+            "n_windows": self.n_windows,
+            "threshold": self.threshold,
+            "passed": self.passed,
+            "rows": [r.__dict__ for r in self.rows],
+        }
 
 
 def _windows(n: int, steps: int) -> list[tuple[int, int]]:
@@ -126,8 +138,9 @@ def _diff(a: np.ndarray, b: np.ndarray, angle: bool) -> np.ndarray:
     return (d + np.pi) % (2 * np.pi) - np.pi if angle else d
 
 
-def integration_check(flights: list[Flight], window_steps: int = 750, threshold: float = 0.05
-                      ) -> CheckResult:
+def integration_check(
+    flights: list[Flight], window_steps: int = 750, threshold: float = 0.05
+) -> CheckResult:
     """Integrate each flight's accelerations over windows; RSE per state (see module doc)."""
     if not flights:
         raise GpquadError("no flight to check", field="data.files")
@@ -153,36 +166,45 @@ def integration_check(flights: list[Flight], window_steps: int = 750, threshold:
         if ref is None:
             ref = data_states
             self_referenced = True
-            notes.append(f"{f.name}: no separate measurement reference (a generic file): u..r "
-                         "are compared with the file itself, and the attitude integrated from "
-                         "its rates with its quaternion (phi and theta judged)")
+            notes.append(
+                f"{f.name}: no separate measurement reference (a generic file): u..r "
+                "are compared with the file itself, and the attitude integrated from "
+                "its rates with its quaternion (phi and theta judged)"
+            )
         if raw is None:
             raw = ref
         for name, text in f.meta.get("measured", {}).items():
             if not is_measured(text) or name not in measured:
                 measured[name] = text
         for start, steps in _windows(len(f), window_steps):
-            q, v, w, _ = integrate(quat[start], vel[start], rates[start], np.zeros(3),
-                                   acc[start: start + steps], dt)
+            q, v, w, _ = integrate(
+                quat[start], vel[start], rates[start], np.zeros(3), acc[start : start + steps], dt
+            )
             sim = np.hstack([euler_array(np.ascontiguousarray(q)), v, w])
             n_windows += 1
             for j, name in enumerate(STATE_NAMES):
                 angle = name in ANGLES
-                x_ref = ref[start: start + steps + 1, j]
+                x_ref = ref[start : start + steps + 1, j]
                 e = _diff(sim[:, j], x_ref, angle)
-                centred = _diff(x_ref, np.angle(np.mean(np.exp(1j * x_ref))), True) if angle \
+                centred = (
+                    _diff(x_ref, np.angle(np.mean(np.exp(1j * x_ref))), True)
+                    if angle
                     else x_ref - x_ref.mean()
+                )
                 a, b = float(e @ e), float(centred @ centred)
                 sse[j] += a
                 sst[j] += b
-                x_raw = raw[start: start + steps + 1, j]
+                x_raw = raw[start : start + steps + 1, j]
                 e_raw = _diff(sim[:, j], x_raw, angle)
-                c_raw = _diff(x_raw, np.angle(np.mean(np.exp(1j * x_raw))), True) if angle \
+                c_raw = (
+                    _diff(x_raw, np.angle(np.mean(np.exp(1j * x_raw))), True)
+                    if angle
                     else x_raw - x_raw.mean()
+                )
                 sse_raw[j] += float(e_raw @ e_raw)
                 sst_raw[j] += float(c_raw @ c_raw)
                 worst[j] = max(worst[j], a / b if b > 0 else (0.0 if a == 0 else np.inf))
-                rt = _diff(sim[:, j], data_states[start: start + steps + 1, j], angle)
+                rt = _diff(sim[:, j], data_states[start : start + steps + 1, j], angle)
                 trip[j] = max(trip[j], float(np.abs(rt).max()))
     rows = []
     for j, name in enumerate(STATE_NAMES):
@@ -195,13 +217,17 @@ def integration_check(flights: list[Flight], window_steps: int = 750, threshold:
             status = "not measured"
         else:
             status = "pass" if rse < threshold else "FAIL"
-        rows.append(CheckRow(name, float(rse), float(worst[j]), float(rse_raw), float(trip[j]),
-                             text, status))
+        rows.append(
+            CheckRow(
+                name, float(rse), float(worst[j]), float(rse_raw), float(trip[j]), text, status
+            )
+        )
     if n_windows == 0:
         raise GpquadError("flights too short for the integration check", field="data.files")
     failing = [j for j, r in enumerate(rows) if r.status == "FAIL" and r.name in "pqr"]
-    return CheckResult(rows, window_steps, n_windows, threshold, notes,
-                       diagnose_rates(flights, failing))
+    return CheckResult(
+        rows, window_steps, n_windows, threshold, notes, diagnose_rates(flights, failing)
+    )
 
 
 def diagnose_rates(flights: list[Flight], failing: list[int]) -> str:
@@ -217,18 +243,24 @@ def diagnose_rates(flights: list[Flight], failing: list[int]) -> str:
     corr = [float(np.corrcoef(gyro[:, j - 6], implied[:, j - 6])[0, 1]) for j in failing]
     names = [STATE_NAMES[j] for j in failing]
     peak = float(np.abs(gyro).max())
-    text = (f"the estimator's attitude and the gyro disagree on {', '.join(names)} "
-            f"(correlation of the quaternion's rates with the gyro "
-            f"{', '.join(f'{c:.2f}' for c in corr)})")
+    text = (
+        f"the estimator's attitude and the gyro disagree on {', '.join(names)} "
+        f"(correlation of the quaternion's rates with the gyro "
+        f"{', '.join(f'{c:.2f}' for c in corr)})"
+    )
     if peak > 10.0:
         text += f"; the gyro reaches {peak:.1f} rad/s (flips?)"
     return text
 
 
-def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: float = 0.05,
-                    source: str = "", field: str = "data.check_max_rse",
-                    skip_hint: str = "set data.check_before_run = false"
-                    ) -> tuple[list[Flight], list[str], CheckResult]:
+def screen_segments(
+    flights: list[Flight],
+    window_steps: int = 750,
+    threshold: float = 0.05,
+    source: str = "",
+    field: str = "data.check_max_rse",
+    skip_hint: str = "set data.check_before_run = false",
+) -> tuple[list[Flight], list[str], CheckResult]:
     """Check every segment on its own; drop those that fail, keep the rest.
 
     Returns (kept flights, one warning per dropped segment naming its time span and the
@@ -243,13 +275,17 @@ def screen_segments(flights: list[Flight], window_steps: int = 750, threshold: f
         if result.passed:
             kept.append(f)
         else:
-            dropped.append(f"dropped segment {f.name} ({f.t[0]:.2f}..{f.t[-1]:.2f} s): "
-                           f"{result.failure()}")
+            dropped.append(
+                f"dropped segment {f.name} ({f.t[0]:.2f}..{f.t[-1]:.2f} s): {result.failure()}"
+            )
     if not kept:
         _, worst, result = max(results, key=lambda r: r[0])
         where = f" (every segment fails; longest {worst.name})" if len(flights) > 1 else ""
-        raise GpquadError(f"{result.failure()}{where}; run `gpquad data check` for the table, or "
-                          f"{skip_hint}", source=source, field=field)
+        raise GpquadError(
+            f"{result.failure()}{where}; run `gpquad data check` for the table, or {skip_hint}",
+            source=source,
+            field=field,
+        )
     check = integration_check(kept, window_steps, threshold)
     check.notes.extend(dropped)
     return kept, dropped, check

@@ -42,9 +42,13 @@ def _register_log_readers() -> None:
     from gpquad.data.table import read_table_log
     from gpquad.data.ulog import read_ulog
 
-    for name, reader in (("px4-csv", read_px4_csv), ("ulog", read_ulog),
-                         ("betaflight", read_betaflight), ("table", read_table_log),
-                         ("ardupilot", read_ardupilot)):
+    for name, reader in (
+        ("px4-csv", read_px4_csv),
+        ("ulog", read_ulog),
+        ("betaflight", read_betaflight),
+        ("table", read_table_log),
+        ("ardupilot", read_ardupilot),
+    ):
         READERS.setdefault(name, reader)
 
 
@@ -88,9 +92,12 @@ def guess_format(path: Path, allow_generic: bool = True) -> str:
         return "ardupilot"
     if suffix in (".csv", ".parquet", ".pq"):
         return "generic" if allow_generic and _is_generic_file(path) else "table"
-    raise GpquadError(f"cannot tell the log format from '{suffix}'; give --format (px4-csv, "
-                      "ulog, betaflight, ardupilot, table, generic)", source=str(path),
-                      field="--format")
+    raise GpquadError(
+        f"cannot tell the log format from '{suffix}'; give --format (px4-csv, "
+        "ulog, betaflight, ardupilot, table, generic)",
+        source=str(path),
+        field="--format",
+    )
 
 
 def _read_file(cfg: Config, reader, path: Path) -> list[Flight]:
@@ -105,9 +112,13 @@ def _read_file(cfg: Config, reader, path: Path) -> list[Flight]:
     inputs = np.vstack([f.inputs for f in flights]) if flights else np.zeros((0, 0))
     if inputs.size and float(np.max(np.ptp(inputs, axis=0))) == 0.0:
         names = list(flights[0].input_names)
-        raise GpquadError(f"the inputs {names} never change in any in-flight segment: nothing "
-                          "to identify their effect from; check data.inputs or give a log "
-                          "flown with stick inputs", source=str(path), field="data.inputs")
+        raise GpquadError(
+            f"the inputs {names} never change in any in-flight segment: nothing "
+            "to identify their effect from; check data.inputs or give a log "
+            "flown with stick inputs",
+            source=str(path),
+            field="data.inputs",
+        )
     return flights
 
 
@@ -127,8 +138,11 @@ def load_flights(cfg: Config) -> list[Flight]:
         return [simulate(cfg.simulator, cfg.data.inputs)]
     reader = READERS.get(cfg.data.format)
     if reader is None:
-        raise GpquadError(f"unknown format '{cfg.data.format}'; known: {sorted(READERS)}",
-                          source=str(cfg.data.files[0]), field="data.format")
+        raise GpquadError(
+            f"unknown format '{cfg.data.format}'; known: {sorted(READERS)}",
+            source=str(cfg.data.files[0]),
+            field="data.format",
+        )
     paths = cfg.data_paths()
     paths += [p for p in held_out_paths(cfg) if p not in paths]
     flights: list[Flight] = []
@@ -156,18 +170,28 @@ def dataset_of(flights: list[Flight], cfg: Config, source: str | None) -> Datase
         from gpquad.data.integration_check import screen_segments
 
         flights, dropped, check = screen_segments(
-            flights, cfg.data.check_steps, cfg.data.check_max_rse,
-            source=source, field="data.check_before_run")
+            flights,
+            cfg.data.check_steps,
+            cfg.data.check_max_rse,
+            source=source,
+            field="data.check_before_run",
+        )
         for note in dropped:
             warnings.warn(note, stacklevel=2)
     held = {str(p) for p in held_out_paths(cfg)}
     if held and not any(f.meta.get("file") in held for f in flights):
-        raise GpquadError("no usable segment of the held-out files is left for validation",
-                          source=source, field="data.validation")
-    dataset = build_dataset(flights, validation_fraction=cfg.data.validation_fraction,
-                            trim=cfg.data.trim, trim_values=cfg.data.trim_values,
-                            held_out=[f.meta.get("file") in held for f in flights]
-                            if held else None)
+        raise GpquadError(
+            "no usable segment of the held-out files is left for validation",
+            source=source,
+            field="data.validation",
+        )
+    dataset = build_dataset(
+        flights,
+        validation_fraction=cfg.data.validation_fraction,
+        trim=cfg.data.trim,
+        trim_values=cfg.data.trim_values,
+        held_out=[f.meta.get("file") in held for f in flights] if held else None,
+    )
     if check is not None:
         dataset.integration_check = check.to_dict()
     return dataset
@@ -185,11 +209,15 @@ def resolve_log(path, fmt: str | None, config=None):
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(path))
     if not (path.is_file() or path.is_dir()):
-        raise GpquadError("not a regular file or folder (a pipe or a device); give the log "
-                          "file", source=str(path))
+        raise GpquadError(
+            "not a regular file or folder (a pipe or a device); give the log file", source=str(path)
+        )
     cfg = load_config(config) if config else Config()
-    fmt = fmt or (cfg.data.format if config and cfg.data.format != "generic" else None) \
+    fmt = (
+        fmt
+        or (cfg.data.format if config and cfg.data.format != "generic" else None)
         or guess_format(path)
+    )
     data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
     validate(dataclasses.replace(cfg, data=data), "command line")
     return path, cfg, data
@@ -204,8 +232,9 @@ def read_log_file(path, data: DataConfig, fmt: str | None = None) -> list[Flight
     fmt = fmt or (data.format if data.format != "generic" else None) or guess_format(path)
     reader = READERS.get(fmt)
     if reader is None:
-        raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path),
-                          field="format")
+        raise GpquadError(
+            f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(path), field="format"
+        )
     flights = reader(path, data)
     for f in flights:
         f.meta["file"] = str(path)

@@ -34,16 +34,20 @@ def paper_names(pitch: str, roll: str, yaw: str, thrust: str) -> dict[str, str]:
 
 def is_default(data) -> bool:
     """True when `data.inputs` is the paper's default names with no column map for them."""
-    return (isinstance(data.inputs, tuple) and tuple(data.inputs) == DEFAULT_INPUTS
-            and not any(n in data.columns for n in DEFAULT_INPUTS))
+    return (
+        isinstance(data.inputs, tuple)
+        and tuple(data.inputs) == DEFAULT_INPUTS
+        and not any(n in data.columns for n in DEFAULT_INPUTS)
+    )
 
 
 def default_level(levels: dict[str, dict[str, str]]) -> str | None:
     return next((lv for lv in DEFAULT_ORDER if lv in levels), None)
 
 
-def resolve_inputs(data, levels: dict[str, dict[str, str]], available, source: str
-                   ) -> tuple[dict[str, str], str]:
+def resolve_inputs(
+    data, levels: dict[str, dict[str, str]], available, source: str
+) -> tuple[dict[str, str], str]:
     """Input name -> signal column, and a label of the choice ("rates", "explicit", ...).
 
     levels: what the reader supports, level -> {input name: column}; available: every column
@@ -57,12 +61,20 @@ def resolve_inputs(data, levels: dict[str, dict[str, str]], available, source: s
         choice = default_level(levels) or choice
     if isinstance(choice, str):
         if choice not in LEVELS:
-            raise GpquadError(f"unknown input level '{choice}'; choose one of {list(LEVELS)} "
-                              "or list signal names", source=source, field="data.inputs")
+            raise GpquadError(
+                f"unknown input level '{choice}'; choose one of {list(LEVELS)} "
+                "or list signal names",
+                source=source,
+                field="data.inputs",
+            )
         if choice not in levels:
-            raise GpquadError(f"this log has no signals for input level '{choice}' (it supports "
-                              f"{supported}); choose another level or list signal names from "
-                              f"{sorted(available)}", source=source, field="data.inputs")
+            raise GpquadError(
+                f"this log has no signals for input level '{choice}' (it supports "
+                f"{supported}); choose another level or list signal names from "
+                f"{sorted(available)}",
+                source=source,
+                field="data.inputs",
+            )
         return dict(levels[choice]), choice
     fallback = levels.get(default_level(levels) or "", {})
     out = {}
@@ -71,20 +83,26 @@ def resolve_inputs(data, levels: dict[str, dict[str, str]], available, source: s
         if col is None:
             col = name if name in available else fallback.get(name)
         if col is None:
-            raise GpquadError(f"no signal for input '{name}'; use a signal name, an input level "
-                              f"{supported}, or map it with [data.columns] {name} = \"<column>\" "
-                              f"(available: {sorted(available)})", source=source,
-                              field=f"data.columns.{name}")
+            raise GpquadError(
+                f"no signal for input '{name}'; use a signal name, an input level "
+                f'{supported}, or map it with [data.columns] {name} = "<column>" '
+                f"(available: {sorted(available)})",
+                source=source,
+                field=f"data.columns.{name}",
+            )
         if col not in available:
-            raise GpquadError(f"input '{name}' maps to unknown signal '{col}' (available: "
-                              f"{sorted(available)})", source=source,
-                              field=f"data.columns.{name}")
+            raise GpquadError(
+                f"input '{name}' maps to unknown signal '{col}' (available: {sorted(available)})",
+                source=source,
+                field=f"data.columns.{name}",
+            )
         out[name] = col
     return out, "explicit"
 
 
-def describe_levels(levels: dict[str, dict[str, str]], chosen: str,
-                    units: dict[str, str] | None = None) -> list[str]:
+def describe_levels(
+    levels: dict[str, dict[str, str]], chosen: str, units: dict[str, str] | None = None
+) -> list[str]:
     """Text lines: every supported level and what each input maps to; the chosen one marked."""
     units = units or {}
     lines = []
@@ -98,15 +116,18 @@ def describe_levels(levels: dict[str, dict[str, str]], chosen: str,
     return lines
 
 
-def check_input_rates(info: list[dict], inputs: dict[str, str], stream_columns: dict,
-                      min_hz: float = 25.0) -> list[str]:
+def check_input_rates(
+    info: list[dict], inputs: dict[str, str], stream_columns: dict, min_hz: float = 25.0
+) -> list[str]:
     """Notes for input streams logged below `min_hz` (too slow to identify delays)."""
     notes = []
     for row in info:
         cols = stream_columns.get(row["stream"], ())
         used = sorted(n for n, c in inputs.items() if c in cols)
         if used and row["rate_hz"] < min_hz:
-            notes.append(f"inputs {', '.join(used)} come from '{row['stream']}' logged at "
-                         f"{row['rate_hz']:.1f} Hz, below {min_hz:g} Hz: too slow to identify "
-                         "input delays of one 25 Hz step")
+            notes.append(
+                f"inputs {', '.join(used)} come from '{row['stream']}' logged at "
+                f"{row['rate_hz']:.1f} Hz, below {min_hz:g} Hz: too slow to identify "
+                "input delays of one 25 Hz step"
+            )
     return notes

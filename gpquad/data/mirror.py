@@ -49,10 +49,12 @@ def mirror_arrays(arrays: FlightArrays, input_names, flipped) -> FlightArrays:
         acc=np.ascontiguousarray(arrays.acc * ACC_SIGNS),
         inputs=np.ascontiguousarray(arrays.inputs * signs),
         rot=np.ascontiguousarray(arrays.rot * ROT_SIGNS),
-        dt=arrays.dt)
+        dt=arrays.dt,
+    )
 
 
 def mirror_dataset(dataset, flipped):
     """The dataset with its flights mirrored (same ranges, names and trim)."""
     return dataclasses.replace(
-        dataset, arrays=mirror_arrays(dataset.arrays, dataset.input_names, tuple(flipped)))
+        dataset, arrays=mirror_arrays(dataset.arrays, dataset.input_names, tuple(flipped))
+    )

@@ -84,8 +84,9 @@ def erpm_to_rad_s(erpm: np.ndarray, pole_pairs: int) -> np.ndarray:
     return np.abs(np.asarray(erpm, dtype=float)) / pole_pairs * RPM_TO_RAD_S
 
 
-def on_clock(grid: np.ndarray, t: np.ndarray, values: np.ndarray, max_gap_s: float
-             ) -> tuple[np.ndarray, np.ndarray]:
+def on_clock(
+    grid: np.ndarray, t: np.ndarray, values: np.ndarray, max_gap_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Linear interpolation of (t, values (M, k)) onto grid, and which grid points it covers:
     inside the signal's span and not inside a gap longer than max_gap_s (or 2.5 periods)."""
     t = np.asarray(t, dtype=float)
@@ -105,6 +106,7 @@ def on_clock(grid: np.ndarray, t: np.ndarray, values: np.ndarray, max_gap_s: flo
 
 # ---- generic files -------------------------------------------------------------------------
 
+
 def _optional(df, names, columns, source):
     if all(columns.get(c, c) in df.columns for c in names):
         return np.column_stack([_column(df, c, columns, source) for c in names])
@@ -118,8 +120,12 @@ def _generic_piece(df: pd.DataFrame, name: str, source: str, data, pole_pairs: i
     quat = np.column_stack([_column(df, c, columns, source) for c in QUAT_COLUMNS])
     norm = np.linalg.norm(quat, axis=1)
     if np.abs(norm - 1.0).max() > 1e-2:
-        raise GpquadError(f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
-                          "give a unit quaternion (w, x, y, z)", source=source, field="qw")
+        raise GpquadError(
+            f"quaternion norm ranges {norm.min():.3f}..{norm.max():.3f}, not 1; "
+            "give a unit quaternion (w, x, y, z)",
+            source=source,
+            field="qw",
+        )
     quat = quat / norm[:, None]
     missing = {}
     rotor = _optional(df, ROTOR_COLUMNS, columns, source)
@@ -127,9 +133,12 @@ def _generic_piece(df: pd.DataFrame, name: str, source: str, data, pole_pairs: i
         erpm = _optional(df, ERPM_COLUMNS, columns, source)
         if erpm is not None:
             if pole_pairs < 1:
-                raise GpquadError("erpm_1..4 need the motor's pole pairs to give rad/s; set "
-                                  "[vehicle] motor_pole_pairs (14 magnets: 7)", source=source,
-                                  field="vehicle.motor_pole_pairs")
+                raise GpquadError(
+                    "erpm_1..4 need the motor's pole pairs to give rad/s; set "
+                    "[vehicle] motor_pole_pairs (14 magnets: 7)",
+                    source=source,
+                    field="vehicle.motor_pole_pairs",
+                )
             rotor = erpm_to_rad_s(erpm, pole_pairs)
         else:
             missing["rotor"] = "columns rotor_1..rotor_4 (rad/s) or erpm_1..erpm_4"
@@ -149,17 +158,31 @@ def _generic_piece(df: pd.DataFrame, name: str, source: str, data, pole_pairs: i
         body, acc, rates = (None if a is None else flip_body(a) for a in (body, acc, rates))
         world, pos = (None if a is None else flip_world(a) for a in (world, pos))
     elif data.frame != "NED/FRD":
-        raise GpquadError(f"unknown frame '{data.frame}'; use NED/FRD or ENU/FLU",
-                          source=source, field="data.frame")
+        raise GpquadError(
+            f"unknown frame '{data.frame}'; use NED/FRD or ENU/FLU",
+            source=source,
+            field="data.frame",
+        )
     if body is not None:
         world = _rotate(quat, body)
     t = t - t[0]
     in_flight = np.ones(len(t), dtype=bool)
     if data.segment == "range":
         in_flight = (t >= data.time_range[0]) & (t <= data.time_range[1])
-    return MotorLog(name=name, source=source, t=t, quat=quat, rotor=rotor, acc=acc,
-                    vel=world, pos=pos, rates=rates, valid=np.ones(len(t), dtype=bool),
-                    in_flight=in_flight, missing=missing)
+    return MotorLog(
+        name=name,
+        source=source,
+        t=t,
+        quat=quat,
+        rotor=rotor,
+        acc=acc,
+        vel=world,
+        pos=pos,
+        rates=rates,
+        valid=np.ones(len(t), dtype=bool),
+        in_flight=in_flight,
+        missing=missing,
+    )
 
 
 def _rotate(quat: np.ndarray, vectors: np.ndarray) -> np.ndarray:
@@ -177,12 +200,20 @@ def read_generic_motors(path, data, pole_pairs: int = 0) -> list[MotorLog]:
     seg = pd.to_numeric(df["segment"], errors="coerce").to_numpy(float)
     if not np.isfinite(seg).all():
         raise GpquadError("NaN or non-numeric segment ids", source=str(path), field="segment")
-    return [_generic_piece(df[seg == s].reset_index(drop=True), f"{path.name}#{int(s)}",
-                           f"{path} (segment {int(s)})", data, pole_pairs)
-            for s in dict.fromkeys(seg.tolist())]
+    return [
+        _generic_piece(
+            df[seg == s].reset_index(drop=True),
+            f"{path.name}#{int(s)}",
+            f"{path} (segment {int(s)})",
+            data,
+            pole_pairs,
+        )
+        for s in dict.fromkeys(seg.tolist())
+    ]
 
 
 # ---- log formats: signals onto the reader's LogTable clock -----------------------------------
+
 
 def _from_table(log: LogTable, extra: dict, missing: dict, data, notes=()) -> MotorLog:
     """A MotorLog from a reader's LogTable and extra signals {name: [(t, values)...]}: each
@@ -206,18 +237,30 @@ def _from_table(log: LogTable, extra: dict, missing: dict, data, notes=()) -> Mo
         elif log.velocity_frame == "body":
             vel = _rotate(quat, table[list(BODY_VEL_COLUMNS)].to_numpy(dtype=float))
     else:
-        missing["vel"] = "a measured velocity (" + "; ".join(
-            f"{a}: {log.measured.get(a, 'absent')}" for a in "uvw") + ")"
+        missing["vel"] = (
+            "a measured velocity ("
+            + "; ".join(f"{a}: {log.measured.get(a, 'absent')}" for a in "uvw")
+            + ")"
+        )
     rates = table[["p", "q", "r"]].to_numpy(dtype=float) if "p" in table.columns else None
     acc = arrays.get("acc")
     if acc is None and all(c in table.columns for c in ("ax", "ay", "az")):
         acc = table[["ax", "ay", "az"]].to_numpy(dtype=float)
-    return MotorLog(name=log.name, source=log.source, t=grid, quat=quat,
-                    rotor=arrays.get("rotor"), acc=acc, vel=vel, pos=arrays.get("pos"),
-                    rates=rates, valid=valid, in_flight=log.in_flight.copy(),
-                    missing={k: v for k, v in missing.items()
-                             if not (k == "acc" and acc is not None)},
-                    notes=list(log.notes) + list(notes))
+    return MotorLog(
+        name=log.name,
+        source=log.source,
+        t=grid,
+        quat=quat,
+        rotor=arrays.get("rotor"),
+        acc=acc,
+        vel=vel,
+        pos=arrays.get("pos"),
+        rates=rates,
+        valid=valid,
+        in_flight=log.in_flight.copy(),
+        missing={k: v for k, v in missing.items() if not (k == "acc" and acc is not None)},
+        notes=list(log.notes) + list(notes),
+    )
 
 
 def _px4(tp, data, name: str) -> MotorLog:
@@ -229,19 +272,28 @@ def _px4(tp, data, name: str) -> MotorLog:
     rpm_cols = [f"esc[{i}].esc_rpm" for i in range(4)]
     if esc is not None and all(c in esc.columns for c in rpm_cols):
         t = tp.time("esc_status")
-        extra["rotor"] = [(t, np.abs(np.column_stack([tp.column("esc_status", c)
-                                                      for c in rpm_cols])) * RPM_TO_RAD_S)]
+        extra["rotor"] = [
+            (
+                t,
+                np.abs(np.column_stack([tp.column("esc_status", c) for c in rpm_cols]))
+                * RPM_TO_RAD_S,
+            )
+        ]
     else:
         missing["rotor"] = "topic esc_status esc[0..3].esc_rpm, from ESC telemetry"
-    for topic, fields in (("vehicle_acceleration", [f"xyz[{i}]" for i in range(3)]),
-                          ("sensor_combined", [f"accelerometer_m_s2[{i}]" for i in range(3)])):
+    for topic, fields in (
+        ("vehicle_acceleration", [f"xyz[{i}]" for i in range(3)]),
+        ("sensor_combined", [f"accelerometer_m_s2[{i}]" for i in range(3)]),
+    ):
         if tp.has(topic) and all(f in tp.get(topic).columns for f in fields):
-            extra["acc"] = [(tp.time(topic), np.column_stack([tp.column(topic, f)
-                                                              for f in fields]))]
+            extra["acc"] = [
+                (tp.time(topic), np.column_stack([tp.column(topic, f) for f in fields]))
+            ]
             break
     else:
-        missing["acc"] = "topic vehicle_acceleration xyz[0..2] or sensor_combined " \
-                         "accelerometer_m_s2[0..2]"
+        missing["acc"] = (
+            "topic vehicle_acceleration xyz[0..2] or sensor_combined accelerometer_m_s2[0..2]"
+        )
     lp = tp.get("vehicle_local_position")
     if all(c in lp.columns for c in POS_COLUMNS):
         pos = np.column_stack([tp.column("vehicle_local_position", c) for c in POS_COLUMNS])
@@ -281,9 +333,12 @@ def betaflight_pole_pairs(headers: dict, pole_pairs: int, source: str) -> int:
     except (TypeError, ValueError):
         poles = 0
     if poles < 2:
-        raise GpquadError("the log's header has no motor_poles; set [vehicle] motor_pole_pairs "
-                          "(14 magnets: 7) to turn eRPM into rad/s", source=source,
-                          field="vehicle.motor_pole_pairs")
+        raise GpquadError(
+            "the log's header has no motor_poles; set [vehicle] motor_pole_pairs "
+            "(14 magnets: 7) to turn eRPM into rad/s",
+            source=source,
+            field="vehicle.motor_pole_pairs",
+        )
     return poles // 2
 
 
@@ -309,8 +364,10 @@ def read_betaflight_motors(path, data, pole_pairs: int = 0) -> list[MotorLog]:
             extra["rotor"] = [(t, erpm_to_rad_s(erpm, pp))]
         else:
             firmware = headers.get("Firmware revision", "unknown firmware")
-            missing["rotor"] = (f"fields eRPM[0..3]: {firmware}; Betaflight 4.3+ logs them "
-                                "with dshot_bidir = ON and the RPM blackbox field enabled")
+            missing["rotor"] = (
+                f"fields eRPM[0..3]: {firmware}; Betaflight 4.3+ logs them "
+                "with dshot_bidir = ON and the RPM blackbox field enabled"
+            )
         out.append(_from_table(log, extra, missing, data))
     return out
 
@@ -325,31 +382,47 @@ def read_ardupilot_motors(path, data, pole_pairs: int = 0) -> list[MotorLog]:
     esc = df.get("ESC")
     if esc and "RPM" in esc and "Instance" in esc:
         inst = np.asarray(esc["Instance"], dtype=int)
-        parts = [(np.asarray(esc["TimeUS"], float)[inst == i] * 1e-6,
-                  np.abs(np.asarray(esc["RPM"], float)[inst == i]) * RPM_TO_RAD_S)
-                 for i in range(4)]
+        parts = [
+            (
+                np.asarray(esc["TimeUS"], float)[inst == i] * 1e-6,
+                np.abs(np.asarray(esc["RPM"], float)[inst == i]) * RPM_TO_RAD_S,
+            )
+            for i in range(4)
+        ]
         if all(len(p[0]) >= 2 for p in parts):
             extra["rotor"] = parts
     if "rotor" not in extra:
         missing["rotor"] = "ESC messages with RPM for instances 0..3, from ESC telemetry"
     _, imu = _first(df, ("IMU",))
     if imu and all(f in imu for f in ("AccX", "AccY", "AccZ")):
-        extra["acc"] = [(np.asarray(imu["TimeUS"], float) * 1e-6,
-                         np.column_stack([imu["AccX"], imu["AccY"], imu["AccZ"]]))]
+        extra["acc"] = [
+            (
+                np.asarray(imu["TimeUS"], float) * 1e-6,
+                np.column_stack([imu["AccX"], imu["AccY"], imu["AccZ"]]),
+            )
+        ]
     else:
         missing["acc"] = "IMU messages AccX, AccY, AccZ"
     _, ekf = _first(df, ("XKF1", "NKF1"))
     if ekf and all(f in ekf for f in ("PN", "PE", "PD")):
-        extra["pos"] = [(np.asarray(ekf["TimeUS"], float) * 1e-6,
-                         np.column_stack([ekf["PN"], ekf["PE"], ekf["PD"]]))]
+        extra["pos"] = [
+            (
+                np.asarray(ekf["TimeUS"], float) * 1e-6,
+                np.column_stack([ekf["PN"], ekf["PE"], ekf["PD"]]),
+            )
+        ]
     else:
         missing["pos"] = "XKF1 or NKF1 PN, PE, PD"
     return [_from_table(log, extra, missing, data)]
 
 
-READERS = {"generic": read_generic_motors, "betaflight": read_betaflight_motors,
-           "px4-csv": read_px4_motors, "ulog": read_ulog_motors,
-           "ardupilot": read_ardupilot_motors}
+READERS = {
+    "generic": read_generic_motors,
+    "betaflight": read_betaflight_motors,
+    "px4-csv": read_px4_motors,
+    "ulog": read_ulog_motors,
+    "ardupilot": read_ardupilot_motors,
+}
 
 
 def read_motor_logs(path, data, pole_pairs: int = 0) -> list[MotorLog]:
@@ -357,6 +430,9 @@ def read_motor_logs(path, data, pole_pairs: int = 0) -> list[MotorLog]:
     accelerometer where the format has them."""
     reader = READERS.get(data.format)
     if reader is None:
-        raise GpquadError(f"format '{data.format}' has no motor-speed reader; use one of "
-                          f"{list(FORMATS)}", source=str(path), field="data.format")
+        raise GpquadError(
+            f"format '{data.format}' has no motor-speed reader; use one of {list(FORMATS)}",
+            source=str(path),
+            field="data.format",
+        )
     return reader(path, data, pole_pairs)

@@ -103,8 +103,7 @@ def lowpass_taps(taps: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     return h / h.sum()
 
 
-def zero_phase_fir(t: np.ndarray, x: np.ndarray, h: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def zero_phase_fir(t: np.ndarray, x: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Filter x (N, k) with symmetric taps h; return (t_out, y) with the delay compensated.
 
     Output j is sum_i h[i] x[j + i], stamped at the centre of its window, t[j] + (L-1)/2 dt,
@@ -136,8 +135,10 @@ def segments_of(log: LogTable, data) -> tuple[list[tuple[int, int]], list[str]]:
     t = log.table["t"].to_numpy()
     for a, b in runs(log.valid & log.in_flight):
         if b - a < need:
-            notes.append(f"dropped in-flight piece {t[a]:.2f}..{t[b - 1]:.2f} s "
-                         f"({(b - a) / log.rate_hz:.2f} s < {need / log.rate_hz:.2f} s)")
+            notes.append(
+                f"dropped in-flight piece {t[a]:.2f}..{t[b - 1]:.2f} s "
+                f"({(b - a) / log.rate_hz:.2f} s < {need / log.rate_hz:.2f} s)"
+            )
         else:
             keep.append((a, b))
     return keep, notes
@@ -147,13 +148,17 @@ def no_flight_error(log: LogTable, data, notes: list[str]) -> GpquadError:
     t = log.table["t"].to_numpy()
     flying = float(log.in_flight.sum()) / log.rate_hz
     gaps = len(runs(~log.valid))
-    detail = (f"{flying:.1f} s in flight by segment = '{data.segment}' over "
-              f"{t[0]:.1f}..{t[-1]:.1f} s")
+    detail = (
+        f"{flying:.1f} s in flight by segment = '{data.segment}' over {t[0]:.1f}..{t[-1]:.1f} s"
+    )
     if notes:
         detail += f", {len(notes)} piece(s) too short or cut by {gaps} gap(s)"
-    return GpquadError(f"no usable flight in the log ({detail}); check arming/thrust, or set "
-                       "data.segment = 'range' with data.time_range", source=log.source,
-                       field="data.segment")
+    return GpquadError(
+        f"no usable flight in the log ({detail}); check arming/thrust, or set "
+        "data.segment = 'range' with data.time_range",
+        source=log.source,
+        field="data.segment",
+    )
 
 
 def _reference(table: pd.DataFrame, t_out: np.ndarray, rates: np.ndarray) -> np.ndarray:
@@ -169,9 +174,16 @@ def _reference(table: pd.DataFrame, t_out: np.ndarray, rates: np.ndarray) -> np.
         vel = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in BODY_VEL_COLS])
     elif "vx" not in table.columns:  # position only: differences over each step
         dt = t_out[1] - t_out[0]
-        world = np.column_stack([(np.interp(t_out + dt, t, table[c].to_numpy()) -
-                                  np.interp(t_out, t, table[c].to_numpy())) / dt
-                                 for c in POS_COLS])
+        world = np.column_stack(
+            [
+                (
+                    np.interp(t_out + dt, t, table[c].to_numpy())
+                    - np.interp(t_out, t, table[c].to_numpy())
+                )
+                / dt
+                for c in POS_COLS
+            ]
+        )
         vel = world_to_body(q, np.ascontiguousarray(world))
     else:
         world = np.column_stack([np.interp(t_out, t, table[c].to_numpy()) for c in WORLD_VEL_COLS])
@@ -182,8 +194,7 @@ def _reference(table: pd.DataFrame, t_out: np.ndarray, rates: np.ndarray) -> np.
         w = np.full(9, 1.0 / 8)
         w[0] = w[-1] = 0.5 / 8
         times = np.minimum(t_out[:, None] + sub[None, :], t[-1])
-        rates = np.column_stack([np.interp(times, t, table[c].to_numpy()) @ w
-                                 for c in RATE_COLS])
+        rates = np.column_stack([np.interp(times, t, table[c].to_numpy()) @ w for c in RATE_COLS])
     return np.hstack([euler_array(q), vel, rates])
 
 
@@ -196,12 +207,13 @@ def _step_means(x: np.ndarray, d: int) -> np.ndarray:
         w = np.full(d + 1, 1.0 / d)
         w[0] = w[-1] = 0.5 / d
         for i in range(n_full):
-            out[i] = w @ x[i * d: i * d + d + 1]
+            out[i] = w @ x[i * d : i * d + d + 1]
     return out
 
 
-def _filtered_reference(x: np.ndarray, frame: str, rates: np.ndarray,
-                        world_vel: np.ndarray | None = None) -> np.ndarray:
+def _filtered_reference(
+    x: np.ndarray, frame: str, rates: np.ndarray, world_vel: np.ndarray | None = None
+) -> np.ndarray:
     """Filtered (not downsampled-then-derived) measurements (N, 9) on the final clock."""
     q = np.ascontiguousarray(x[:, :4] / np.linalg.norm(x[:, :4], axis=1, keepdims=True))
     vel = x[:, 4:7] if world_vel is None else world_vel
@@ -229,11 +241,13 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
         if data.filter_inputs:
             _, x_in = zero_phase_fir(t, x_in, h)
         else:
-            x_in = x_in[(len(h) - 1) // 2: (len(h) - 1) // 2 + len(t_f)]
+            x_in = x_in[(len(h) - 1) // 2 : (len(h) - 1) // 2 + len(t_f)]
         t = t_f
-        steps.append(f"zero-phase FIR low-pass: {data.filter_taps} taps, {data.cutoff_hz:g} Hz "
-                     f"(delay {(data.filter_taps - 1) / 2:g} samples compensated; inputs "
-                     f"{'filtered' if data.filter_inputs else 'not filtered'})")
+        steps.append(
+            f"zero-phase FIR low-pass: {data.filter_taps} taps, {data.cutoff_hz:g} Hz "
+            f"(delay {(data.filter_taps - 1) / 2:g} samples compensated; inputs "
+            f"{'filtered' if data.filter_inputs else 'not filtered'})"
+        )
     d = data.downsample
     filtered_ref = x_state[::d].copy()
     if has_rates:  # the discrete rate is the mean over [t, t + dt]: average the gyro likewise
@@ -255,31 +269,51 @@ def process_segment(log: LogTable, a: int, b: int, data, index: int) -> Flight:
     world_vel = ref_vel = None
     if log.velocity_frame == "position":  # exact inverse of x_{t+1} = x_t + R(q_t) V_t dt
         n = min(n, len(t) - 1)
-        world_vel = (x_state[1: n + 1, 4:7] - x_state[:n, 4:7]) / dt
-        ref_vel = (filtered_ref[1: n + 1, 4:7] - filtered_ref[:n, 4:7]) / dt
+        world_vel = (x_state[1 : n + 1, 4:7] - x_state[:n, 4:7]) / dt
+        ref_vel = (filtered_ref[1 : n + 1, 4:7] - filtered_ref[:n, 4:7]) / dt
     t, quat, x_state, x_in, rates = t[:n], quat[:n], x_state[:n], x_in[:n], rates[:n]
     if world_vel is not None:
         vel = world_to_body(quat, np.ascontiguousarray(world_vel))
-        steps.append("body velocity from position differences (exact inverse of the "
-                     "integrator's position update)")
+        steps.append(
+            "body velocity from position differences (exact inverse of the "
+            "integrator's position update)"
+        )
     elif log.velocity_frame == "world":
         vel = world_to_body(quat, np.ascontiguousarray(x_state[:, 4:7]))
         steps.append("body velocity = world velocity rotated by the filtered attitude")
     else:
         vel = np.ascontiguousarray(x_state[:, 4:7])
     if np.abs(rates).max() > MAX_PLAUSIBLE_RATE:
-        raise GpquadError(f"body rates reach {np.abs(rates).max():.1f} rad/s, implausible; "
-                          "degrees where radians are expected?", source=log.source, field="p")
+        raise GpquadError(
+            f"body rates reach {np.abs(rates).max():.1f} rad/s, implausible; "
+            "degrees where radians are expected?",
+            source=log.source,
+            field="p",
+        )
     meta = {
-        "source": log.source, "log": log.name, "segment": index,
-        "t_start_s": float(t[0]), "t_stop_s": float(t[-1]), "dt": dt,
-        "measured": dict(log.measured), "pipeline": steps, "input_level": log.input_level,
+        "source": log.source,
+        "log": log.name,
+        "segment": index,
+        "t_start_s": float(t[0]),
+        "t_stop_s": float(t[-1]),
+        "dt": dt,
+        "measured": dict(log.measured),
+        "pipeline": steps,
+        "input_level": log.input_level,
         "reference_raw": _reference(log.table.iloc[a:b], t, rates),
         "reference": _filtered_reference(filtered_ref[:n], log.velocity_frame, rates, ref_vel),
     }
-    return Flight(name=f"{log.name}#{index}", t=t, quat=quat, vel=np.ascontiguousarray(vel),
-                  rates=np.ascontiguousarray(rates), inputs=np.ascontiguousarray(x_in),
-                  input_names=tuple(inputs), pos=None, meta=meta)
+    return Flight(
+        name=f"{log.name}#{index}",
+        t=t,
+        quat=quat,
+        vel=np.ascontiguousarray(vel),
+        rates=np.ascontiguousarray(rates),
+        inputs=np.ascontiguousarray(x_in),
+        input_names=tuple(inputs),
+        pos=None,
+        meta=meta,
+    )
 
 
 def flights_from_log(log: LogTable, data) -> list[Flight]:

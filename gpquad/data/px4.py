@@ -43,8 +43,9 @@ REQUIRED_TOPICS = ("vehicle_attitude", "vehicle_local_position")
 class Topics:
     """Topic tables of one log: name -> DataFrame (timestamp in us), with their sources."""
 
-    def __init__(self, tables: dict[str, pd.DataFrame], sources: dict[str, str], params: dict,
-                 where: str):
+    def __init__(
+        self, tables: dict[str, pd.DataFrame], sources: dict[str, str], params: dict, where: str
+    ):
         self.tables = tables
         self.sources = sources
         self.params = params
@@ -55,17 +56,22 @@ class Topics:
 
     def get(self, topic: str) -> pd.DataFrame:
         if topic not in self.tables:
-            hint = ("the .ulg may be truncated before its first message" if
-                    self.where.lower().endswith(".ulg") else f"expected a file *_{topic}_0.csv")
-            raise GpquadError(f"missing topic '{topic}' ({hint})", source=self.where,
-                              field=topic)
+            hint = (
+                "the .ulg may be truncated before its first message"
+                if self.where.lower().endswith(".ulg")
+                else f"expected a file *_{topic}_0.csv"
+            )
+            raise GpquadError(f"missing topic '{topic}' ({hint})", source=self.where, field=topic)
         return self.tables[topic]
 
     def column(self, topic: str, name: str) -> np.ndarray:
         df = self.get(topic)
         if name not in df.columns:
-            raise GpquadError(f"missing column '{name}' in topic '{topic}'",
-                              source=self.sources.get(topic, self.where), field=name)
+            raise GpquadError(
+                f"missing column '{name}' in topic '{topic}'",
+                source=self.sources.get(topic, self.where),
+                field=name,
+            )
         return pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
 
     def time_field(self, topic: str) -> str:
@@ -81,13 +87,30 @@ class Topics:
         """Topic times in s (from microseconds)."""
         return self.column(topic, self.time_field(topic)) * 1e-6
 
-    def stream(self, topic: str, fields, columns, kind: str, required: bool = True,
-               scale=1.0, offset: float = 0.0) -> Stream:
+    def stream(
+        self,
+        topic: str,
+        fields,
+        columns,
+        kind: str,
+        required: bool = True,
+        scale=1.0,
+        offset: float = 0.0,
+    ) -> Stream:
         scales = np.broadcast_to(np.asarray(scale, dtype=float), (len(fields),))
-        values = np.column_stack([(self.column(topic, f) - offset) * k
-                                  for f, k in zip(fields, scales, strict=True)])
-        return Stream(topic, self.time(topic), values, tuple(columns), kind,
-                      self.sources.get(topic, self.where), self.time_field(topic), required)
+        values = np.column_stack(
+            [(self.column(topic, f) - offset) * k for f, k in zip(fields, scales, strict=True)]
+        )
+        return Stream(
+            topic,
+            self.time(topic),
+            values,
+            tuple(columns),
+            kind,
+            self.sources.get(topic, self.where),
+            self.time_field(topic),
+            required,
+        )
 
 
 _TOPIC_FILE = re.compile(r"^(?P<topic>.+)_(?P<inst>\d+)\.csv$")
@@ -115,8 +138,11 @@ def read_px4_folder(path) -> Topics:
     if not path.is_dir():
         if not path.exists():
             raise GpquadError("no such file or folder", source=str(path))
-        raise GpquadError("not a folder of ulog2csv topic CSVs (format px4-csv); give the "
-                          "folder ulog2csv wrote, or a .ulg file", source=str(path))
+        raise GpquadError(
+            "not a folder of ulog2csv topic CSVs (format px4-csv); give the "
+            "folder ulog2csv wrote, or a .ulg file",
+            source=str(path),
+        )
     files = sorted(path.glob("*.csv"))
     if not files:
         raise GpquadError("no topic CSVs in the folder", source=str(path))
@@ -124,7 +150,7 @@ def read_px4_folder(path) -> Topics:
     prefix = _common_prefix(stems)
     tables, sources = {}, {}
     for f in files:
-        m = _TOPIC_FILE.match(f.name[len(prefix):])
+        m = _TOPIC_FILE.match(f.name[len(prefix) :])
         if not m:
             continue
         topic, inst = m.group("topic"), int(m.group("inst"))
@@ -134,19 +160,32 @@ def read_px4_folder(path) -> Topics:
         try:
             tables[key] = pd.read_csv(f)
         except Exception as exc:  # truncated or corrupt CSV
-            raise GpquadError(f"cannot read the topic CSV ({type(exc).__name__}: {exc})",
-                              source=str(f)) from None
+            raise GpquadError(
+                f"cannot read the topic CSV ({type(exc).__name__}: {exc})", source=str(f)
+            ) from None
         sources[key] = str(f)
     octave = path / "parameters.octave"
     params = read_octave_params(octave) if octave.is_file() else {}
     return Topics(tables, sources, params, str(path))
 
 
-_WANTED = {"vehicle_attitude", "vehicle_angular_velocity", "vehicle_local_position",
-           "sensor_combined", "vehicle_acceleration",
-           "actuator_controls_0", "vehicle_status", "vehicle_rates_setpoint", "input_rc",
-           "actuator_outputs", "control_state", "vehicle_torque_setpoint",
-           "vehicle_thrust_setpoint", "actuator_motors", "esc_status"}
+_WANTED = {
+    "vehicle_attitude",
+    "vehicle_angular_velocity",
+    "vehicle_local_position",
+    "sensor_combined",
+    "vehicle_acceleration",
+    "actuator_controls_0",
+    "vehicle_status",
+    "vehicle_rates_setpoint",
+    "input_rc",
+    "actuator_outputs",
+    "control_state",
+    "vehicle_torque_setpoint",
+    "vehicle_thrust_setpoint",
+    "actuator_motors",
+    "esc_status",
+}
 
 
 def _common_prefix(names: list[str]) -> str:
@@ -172,12 +211,16 @@ def _velocity_stream(tp: Topics, measured: dict) -> Stream:
         ok = tp.column(topic, flag) > 0.5
         if not ok.any():
             for a in axes:
-                measured[a] = (f"not measured ({flag} = 0 throughout; the log's value "
-                               f"{np.nanmean(np.abs(vel[:, cols])):.3g} m/s is kept)")
+                measured[a] = (
+                    f"not measured ({flag} = 0 throughout; the log's value "
+                    f"{np.nanmean(np.abs(vel[:, cols])):.3g} m/s is kept)"
+                )
         else:
             for a in axes:
-                measured[a] = (f"measured (estimator, {flag} = 1 for {ok.mean():.0%} of rows; "
-                               "invalid rows are gaps)")
+                measured[a] = (
+                    f"measured (estimator, {flag} = 1 for {ok.mean():.0%} of rows; "
+                    "invalid rows are gaps)"
+                )
             vel[~ok] = np.nan  # a gap: never interpolated across
     return Stream(topic, t, vel, ("vx", "vy", "vz"), "state", tp.sources.get(topic, tp.where))
 
@@ -187,10 +230,14 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     for topic in REQUIRED_TOPICS:
         tp.get(topic)
     measured = {}
-    streams = [tp.stream("vehicle_attitude", [f"q[{i}]" for i in range(4)],
-                         ("qw", "qx", "qy", "qz"), "quat")]
-    measured.update({a: "measured (estimator attitude quaternion)"
-                     for a in ("phi", "theta", "psi")})
+    streams = [
+        tp.stream(
+            "vehicle_attitude", [f"q[{i}]" for i in range(4)], ("qw", "qx", "qy", "qz"), "quat"
+        )
+    ]
+    measured.update(
+        {a: "measured (estimator attitude quaternion)" for a in ("phi", "theta", "psi")}
+    )
     att = tp.get("vehicle_attitude")
     rate_fields = None
     if "rollspeed" in att.columns:
@@ -228,8 +275,9 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
     if s_rates is not None:
         check_rate_units(table, valid, s_rates.source, rate_fields)
-    bad, splits = reset_mask(table, data.resample_hz, counter_labels(table.columns),
-                             data.max_attitude_step_deg)
+    bad, splits = reset_mask(
+        table, data.resample_hz, counter_labels(table.columns), data.max_attitude_step_deg
+    )
     valid &= ~bad
     notes.extend(splits)
     notes.extend(check_input_rates(info, inputs, {s.name: s.columns for s in streams}))
@@ -239,10 +287,22 @@ def px4_log_table(tp: Topics, data, name: str) -> LogTable:
     armed = (table["arming_state"].to_numpy() == ARMED) if armed_ok else None
     thrust = table["thrust_cmd"].to_numpy()
     mask = in_flight_mask(t, armed, thrust, data, tp.where)
-    return LogTable(name=name, source=tp.where, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(inputs), measured=measured,
-                    streams=info, notes=notes, levels=supported, input_level=chosen,
-                    input_columns=inputs, units=UNITS)
+    return LogTable(
+        name=name,
+        source=tp.where,
+        table=table,
+        valid=valid,
+        in_flight=mask,
+        rate_hz=data.resample_hz,
+        input_names=tuple(inputs),
+        measured=measured,
+        streams=info,
+        notes=notes,
+        levels=supported,
+        input_level=chosen,
+        input_columns=inputs,
+        units=UNITS,
+    )
 
 
 def read_px4_folder_log(path, data) -> LogTable:

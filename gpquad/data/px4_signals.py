@@ -39,12 +39,15 @@ UNITS = {"p_sp": " (rad/s)", "q_sp": " (rad/s)", "r_sp": " (rad/s)"}
 def torque_stream(tp):
     """Torque and thrust commands from actuator_controls_0, else the v1.14+ setpoints."""
     if tp.has("actuator_controls_0") or not tp.has("vehicle_torque_setpoint"):
-        return tp.stream("actuator_controls_0", [f"control[{i}]" for i in range(4)],
-                         TORQUE_COLUMNS, "hold")
-    torque = tp.stream("vehicle_torque_setpoint", ["xyz[0]", "xyz[1]", "xyz[2]"],
-                       TORQUE_COLUMNS[:3], "hold")
-    thrust = tp.stream("vehicle_thrust_setpoint", ["xyz[2]"], TORQUE_COLUMNS[3:], "hold",
-                       scale=-1.0)
+        return tp.stream(
+            "actuator_controls_0", [f"control[{i}]" for i in range(4)], TORQUE_COLUMNS, "hold"
+        )
+    torque = tp.stream(
+        "vehicle_torque_setpoint", ["xyz[0]", "xyz[1]", "xyz[2]"], TORQUE_COLUMNS[:3], "hold"
+    )
+    thrust = tp.stream(
+        "vehicle_thrust_setpoint", ["xyz[2]"], TORQUE_COLUMNS[3:], "hold", scale=-1.0
+    )
     return [torque, thrust]
 
 
@@ -52,45 +55,91 @@ def optional_streams(tp) -> list:
     """Factories of the optional streams the log has (each may raise GpquadError)."""
     out = []
     if tp.has("vehicle_status"):
-        out.append(lambda: tp.stream("vehicle_status", ["arming_state", "nav_state"],
-                                     ("arming_state", "nav_state"), "hold", required=False))
+        out.append(
+            lambda: tp.stream(
+                "vehicle_status",
+                ["arming_state", "nav_state"],
+                ("arming_state", "nav_state"),
+                "hold",
+                required=False,
+            )
+        )
     if tp.has("vehicle_rates_setpoint"):
         sp = tp.get("vehicle_rates_setpoint")
         new = "thrust_body[2]" in sp.columns
-        out.append(lambda: tp.stream(
-            "vehicle_rates_setpoint", ["roll", "pitch", "yaw", "thrust_body[2]" if new else
-                                       "thrust"], ("p_sp", "q_sp", "r_sp", "thrust_sp"), "hold",
-            required=False, scale=np.array([1.0, 1.0, 1.0, -1.0 if new else 1.0])))
+        out.append(
+            lambda: tp.stream(
+                "vehicle_rates_setpoint",
+                ["roll", "pitch", "yaw", "thrust_body[2]" if new else "thrust"],
+                ("p_sp", "q_sp", "r_sp", "thrust_sp"),
+                "hold",
+                required=False,
+                scale=np.array([1.0, 1.0, 1.0, -1.0 if new else 1.0]),
+            )
+        )
     if tp.has("input_rc"):
-        out.append(lambda: tp.stream("input_rc", [f"values[{i}]" for i in range(8)],
-                                     tuple(f"rc_{i}" for i in range(8)), "hold",
-                                     required=False, scale=1 / 500, offset=1500.0))
+        out.append(
+            lambda: tp.stream(
+                "input_rc",
+                [f"values[{i}]" for i in range(8)],
+                tuple(f"rc_{i}" for i in range(8)),
+                "hold",
+                required=False,
+                scale=1 / 500,
+                offset=1500.0,
+            )
+        )
     if tp.has("actuator_motors"):
-        out.append(lambda: tp.stream("actuator_motors", [f"control[{i}]" for i in range(4)],
-                                     tuple(f"motor_{i}" for i in range(4)), "hold",
-                                     required=False))
+        out.append(
+            lambda: tp.stream(
+                "actuator_motors",
+                [f"control[{i}]" for i in range(4)],
+                tuple(f"motor_{i}" for i in range(4)),
+                "hold",
+                required=False,
+            )
+        )
     elif tp.has("actuator_outputs"):
         lo, hi = tp.params.get("PWM_MIN", 1000.0), tp.params.get("PWM_MAX", 2000.0)
-        out.append(lambda: tp.stream("actuator_outputs", [f"output[{i}]" for i in range(4)],
-                                     tuple(f"motor_{i}" for i in range(4)), "hold",
-                                     required=False, scale=1 / (hi - lo), offset=lo))
+        out.append(
+            lambda: tp.stream(
+                "actuator_outputs",
+                [f"output[{i}]" for i in range(4)],
+                tuple(f"motor_{i}" for i in range(4)),
+                "hold",
+                required=False,
+                scale=1 / (hi - lo),
+                offset=lo,
+            )
+        )
     if tp.has("esc_status"):
         esc = tp.get("esc_status")
         n = sum(1 for i in range(8) if f"esc[{i}].esc_rpm" in esc.columns)
         if n:
-            out.append(lambda: tp.stream("esc_status", [f"esc[{i}].esc_rpm" for i in range(n)],
-                                         tuple(f"esc_krpm_{i}" for i in range(n)), "hold",
-                                         required=False, scale=1e-3))
+            out.append(
+                lambda: tp.stream(
+                    "esc_status",
+                    [f"esc[{i}].esc_rpm" for i in range(n)],
+                    tuple(f"esc_krpm_{i}" for i in range(n)),
+                    "hold",
+                    required=False,
+                    scale=1e-3,
+                )
+            )
     for col, (topic, field, _) in COUNTERS.items():
         if tp.has(topic) and field in tp.get(topic).columns:
-            out.append(lambda topic=topic, field=field, col=col: tp.stream(
-                topic, [field], (col,), "hold", required=False))
+            out.append(
+                lambda topic=topic, field=field, col=col: tp.stream(
+                    topic, [field], (col,), "hold", required=False
+                )
+            )
     return out
 
 
 def counter_labels(columns) -> dict[str, str]:
-    return {c: f"{COUNTERS[c][2]} ({COUNTERS[c][0]}.{COUNTERS[c][1]})" for c in COUNTERS
-            if c in columns}
+    return {
+        c: f"{COUNTERS[c][2]} ({COUNTERS[c][0]}.{COUNTERS[c][1]})" for c in COUNTERS if c in columns
+    }
 
 
 def levels(columns, params: dict) -> dict[str, dict[str, str]]:

@@ -66,13 +66,19 @@ def attitude_steps(table: pd.DataFrame, max_step_deg: float) -> list[tuple[int, 
     for i in idx:
         if events and i - events[-1][0] <= 2:  # one step spread over two clock samples
             continue
-        events.append((int(i), f"attitude step of {np.degrees(angle[i - 1]):.0f} deg in one "
-                               f"sample, {how} (estimator reset?)"))
+        events.append(
+            (
+                int(i),
+                f"attitude step of {np.degrees(angle[i - 1]):.0f} deg in one "
+                f"sample, {how} (estimator reset?)",
+            )
+        )
     return events
 
 
-def reset_mask(table: pd.DataFrame, rate_hz: float, counters: dict[str, str],
-               max_step_deg: float) -> tuple[np.ndarray, list[str]]:
+def reset_mask(
+    table: pd.DataFrame, rate_hz: float, counters: dict[str, str], max_step_deg: float
+) -> tuple[np.ndarray, list[str]]:
     """(bad (N,) bool, notes): samples around resets, and one note per split."""
     n = len(table)
     bad = np.zeros(n, dtype=bool)
@@ -84,7 +90,7 @@ def reset_mask(table: pd.DataFrame, rate_hz: float, counters: dict[str, str],
     notes = []
     seen: list[int] = []
     for i, why in sorted(events):
-        bad[max(0, i - margin): min(n, i + margin)] = True
+        bad[max(0, i - margin) : min(n, i + margin)] = True
         near = [j for j in seen if abs(j - i) <= margin]
         seen.append(i)
         notes.append(f"split at {t[i]:.2f} s: {why}" + (" (same reset)" if near else ""))

@@ -42,15 +42,25 @@ def _part(cfg, path: Path, part: str) -> str:
         return "all"
     if cfg.data.files and path in cfg.data_paths():
         if not isinstance(cfg.data.validation, str):
-            raise GpquadError("this log trained the run whole (data.validation lists other "
-                              "files); give --part all to score it anyway", source=str(path),
-                              field="--part")
+            raise GpquadError(
+                "this log trained the run whole (data.validation lists other "
+                "files); give --part all to score it anyway",
+                source=str(path),
+                field="--part",
+            )
         return "validation"
     return "all"
 
 
-def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
-              part: str = "auto", check: bool = True, integrator: str = "own") -> dict:
+def score_log(
+    run_dir,
+    log,
+    horizon_s: float = 7.0,
+    fmt: str | None = None,
+    part: str = "auto",
+    check: bool = True,
+    integrator: str = "own",
+) -> dict:
     """RSE per state, window counts and what was scored (see the module docstring)."""
     from gpquad.data.dataset import build_dataset
     from gpquad.data.integration_check import screen_segments
@@ -71,8 +81,9 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     if part not in PARTS:
         raise GpquadError(f"choose one of {list(PARTS)}", field="--part")
     if not (np.isfinite(horizon_s) and horizon_s > 0):
-        raise GpquadError(f"must be a finite number of seconds > 0, not {horizon_s}",
-                          field="--horizon-s")
+        raise GpquadError(
+            f"must be a finite number of seconds > 0, not {horizon_s}", field="--horizon-s"
+        )
     if integrator not in INTEGRATORS:
         raise GpquadError(f"choose one of {list(INTEGRATORS)}", field="--integrator")
     run = load_run(run_dir)
@@ -81,26 +92,40 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     if not path.exists():
         raise GpquadError("no such file or folder", source=str(log), field="--data")
     if not (path.is_file() or path.is_dir()):
-        raise GpquadError("not a regular file or folder (a pipe or a device)", source=str(log),
-                          field="--data")
+        raise GpquadError(
+            "not a regular file or folder (a pipe or a device)", source=str(log), field="--data"
+        )
     fmt = fmt or guess_format(path)
     if fmt not in READERS:
-        raise GpquadError(f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(log),
-                          field="--format")
+        raise GpquadError(
+            f"unknown format '{fmt}'; known: {sorted(READERS)}", source=str(log), field="--format"
+        )
     which = _part(cfg, path, part)
     data = dataclasses.replace(cfg.data, format=fmt, files=(str(path),))
     flights = READERS[fmt](path, data)
     dropped: list[str] = []
     if data.check_before_run and check:
-        flights, dropped, _ = screen_segments(flights, data.check_steps, data.check_max_rse,
-                                              source=str(log), field="--data",
-                                              skip_hint="give --no-check to score it anyway")
-    dataset = build_dataset(flights, validation_fraction=data.validation_fraction,
-                            held_out=None if which == "validation" else [True] * len(flights))
+        flights, dropped, _ = screen_segments(
+            flights,
+            data.check_steps,
+            data.check_max_rse,
+            source=str(log),
+            field="--data",
+            skip_hint="give --no-check to score it anyway",
+        )
+    dataset = build_dataset(
+        flights,
+        validation_fraction=data.validation_fraction,
+        held_out=None if which == "validation" else [True] * len(flights),
+    )
     if tuple(run.model.input_names) != tuple(dataset.input_names):
-        raise GpquadError(f"the run's equations read inputs {list(run.model.input_names)} but "
-                          f"the log gives {list(dataset.input_names)}; score with the run's "
-                          "input level", source=str(log), field="data.inputs")
+        raise GpquadError(
+            f"the run's equations read inputs {list(run.model.input_names)} but "
+            f"the log gives {list(dataset.input_names)}; score with the run's "
+            "input level",
+            source=str(log),
+            field="data.inputs",
+        )
     check_same_rate(run.model, dataset.dt, str(log))
     steps = max(1, int(round(horizon_s / dataset.dt)))
     starts, steps = validation_windows(dataset, steps, run.max_delay)
@@ -114,33 +139,52 @@ def score_log(run_dir, log, horizon_s: float = 7.0, fmt: str | None = None,
     flipped = cfg.vehicle.flipped(dataset.input_names)
     mirrored = None
     if flipped and all(n in dataset.input_names for n in flipped):
-        mirrored = {"inputs": list(flipped),
-                    "diverged": mirrored_diverged(run.model, view, starts, steps, bound, flipped)}
+        mirrored = {
+            "inputs": list(flipped),
+            "diverged": mirrored_diverged(run.model, view, starts, steps, bound, flipped),
+        }
     outside = []
     if run.model.envelope:
         from gpquad.models.envelope import outside_envelope
 
         rows = np.unique(starts[:, None] + np.arange(steps + 1)[None, :])
         outside = outside_envelope(run.model.envelope, view, rows)
+
     def measured(values):
-        return {s: float("nan") if dataset.unmeasured(s) else float(v)
-                for s, v in zip(SCORED_STATES, values, strict=True)}
+        return {
+            s: float("nan") if dataset.unmeasured(s) else float(v)
+            for s, v in zip(SCORED_STATES, values, strict=True)
+        }
 
     continuous = None
     if integrator == "rk4":
         rk4 = dataclasses.replace(run.model, integrator="rk4", substeps=FIDELITY_SUBSTEPS)
         pred_rk4 = rk4.simulate(view, starts, steps)
-        continuous = {"substeps": FIDELITY_SUBSTEPS, "rse": measured(rse(pred_rk4, truth)),
-                      "diverged": int(diverged(pred_rk4, bound).sum())}
+        continuous = {
+            "substeps": FIDELITY_SUBSTEPS,
+            "rse": measured(rse(pred_rk4, truth)),
+            "diverged": int(diverged(pred_rk4, bound).sum()),
+        }
     baselines = reference_scores(run.model, dataset, starts, steps, bound)
-    return {"run": str(run_dir), "data": str(log), "format": fmt, "part": which,
-            "horizon_s": steps * dataset.dt, "steps": int(steps), "windows": int(len(starts)),
-            "diverged": n_diverged, "rse": measured(values),
-            "integrator": {"scheme": run.model.integrator, "substeps": run.model.substeps},
-            "rk4": continuous,
-            "input_names": list(dataset.input_names), "segments": [f.name for f in flights],
-            "dropped": dropped, "outside_training": outside, "mirrored": mirrored,
-            "baselines": baselines}
+    return {
+        "run": str(run_dir),
+        "data": str(log),
+        "format": fmt,
+        "part": which,
+        "horizon_s": steps * dataset.dt,
+        "steps": int(steps),
+        "windows": int(len(starts)),
+        "diverged": n_diverged,
+        "rse": measured(values),
+        "integrator": {"scheme": run.model.integrator, "substeps": run.model.substeps},
+        "rk4": continuous,
+        "input_names": list(dataset.input_names),
+        "segments": [f.name for f in flights],
+        "dropped": dropped,
+        "outside_training": outside,
+        "mirrored": mirrored,
+        "baselines": baselines,
+    }
 
 
 def reference_scores(model, dataset, starts, steps: int, bound) -> dict:
@@ -158,8 +202,10 @@ def reference_scores(model, dataset, starts, steps: int, bound) -> dict:
         with np.errstate(all="ignore"):
             pred = reference.simulate(dataset, starts, steps)
         values = rse(pred, truth)
-        out[name] = {s: float("nan") if dataset.unmeasured(s) else float(v)
-                     for s, v in zip(SCORED_STATES, values, strict=True)}
+        out[name] = {
+            s: float("nan") if dataset.unmeasured(s) else float(v)
+            for s, v in zip(SCORED_STATES, values, strict=True)
+        }
         out[name]["diverged"] = int(diverged(pred, bound).sum())
     return out
 
@@ -187,33 +233,47 @@ def format_score(result: dict) -> str:
     rows = [("model", result["rse"])]
     if result.get("rk4"):
         rows.append((f"rk4 x{result['rk4']['substeps']}", result["rk4"]["rse"]))
-    rows += [(n, {s: r[s] for s in result["rse"]})
-             for n, r in result.get("baselines", {}).items()]
-    table = [f"{name:10}" + "".join(_cell(v) for v in values.values())
-             for name, values in rows]
-    lines = [f"score of {result['run']} on {result['data']} ({result['part']} part, "
-             f"{len(result['segments'])} segment(s), inputs {', '.join(result['input_names'])})",
-             f"RSE of the integrated states over {result['windows']} window(s) of "
-             f"{result['steps']} steps ({result['horizon_s']:.2f} s); "
-             f"{result['diverged']} diverged; - = not measured by the log; ! = RSE above 1, "
-             "no better than the data's mean; zero: every acceleration zero"
-             + ("; set-point: each rate follows its set-point" if "set-point" in
-                result.get("baselines", {}) else "")
-             + (f"; rk4 x{result['rk4']['substeps']}: the printed equations flown in "
-                f"continuous time ({result['rk4']['diverged']} diverged)"
-                if result.get("rk4") else ""),
-             head, *table]
+    rows += [(n, {s: r[s] for s in result["rse"]}) for n, r in result.get("baselines", {}).items()]
+    table = [f"{name:10}" + "".join(_cell(v) for v in values.values()) for name, values in rows]
+    lines = [
+        f"score of {result['run']} on {result['data']} ({result['part']} part, "
+        f"{len(result['segments'])} segment(s), inputs {', '.join(result['input_names'])})",
+        f"RSE of the integrated states over {result['windows']} window(s) of "
+        f"{result['steps']} steps ({result['horizon_s']:.2f} s); "
+        f"{result['diverged']} diverged; - = not measured by the log; ! = RSE above 1, "
+        "no better than the data's mean; zero: every acceleration zero"
+        + (
+            "; set-point: each rate follows its set-point"
+            if "set-point" in result.get("baselines", {})
+            else ""
+        )
+        + (
+            f"; rk4 x{result['rk4']['substeps']}: the printed equations flown in "
+            f"continuous time ({result['rk4']['diverged']} diverged)"
+            if result.get("rk4")
+            else ""
+        ),
+        head,
+        *table,
+    ]
     lines.extend(f"warning: {d}" for d in result["dropped"])
     mirrored = result.get("mirrored")
     if mirrored:
-        line = (f"mirrored left-right ({', '.join(mirrored['inputs'])} flipped): "
-                f"{mirrored['diverged']} of {result['windows']} window(s) diverged")
+        line = (
+            f"mirrored left-right ({', '.join(mirrored['inputs'])} flipped): "
+            f"{mirrored['diverged']} of {result['windows']} window(s) diverged"
+        )
         if mirrored["diverged"]:
-            line += ("; an equation holds only on the side of the flights the training log "
-                     "flew (vehicle.mirror_inputs)")
+            line += (
+                "; an equation holds only on the side of the flights the training log "
+                "flew (vehicle.mirror_inputs)"
+            )
         lines.append(line)
-    lines.extend(f"note: {o['signal']} leaves the training range on {100 * o['fraction']:.1f} % "
-                 f"of the scored samples (training {o['training'][0]:.3g}..{o['training'][1]:.3g}"
-                 f", here {o['seen'][0]:.3g}..{o['seen'][1]:.3g}): the equations extrapolate "
-                 "there" for o in result.get("outside_training", []))
+    lines.extend(
+        f"note: {o['signal']} leaves the training range on {100 * o['fraction']:.1f} % "
+        f"of the scored samples (training {o['training'][0]:.3g}..{o['training'][1]:.3g}"
+        f", here {o['seen'][0]:.3g}..{o['seen'][1]:.3g}): the equations extrapolate "
+        "there"
+        for o in result.get("outside_training", [])
+    )
     return "\n".join(lines)

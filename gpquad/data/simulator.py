@@ -34,12 +34,15 @@ class TruthModel:
         for target, text in equations.items():
             if target not in TARGET_NAMES:
                 raise GpquadError(f"unknown target '{target}'", field="simulator.equations")
-            expr, delays = parse_equation(text, self.input_names,
-                                          source=f"simulator.equations.{target}")
+            expr, delays = parse_equation(
+                text, self.input_names, source=f"simulator.equations.{target}"
+            )
             if max(delays.values(), default=0) > MAX_TRUTH_DELAY:
-                raise GpquadError(f"a delay of {max(delays.values())} samples; the simulator's "
-                                  f"delays are at most {MAX_TRUTH_DELAY}",
-                                  field=f"simulator.equations.{target}")
+                raise GpquadError(
+                    f"a delay of {max(delays.values())} samples; the simulator's "
+                    f"delays are at most {MAX_TRUTH_DELAY}",
+                    field=f"simulator.equations.{target}",
+                )
             self.exprs[target] = expr
             self.delays[target] = delays
         # an input written at several delays is one leaf per delay (gpquad.engine.taps)
@@ -57,17 +60,20 @@ class TruthModel:
             func = self._funcs.get(target)
             if func is None:
                 continue
-            delayed = [inputs[max(t - self.delays[target].get(n, 0), 0), j % n_in]
-                       for j, n in enumerate(self._leaves)]
+            delayed = [
+                inputs[max(t - self.delays[target].get(n, 0), 0), j % n_in]
+                for j, n in enumerate(self._leaves)
+            ]
             acc[k] = func(*state, *delayed)
         return acc
 
 
-def pilot_sticks(cfg: SimulatorConfig, input_names, n: int, dt: float,
-                 rng: np.random.Generator) -> np.ndarray:
+def pilot_sticks(
+    cfg: SimulatorConfig, input_names, n: int, dt: float, rng: np.random.Generator
+) -> np.ndarray:
     """Smooth random sticks (n, n_inputs): OU processes with the configured SD and time constant."""
     decay = np.exp(-dt / cfg.stick_time_constant_s)
-    scale = np.sqrt(1.0 - decay ** 2)
+    scale = np.sqrt(1.0 - decay**2)
     shocks = rng.standard_normal((n, len(input_names)))
     sd = np.array([cfg.stick_sd.get(name, 0.0) for name in input_names])
     sticks = np.zeros((n, len(input_names)))
@@ -92,28 +98,43 @@ def completed(cfg: SimulatorConfig) -> SimulatorConfig:
     import math
 
     base = SimulatorConfig()
-    cfg = dataclasses.replace(cfg, equations={**base.equations, **cfg.equations},
-                              stick_sd={**base.stick_sd, **cfg.stick_sd},
-                              trim={**base.trim, **cfg.trim})
+    cfg = dataclasses.replace(
+        cfg,
+        equations={**base.equations, **cfg.equations},
+        stick_sd={**base.stick_sd, **cfg.stick_sd},
+        trim={**base.trim, **cfg.trim},
+    )
 
-    def finite(value, field: str, low: float | None = None, high: float | None = None,
-               low_open: bool = False):
-        ok = isinstance(value, (int, float)) and math.isfinite(value) \
-            and (low is None or (value > low if low_open else value >= low)) \
+    def finite(
+        value,
+        field: str,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+    ):
+        ok = (
+            isinstance(value, (int, float))
+            and math.isfinite(value)
+            and (low is None or (value > low if low_open else value >= low))
             and (high is None or value <= high)
+        )
         if not ok:
-            bounds = (f" {'>' if low_open else '>='} {low:g}" if low is not None else "") + \
-                (f" and <= {high:g}" if high is not None else "")
-            raise GpquadError(f"{value!r} is not a finite number{bounds}",
-                              field=f"simulator.{field}")
+            bounds = (f" {'>' if low_open else '>='} {low:g}" if low is not None else "") + (
+                f" and <= {high:g}" if high is not None else ""
+            )
+            raise GpquadError(
+                f"{value!r} is not a finite number{bounds}", field=f"simulator.{field}"
+            )
 
     finite(cfg.rate_hz, "rate_hz", 0.0, 10_000.0, low_open=True)
     finite(cfg.duration_s, "duration_s", 0.0, None, low_open=True)
     if cfg.duration_s * cfg.rate_hz > MAX_SAMPLES:
-        raise GpquadError(f"{cfg.duration_s:g} s at {cfg.rate_hz:g} Hz is "
-                          f"{cfg.duration_s * cfg.rate_hz:.3g} samples, more than the "
-                          f"{MAX_SAMPLES:,} the simulator flies; shorten duration_s",
-                          field="simulator.duration_s")
+        raise GpquadError(
+            f"{cfg.duration_s:g} s at {cfg.rate_hz:g} Hz is "
+            f"{cfg.duration_s * cfg.rate_hz:.3g} samples, more than the "
+            f"{MAX_SAMPLES:,} the simulator flies; shorten duration_s",
+            field="simulator.duration_s",
+        )
     finite(cfg.stick_time_constant_s, "stick_time_constant_s", 0.0, low_open=True)
     finite(cfg.input_limit, "input_limit", 0.0, low_open=True)
     for name, sd in cfg.stick_sd.items():
@@ -122,8 +143,10 @@ def completed(cfg: SimulatorConfig) -> SimulatorConfig:
         finite(value, f"trim.{name}")
     for name, sd in cfg.measurement_noise.items():
         if name not in MAX_NOISE:
-            raise GpquadError(f"unknown signal {name!r}; measurement noise is given for "
-                              f"{list(MAX_NOISE)}", field=f"simulator.measurement_noise.{name}")
+            raise GpquadError(
+                f"unknown signal {name!r}; measurement noise is given for {list(MAX_NOISE)}",
+                field=f"simulator.measurement_noise.{name}",
+            )
         finite(sd, f"measurement_noise.{name}", 0.0, MAX_NOISE[name])
     return cfg
 
@@ -133,15 +156,22 @@ def check_motion(inputs: np.ndarray, rates: np.ndarray, vel: np.ndarray, input_n
     that identifies nothing: one line naming the settings to change."""
     from gpquad.data.plausibility import MIN_MOTION_SD
 
-    if max(float(np.max(np.std(rates, axis=0))), float(np.max(np.std(vel, axis=0)))) \
-            < MIN_MOTION_SD:
-        raise GpquadError("the simulated flight does not move (rates and velocities constant): "
-                          "raise stick_sd or input_limit", field="simulator.stick_sd")
+    if (
+        max(float(np.max(np.std(rates, axis=0))), float(np.max(np.std(vel, axis=0))))
+        < MIN_MOTION_SD
+    ):
+        raise GpquadError(
+            "the simulated flight does not move (rates and velocities constant): "
+            "raise stick_sd or input_limit",
+            field="simulator.stick_sd",
+        )
     for j, name in enumerate(input_names):
         if float(np.ptp(inputs[:, j])) == 0.0:
-            raise GpquadError(f"input {name} never changes in the simulated flight; give it a "
-                              "stick_sd > 0 (or a pilot gain) and an input_limit above its trim",
-                              field=f"simulator.stick_sd.{name}")
+            raise GpquadError(
+                f"input {name} never changes in the simulated flight; give it a "
+                "stick_sd > 0 (or a pilot gain) and an input_limit above its trim",
+                field=f"simulator.stick_sd.{name}",
+            )
 
 
 def simulate(cfg: SimulatorConfig, input_names) -> Flight:
@@ -157,9 +187,11 @@ def simulate(cfg: SimulatorConfig, input_names) -> Flight:
     for inp, gains in cfg.pilot_gains.items():
         for state in gains:
             if inp not in input_names or state not in STATE_NAMES:
-                raise GpquadError(f"pilot gain {inp}.{state}: unknown input or state "
-                                  f"(inputs {list(input_names)}, states {list(STATE_NAMES)})",
-                                  field="simulator.pilot_gains")
+                raise GpquadError(
+                    f"pilot gain {inp}.{state}: unknown input or state "
+                    f"(inputs {list(input_names)}, states {list(STATE_NAMES)})",
+                    field="simulator.pilot_gains",
+                )
     gain = np.zeros((len(input_names), len(STATE_NAMES)))
     for j, inp in enumerate(input_names):
         for state, g in cfg.pilot_gains.get(inp, {}).items():
@@ -183,20 +215,35 @@ def simulate(cfg: SimulatorConfig, input_names) -> Flight:
         inputs[t] = np.clip(trim + sticks[t] + gain @ state, -cfg.input_limit, cfg.input_limit)
         acc = model.accelerations(state, inputs, t)
         if not np.all(np.isfinite(acc)) or np.abs(state).max() > 1e4:
-            raise GpquadError(f"the truth model diverged at t = {t * dt:.2f} s; lower the stick "
-                              "SD or change the pilot gains", field="simulator.equations")
+            raise GpquadError(
+                f"the truth model diverged at t = {t * dt:.2f} s; lower the stick "
+                "SD or change the pilot gains",
+                field="simulator.equations",
+            )
         true_acc[t] = acc
         if t < n - 1:
             integrate_step(quat, vel, rates, pos, acc, dt, mat)
     check_motion(inputs, out_w, out_v, input_names)
     if any(cfg.measurement_noise.values()):
-        out_q, out_v, out_w = add_measurement_noise(out_q, out_v, out_w, cfg.measurement_noise,
-                                                    np.random.default_rng([cfg.seed, 1]))
-    return Flight(name=f"simulated_seed{cfg.seed}", t=np.arange(n) * dt, quat=out_q, vel=out_v,
-                  rates=out_w, inputs=inputs, input_names=tuple(input_names), pos=out_x,
-                  meta={"source": "simulator", "true_acc": true_acc,
-                        "equations": dict(cfg.equations),
-                        "measurement_noise": dict(cfg.measurement_noise)})
+        out_q, out_v, out_w = add_measurement_noise(
+            out_q, out_v, out_w, cfg.measurement_noise, np.random.default_rng([cfg.seed, 1])
+        )
+    return Flight(
+        name=f"simulated_seed{cfg.seed}",
+        t=np.arange(n) * dt,
+        quat=out_q,
+        vel=out_v,
+        rates=out_w,
+        inputs=inputs,
+        input_names=tuple(input_names),
+        pos=out_x,
+        meta={
+            "source": "simulator",
+            "true_acc": true_acc,
+            "equations": dict(cfg.equations),
+            "measurement_noise": dict(cfg.measurement_noise),
+        },
+    )
 
 
 def add_measurement_noise(quat, vel, rates, sd: dict, rng: np.random.Generator):

@@ -44,8 +44,11 @@ def table_log(path, data) -> LogTable:
     def col(name):
         c = cols.get(name, name)
         if c not in df.columns:
-            raise GpquadError(f"missing column '{c}'; map it with [data.columns] {name} = "
-                              "\"...\"", source=source, field=c)
+            raise GpquadError(
+                f"missing column '{c}'; map it with [data.columns] {name} = \"...\"",
+                source=source,
+                field=c,
+            )
         import pandas as pd
 
         return pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=float)
@@ -62,8 +65,11 @@ def table_log(path, data) -> LogTable:
     elif have(POSITION_COLUMNS):  # motion capture: velocity from position differences
         vel, vel_cols = np.column_stack([col(c) for c in POSITION_COLUMNS]), POSITION_COLUMNS
     else:
-        raise GpquadError("needs body velocity u, v, w, world velocity vx, vy, vz or position "
-                          "x, y, z columns", source=source, field="u")
+        raise GpquadError(
+            "needs body velocity u, v, w, world velocity vx, vy, vz or position x, y, z columns",
+            source=source,
+            field="u",
+        )
     rates = np.column_stack([col(c) for c in RATE_COLUMNS]) if have(RATE_COLUMNS) else None
     rate_fields = tuple(cols.get(c, c) for c in RATE_COLUMNS)
     if rates is not None:
@@ -74,29 +80,47 @@ def table_log(path, data) -> LogTable:
         vel = flip_body(vel) if vel_cols == BODY_VEL_COLUMNS else flip_world(vel)
         rates = None if rates is None else flip_body(rates)
     inputs = np.column_stack([col(n) for n in data.inputs])
-    streams = [Stream("quaternion", t, quat, QUAT_COLUMNS, "quat", source, cols.get("t", "t")),
-               Stream("velocity", t, vel, vel_cols, "state", source, cols.get("t", "t")),
-               Stream("inputs", t, inputs, tuple(data.inputs), "hold", source, cols.get("t", "t"))]
+    streams = [
+        Stream("quaternion", t, quat, QUAT_COLUMNS, "quat", source, cols.get("t", "t")),
+        Stream("velocity", t, vel, vel_cols, "state", source, cols.get("t", "t")),
+        Stream("inputs", t, inputs, tuple(data.inputs), "hold", source, cols.get("t", "t")),
+    ]
     if rates is not None:
-        streams.append(Stream("rates", t, rates, RATE_COLUMNS, "state", source,
-                              cols.get("t", "t")))
+        streams.append(Stream("rates", t, rates, RATE_COLUMNS, "state", source, cols.get("t", "t")))
     table, valid, info = resample(streams, data.resample_hz, data.max_gap_s)
     if rates is not None:
         check_rate_units(table, valid, source, rate_fields)
     thrust = table["u_T"].to_numpy() if "u_T" in table.columns else None
     mode_needs_thrust = data.segment in ("auto", "thrust")
     if mode_needs_thrust and thrust is None:
-        raise GpquadError("segment on thrust needs an input u_T; set data.segment = 'none' or "
-                          "'range'", source=source, field="data.segment")
+        raise GpquadError(
+            "segment on thrust needs an input u_T; set data.segment = 'none' or 'range'",
+            source=source,
+            field="data.segment",
+        )
     mask = in_flight_mask(table["t"].to_numpy(), None, thrust, data, source)
     measured = {a: "measured (file column)" for a in ("phi", "theta", "psi", "u", "v", "w")}
     if vel_cols == POSITION_COLUMNS:
         measured.update({a: "measured (from position differences)" for a in "uvw"})
-    measured.update({a: "measured (file column)" if rates is not None else
-                     "measured (derived from the quaternion)" for a in "pqr"})
-    return LogTable(name=path.stem, source=source, table=table, valid=valid, in_flight=mask,
-                    rate_hz=data.resample_hz, input_names=tuple(data.inputs), measured=measured,
-                    streams=info)
+    measured.update(
+        {
+            a: "measured (file column)"
+            if rates is not None
+            else "measured (derived from the quaternion)"
+            for a in "pqr"
+        }
+    )
+    return LogTable(
+        name=path.stem,
+        source=source,
+        table=table,
+        valid=valid,
+        in_flight=mask,
+        rate_hz=data.resample_hz,
+        input_names=tuple(data.inputs),
+        measured=measured,
+        streams=info,
+    )
 
 
 def read_table_log(path, data) -> list[Flight]:

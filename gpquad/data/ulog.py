@@ -29,8 +29,9 @@ def read_ulog_topics(path) -> Topics:
 
         ulog = ULog(str(path), list(_WANTED | {"vehicle_angular_velocity"}))
     except Exception as exc:  # pyulog raises many kinds on corrupt input
-        raise GpquadError(f"not a readable ULog file ({type(exc).__name__}: {exc})",
-                          source=str(path)) from None
+        raise GpquadError(
+            f"not a readable ULog file ({type(exc).__name__}: {exc})", source=str(path)
+        ) from None
     tables, sources = {}, {}
     for d in ulog.data_list:
         key = d.name if d.multi_id == 0 else f"{d.name}#{d.multi_id}"

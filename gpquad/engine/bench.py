@@ -55,17 +55,31 @@ def path_trees(input_names) -> dict[str, tuple[str, Tree]]:
     u_p, u_r, u_y, u_t = input_names[:4]
     return {
         # (10.3 u_R - 4.15 p) + (q r - u_P u_Y)
-        "rates_and_inputs": ("p_dot", prefix_tree(
-            ["+", "-", "*", 10.3, u_r, "*", 4.15, "p", "-", "*", "q", "r", "*", u_p, u_y],
-            input_names, {u_r: 1})),
+        "rates_and_inputs": (
+            "p_dot",
+            prefix_tree(
+                ["+", "-", "*", 10.3, u_r, "*", 4.15, "p", "-", "*", "q", "r", "*", u_p, u_y],
+                input_names,
+                {u_r: 1},
+            ),
+        ),
         # (10.3 u_R - 4.15 p) + (theta q - v u_Y)
-        "attitude_and_velocity": ("p_dot", prefix_tree(
-            ["+", "-", "*", 10.3, u_r, "*", 4.15, "p", "-", "*", "theta", "q", "*", "v", u_y],
-            input_names, {u_r: 1})),
+        "attitude_and_velocity": (
+            "p_dot",
+            prefix_tree(
+                ["+", "-", "*", 10.3, u_r, "*", 4.15, "p", "-", "*", "theta", "q", "*", "v", u_y],
+                input_names,
+                {u_r: 1},
+            ),
+        ),
         # (10 theta - 0.6 u) + (q r - v u_T)
-        "linear_target": ("a_x", prefix_tree(
-            ["+", "-", "*", 10.0, "theta", "*", 0.6, "u", "-", "*", "q", "r", "*", "v", u_t],
-            input_names)),
+        "linear_target": (
+            "a_x",
+            prefix_tree(
+                ["+", "-", "*", 10.0, "theta", "*", 0.6, "u", "-", "*", "q", "r", "*", "v", u_t],
+                input_names,
+            ),
+        ),
     }
 
 
@@ -89,20 +103,21 @@ def _rate(func, steps_per_call: int, min_time: float = 1.0) -> float:
             return calls * steps_per_call / elapsed
 
 
-def constant_fit_speed(evaluator, input_names, starts, n_steps: int,
-                       min_time: float = 1.0) -> tuple[float, float]:
+def constant_fit_speed(
+    evaluator, input_names, starts, n_steps: int, min_time: float = 1.0
+) -> tuple[float, float]:
     """(ms per LM fit, window-steps with sensitivities per s) of the rates-and-inputs
     tree's constants fitted from 30 % off on `starts`."""
     _, tree = path_trees(input_names)["rates_and_inputs"]
-    start = Tree(tree.codes, np.where(tree.codes == CONST, tree.values * 1.3, tree.values),
-                 tree.delays)
+    start = Tree(
+        tree.codes, np.where(tree.codes == CONST, tree.values * 1.3, tree.values), tree.delays
+    )
 
     def error_of(t):
         return float(evaluator.mean_errors([t], starts)[0])
 
     def fit():
-        gauss_newton_constants(evaluator, start, error_of(start), starts, n_steps, error_of,
-                               20)
+        gauss_newton_constants(evaluator, start, error_of(start), starts, n_steps, error_of, 20)
 
     fit()  # compile / warm
     before, fits, t0 = evaluator.evaluations, 0, time.perf_counter()
@@ -123,14 +138,22 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     starts84 = co.space.starts(co.space.random(rng, 84))
     steps84 = 84 * window
     evaluators = {t: Evaluator(dataset, t, window) for t in TARGET_NAMES}
-    paths = {name: _rate(lambda t=target, tr=tree: evaluators[t].window_errors([tr], starts84),
-                         steps84)
-             for name, (target, tree) in path_trees(dataset.input_names).items()}
-    rk4 = {(t, m): Evaluator(dataset, t, window, integrator="rk4", substeps=m)
-           for t in TARGET_NAMES for m in (1, 4)}
-    paths_rk4 = {f"{name} rk4x{m}": _rate(
-        lambda t=target, tr=tree, m=m: rk4[t, m].window_errors([tr], starts84), steps84)
-        for name, (target, tree) in path_trees(dataset.input_names).items() for m in (1, 4)}
+    paths = {
+        name: _rate(lambda t=target, tr=tree: evaluators[t].window_errors([tr], starts84), steps84)
+        for name, (target, tree) in path_trees(dataset.input_names).items()
+    }
+    rk4 = {
+        (t, m): Evaluator(dataset, t, window, integrator="rk4", substeps=m)
+        for t in TARGET_NAMES
+        for m in (1, 4)
+    }
+    paths_rk4 = {
+        f"{name} rk4x{m}": _rate(
+            lambda t=target, tr=tree, m=m: rk4[t, m].window_errors([tr], starts84), steps84
+        )
+        for name, (target, tree) in path_trees(dataset.input_names).items()
+        for m in (1, 4)
+    }
     mix = random_trees_of_size(rng, co.params, 15, len(TARGET_NAMES))
 
     def all_targets():
@@ -140,8 +163,9 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
     one_tree = _rate(all_targets, steps84 * len(TARGET_NAMES))
     trees = [random_tree(rng, co.params) for _ in range(14)]
     generation = _rate(lambda: evaluators["p_dot"].window_errors(trees, starts84[:6]), steps84)
-    fit_ms, fit_steps_per_s = constant_fit_speed(evaluators["p_dot"], dataset.input_names,
-                                                 starts84[:6], window)
+    fit_ms, fit_steps_per_s = constant_fit_speed(
+        evaluators["p_dot"], dataset.input_names, starts84[:6], window
+    )
     state = co.init_state(seed)
     t0 = time.perf_counter()
     co.iterate(state)
@@ -178,8 +202,10 @@ def format_report(result: dict) -> str:
         lines.append(f"    path {name:24s} {rate / 1e6:8.1f} M window-steps/s")
     for name, rate in result.get("paths_rk4", {}).items():
         base = result["paths"][name.split()[0]]
-        lines.append(f"    path {name:30s} {rate / 1e6:8.2f} M window-steps/s "
-                     f"({base / rate:.1f}x euler's cost per window-step)")
+        lines.append(
+            f"    path {name:30s} {rate / 1e6:8.2f} M window-steps/s "
+            f"({base / rate:.1f}x euler's cost per window-step)"
+        )
     lines += [
         f"one generation, 14 random trees x 6 windows: "
         f"{result['generation_window_steps_per_s'] / 1e6:8.1f} M window-steps/s per core",

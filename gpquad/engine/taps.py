@@ -68,8 +68,9 @@ def with_taps(dataset, taps: int):
         return dataset
     arrays = dataset.arrays._replace(inputs=tile_inputs(dataset.arrays.inputs, taps))
     trim = {tap_name(n, k): v for k in range(taps) for n, v in dataset.trim.items()}
-    return dataclasses.replace(dataset, arrays=arrays,
-                               input_names=tap_names(dataset.input_names, taps), trim=trim)
+    return dataclasses.replace(
+        dataset, arrays=arrays, input_names=tap_names(dataset.input_names, taps), trim=trim
+    )
 
 
 def initial_delays(n_inputs: int, taps: int, max_delay: int) -> np.ndarray:
@@ -94,8 +95,7 @@ def canonical_taps(tree, n_inputs: int):
     new_slot = np.arange(n_slots)
     for j in range(n_inputs):
         slots = [k * n_inputs + j for k in range(taps)]
-        order = sorted(slots, key=lambda s: (s not in used, tree.delays[s] if s in used else 0,
-                                             s))
+        order = sorted(slots, key=lambda s: (s not in used, tree.delays[s] if s in used else 0, s))
         for k, s in enumerate(order):
             new_slot[s] = k * n_inputs + j
     if np.array_equal(new_slot, np.arange(n_slots)):

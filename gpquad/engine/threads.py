@@ -18,8 +18,10 @@ from threadpoolctl import threadpool_limits
 
 def one_blas_thread(func):
     """func runs with BLAS (and LAPACK) limited to one thread; the limit is lifted after."""
+
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         with threadpool_limits(limits=1, user_api="blas"):
             return func(*args, **kwargs)
+
     return wrapper

@@ -16,7 +16,12 @@ TARGET_UNITS: tuple[str, ...] = ("m/s^2",) * 3 + ("rad/s^2",) * 3
 TARGET_LATEX: tuple[str, ...] = ("a_x", "a_y", "a_z", r"\dot{p}", r"\dot{q}", r"\dot{r}")
 #: The state variable that each target's acceleration integrates into.
 TARGET_STATE: dict[str, str] = {
-    "a_x": "u", "a_y": "v", "a_z": "w", "p_dot": "p", "q_dot": "q", "r_dot": "r",
+    "a_x": "u",
+    "a_y": "v",
+    "a_z": "w",
+    "p_dot": "p",
+    "q_dot": "q",
+    "r_dot": "r",
 }
 
 DEFAULT_INPUTS: tuple[str, ...] = ("u_P", "u_R", "u_Y", "u_T")

@@ -42,8 +42,9 @@ def term_series(eq: Equation, dataset: Dataset, raw: bool = True):
         coeff, rest = term.as_coeff_Mul()
         symbols = sorted(rest.free_symbols, key=str)
         func = sp.lambdify(symbols, rest, "numpy")
-        series = np.broadcast_to(np.asarray(func(*[values[str(s)] for s in symbols]), float),
-                                 idx.shape)
+        series = np.broadcast_to(
+            np.asarray(func(*[values[str(s)] for s in symbols]), float), idx.shape
+        )
         terms.append((str(rest), float(coeff), float(coeff) * series))
     return terms, target_rms
 
@@ -57,21 +58,31 @@ def term_contributions(eq: Equation, dataset: Dataset, raw: bool = True) -> list
     terms, target_rms = term_series(eq, dataset, raw)
     rows = []
     for term, coeff, series in terms:
-        rms = float(np.sqrt(np.mean(series ** 2)))
-        rows.append({"term": term, "coefficient": coeff,
-                     "share": rms / target_rms if target_rms > 0 else np.inf})
+        rms = float(np.sqrt(np.mean(series**2)))
+        rows.append(
+            {
+                "term": term,
+                "coefficient": coeff,
+                "share": rms / target_rms if target_rms > 0 else np.inf,
+            }
+        )
     return sorted(rows, key=lambda r: -r["share"])
 
 
-def dominant_structure(eq: Equation, dataset: Dataset, threshold: float = 0.02,
-                       raw: bool = True) -> dict[str, float]:
+def dominant_structure(
+    eq: Equation, dataset: Dataset, threshold: float = 0.02, raw: bool = True
+) -> dict[str, float]:
     """{term: coefficient} of the terms whose RMS share is at least `threshold`."""
-    return {r["term"]: r["coefficient"] for r in term_contributions(eq, dataset, raw)
-            if r["share"] >= threshold}
+    return {
+        r["term"]: r["coefficient"]
+        for r in term_contributions(eq, dataset, raw)
+        if r["share"] >= threshold
+    }
 
 
-def compare_to_truth(eq: Equation, truth: str, dataset: Dataset, rel_tol: float = 0.05,
-                     threshold: float = 0.02) -> dict:
+def compare_to_truth(
+    eq: Equation, truth: str, dataset: Dataset, rel_tol: float = 0.05, threshold: float = 0.02
+) -> dict:
     """Did `eq` recover a known equation (text like '10.3*u_R(t-1) - 4.15*p')?
 
     Passes when its dominant structure (raw inputs) has exactly the truth's terms, every
@@ -91,6 +102,12 @@ def compare_to_truth(eq: Equation, truth: str, dataset: Dataset, rel_tol: float 
     errors = {t: abs(found[t] - c) / abs(c) for t, c in expected.items() if t in found}
     same_structure = set(found) == set(expected)
     passed = same_structure and delays == wanted and max(errors.values(), default=0) <= rel_tol
-    return {"passed": bool(passed), "same_structure": same_structure, "found": found,
-            "expected": expected, "delays": delays, "expected_delays": wanted,
-            "relative_errors": errors}
+    return {
+        "passed": bool(passed),
+        "same_structure": same_structure,
+        "found": found,
+        "expected": expected,
+        "delays": delays,
+        "expected_delays": wanted,
+        "relative_errors": errors,
+    }

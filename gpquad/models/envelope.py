@@ -27,8 +27,11 @@ def training_envelope(dataset) -> dict[str, list[float]]:
         return {}
     values = np.column_stack([dataset.arrays.states[rows], dataset.arrays.inputs[rows]])
     names = list(STATE_NAMES) + list(dataset.input_names)
-    return {n: [float(np.nanmin(values[:, k])), float(np.nanmax(values[:, k]))]
-            for k, n in enumerate(names) if np.isfinite(values[:, k]).any()}
+    return {
+        n: [float(np.nanmin(values[:, k])), float(np.nanmax(values[:, k]))]
+        for k, n in enumerate(names)
+        if np.isfinite(values[:, k]).any()
+    }
 
 
 def outside_envelope(envelope: dict, dataset, rows) -> list[dict]:
@@ -37,8 +40,7 @@ def outside_envelope(envelope: dict, dataset, rows) -> list[dict]:
     range and the range seen, largest fraction first."""
     rows = np.asarray(rows, dtype=np.int64)
     columns = {n: dataset.arrays.states[rows, k] for k, n in enumerate(STATE_NAMES)}
-    columns.update({n: dataset.arrays.inputs[rows, k]
-                    for k, n in enumerate(dataset.input_names)})
+    columns.update({n: dataset.arrays.inputs[rows, k] for k, n in enumerate(dataset.input_names)})
     out = []
     for name, (lo, hi) in envelope.items():
         values = columns.get(name)
@@ -46,6 +48,12 @@ def outside_envelope(envelope: dict, dataset, rows) -> list[dict]:
             continue
         fraction = float(np.mean((values < lo) | (values > hi)))
         if fraction > REPORT_FRACTION:
-            out.append({"signal": name, "fraction": fraction, "training": [lo, hi],
-                        "seen": [float(values.min()), float(values.max())]})
+            out.append(
+                {
+                    "signal": name,
+                    "fraction": fraction,
+                    "training": [lo, hi],
+                    "seen": [float(values.min()), float(values.max())],
+                }
+            )
     return sorted(out, key=lambda d: -d["fraction"])

@@ -90,15 +90,18 @@ class Equation:
     def sympy_raw(self) -> sp.Expr:
         """The same equation in the raw (not trim-subtracted) inputs."""
         expr = self.sympy()
-        reps = {sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(base_input(n), 0.0)
-                for n in self.leaf_names if self.trim.get(base_input(n), 0.0)}
+        reps = {
+            sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(base_input(n), 0.0)
+            for n in self.leaf_names
+            if self.trim.get(base_input(n), 0.0)
+        }
         return simplify(expr.xreplace(reps)) if reps else expr
 
     def latex_lhs(self) -> str:
         """The left-hand side in LaTeX: the target, with its lag operator when lag > 0."""
         lhs = TARGET_LATEX[target_index(self.target)]
         if self.lag > 0:
-            lhs = fr"\left(1 + {self.lag:.3g}\,\frac{{d}}{{dt}}\right) {lhs}"
+            lhs = rf"\left(1 + {self.lag:.3g}\,\frac{{d}}{{dt}}\right) {lhs}"
         return lhs
 
     def latex(self, digits: int | None = None, raw: bool = False) -> str:
@@ -113,22 +116,26 @@ class Equation:
         for n, d in self.delays.items():
             base = base_input(n)
             if d or base != n:
-                out[sp.Symbol(n, real=True)] = sp.Symbol(f"{base}(t-{d})" if d else base,
-                                                         real=True)
+                out[sp.Symbol(n, real=True)] = sp.Symbol(f"{base}(t-{d})" if d else base, real=True)
         return out
 
     def text(self, digits: int | None = None, raw: bool = False) -> str:
         """One line, delayed inputs written u_T(t-5), constants rounded to `digits`
         significant digits (default: self.digits, which keeps the line faithful)."""
         expr = round_constants(self.sympy_raw() if raw else self.sympy(), digits or self.digits)
-        lhs = self.target if self.lag <= 0 else \
-            f"{self.target} + {self.lag:.3g} d({self.target})/dt"
+        lhs = (
+            self.target if self.lag <= 0 else f"{self.target} + {self.lag:.3g} d({self.target})/dt"
+        )
         return f"{lhs} = {expr.xreplace(self.shown_inputs())}"
 
     def summary(self) -> dict:
         """A short JSON record: expression, delays used, training error, size."""
-        out = {"expr": expr_string(self.sympy()), "delays": self.used_delays(),
-               "error": _json_number(self.error), "size": self.tree.size}
+        out = {
+            "expr": expr_string(self.sympy()),
+            "delays": self.used_delays(),
+            "error": _json_number(self.error),
+            "size": self.tree.size,
+        }
         if self.lag > 0:
             out["lag"] = self.lag
         return out
@@ -141,9 +148,19 @@ class Equation:
         out = []
         for i, c in enumerate(self.candidates):
             tree, _ = parse_candidate(self.target, i, c, self.input_names)
-            out.append(Equation(self.target, tree, self.input_names, _number(c.get("error")),
-                                np.nan, dict(self.trim), [], self.digits,
-                                float(c.get("lag", 0.0))))
+            out.append(
+                Equation(
+                    self.target,
+                    tree,
+                    self.input_names,
+                    _number(c.get("error")),
+                    np.nan,
+                    dict(self.trim),
+                    [],
+                    self.digits,
+                    float(c.get("lag", 0.0)),
+                )
+            )
         return out
 
     def to_dict(self) -> dict:
@@ -180,14 +197,25 @@ class Equation:
         lag = checked_number(d.get("lag", 0.0), f"targets.{target}.lag")
         digits = d.get("digits", 3)
         if isinstance(digits, bool) or not isinstance(digits, int) or not 1 <= digits <= 17:
-            raise GpquadError(f"digits is a whole number from 1 to 17, not {digits!r}",
-                              field=f"targets.{target}.digits")
-        equation = cls(target, tree, tuple(input_names), _number(d.get("error")),
-                       _number(d.get("validation_error")), dict(trim), list(candidates),
-                       digits, max(lag, 0.0))
+            raise GpquadError(
+                f"digits is a whole number from 1 to 17, not {digits!r}",
+                field=f"targets.{target}.digits",
+            )
+        equation = cls(
+            target,
+            tree,
+            tuple(input_names),
+            _number(d.get("error")),
+            _number(d.get("validation_error")),
+            dict(trim),
+            list(candidates),
+            digits,
+            max(lag, 0.0),
+        )
         if "expr" in d:
-            check_expr_agrees(target, d["expr"], equation.tree, equation.leaf_names,
-                              equation.delays)
+            check_expr_agrees(
+                target, d["expr"], equation.tree, equation.leaf_names, equation.delays
+            )
         return equation
 
 

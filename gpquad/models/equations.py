@@ -43,8 +43,15 @@ from gpquad.study.store import read_json
 SCHEMA = 2
 
 #: DiscoveredModel's optional reports: each a model.json entry of the same name when not None.
-REPORTS = ("joint_fit", "stability", "envelope", "mirror_parity", "symmetrized", "refined",
-           "unmeasured")
+REPORTS = (
+    "joint_fit",
+    "stability",
+    "envelope",
+    "mirror_parity",
+    "symmetrized",
+    "refined",
+    "unmeasured",
+)
 
 
 @dataclass
@@ -84,8 +91,10 @@ class DiscoveredModel:
         if self.substeps is None:
             self.substeps = int(evolution.get("substeps", 1))
         if self.integrator not in SCHEMES or self.substeps < 1:  # load() names the file
-            raise ValueError(f"integrator {self.integrator!r} with {self.substeps} substeps: "
-                             f"use one of {sorted(SCHEMES)} and substeps >= 1")
+            raise ValueError(
+                f"integrator {self.integrator!r} with {self.substeps} substeps: "
+                f"use one of {sorted(SCHEMES)} and substeps >= 1"
+            )
 
     @property
     def n_parameters(self) -> int:
@@ -95,8 +104,9 @@ class DiscoveredModel:
     def to_dict(self) -> dict:
         out = {
             "schema": SCHEMA,
-            "targets": {t: self.equations[t].to_dict() for t in TARGET_NAMES
-                        if t in self.equations},
+            "targets": {
+                t: self.equations[t].to_dict() for t in TARGET_NAMES if t in self.equations
+            },
             "seed": self.seed,
             "config": self.config,
             "input_names": list(self.input_names),
@@ -108,25 +118,37 @@ class DiscoveredModel:
         if self.integrator != "euler":
             out["integrator"] = self.integrator
             out["substeps"] = self.substeps
-        out.update({name: getattr(self, name) for name in REPORTS
-                    if getattr(self, name) is not None})
+        out.update(
+            {name: getattr(self, name) for name in REPORTS if getattr(self, name) is not None}
+        )
         return out
 
     @classmethod
     def from_dict(cls, d: dict) -> DiscoveredModel:
         """The model of a model.json, every field checked (gpquad.models.model_checks)."""
         if int(d.get("schema", 1)) > SCHEMA:
-            raise ValueError(f"schema {d['schema']}: written by a newer gpquad (this one reads "
-                             f"up to {SCHEMA}); upgrade gpquad")
+            raise ValueError(
+                f"schema {d['schema']}: written by a newer gpquad (this one reads "
+                f"up to {SCHEMA}); upgrade gpquad"
+            )
         names = checked_input_names(d["input_names"])
         trim = checked_trim(d.get("trim", {}), names)
-        eqs = {t: Equation.from_dict(t, e, names, trim)
-               for t, e in checked_targets(d["targets"]).items()}
-        return cls(eqs, names, dict(trim), checked_number(d["dt"], "dt", positive=True),
-                   int(d.get("seed", 0)), d.get("config", {}), bool(d.get("interrupted", False)),
-                   **{name: d.get(name) for name in REPORTS},
-                   integrator=str(d.get("integrator", "euler")),
-                   substeps=int(d.get("substeps", 1)))
+        eqs = {
+            t: Equation.from_dict(t, e, names, trim)
+            for t, e in checked_targets(d["targets"]).items()
+        }
+        return cls(
+            eqs,
+            names,
+            dict(trim),
+            checked_number(d["dt"], "dt", positive=True),
+            int(d.get("seed", 0)),
+            d.get("config", {}),
+            bool(d.get("interrupted", False)),
+            **{name: d.get(name) for name in REPORTS},
+            integrator=str(d.get("integrator", "euler")),
+            substeps=int(d.get("substeps", 1)),
+        )
 
     @classmethod
     def load(cls, path) -> DiscoveredModel:
@@ -137,8 +159,11 @@ class DiscoveredModel:
         try:
             return cls.from_dict(d)
         except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise GpquadError(f"not a gpquad model (bad or missing entry {exc}); give the "
-                              "model.json a `gpquad run` wrote", source=str(path)) from None
+            raise GpquadError(
+                f"not a gpquad model (bad or missing entry {exc}); give the "
+                "model.json a `gpquad run` wrote",
+                source=str(path),
+            ) from None
         except GpquadError as exc:  # a checked field (model_checks): name the file too
             raise GpquadError(str(exc), source=str(path)) from None
 
@@ -157,20 +182,30 @@ class DiscoveredModel:
         return (self.unmeasured or {}).get(target, "")
 
     def latex(self, raw: bool = False) -> str:
-        rows = [self.equations[t].latex(raw=raw) + (
-            f" && \\text{{({self.note(t)})}}" if self.note(t) else "")
-            for t in TARGET_NAMES if t in self.equations]
-        return "\\begin{align}\n" + " \\\\\n".join(r.replace(" = ", " &= ", 1) for r in rows) + \
-            "\n\\end{align}\n"
+        rows = [
+            self.equations[t].latex(raw=raw)
+            + (f" && \\text{{({self.note(t)})}}" if self.note(t) else "")
+            for t in TARGET_NAMES
+            if t in self.equations
+        ]
+        return (
+            "\\begin{align}\n"
+            + " \\\\\n".join(r.replace(" = ", " &= ", 1) for r in rows)
+            + "\n\\end{align}\n"
+        )
 
     def markdown(self) -> str:
-        lines = ["| target | equation | train error | validation error | note |",
-                 "|---|---|---|---|---|"]
+        lines = [
+            "| target | equation | train error | validation error | note |",
+            "|---|---|---|---|---|",
+        ]
         for t in TARGET_NAMES:
             if t in self.equations:
                 e = self.equations[t]
-                lines.append(f"| {t} | ${e.latex()}$ | {_shown(e.error)} | "
-                             f"{_shown(e.validation_error)} | {self.note(t)} |")
+                lines.append(
+                    f"| {t} | ${e.latex()}$ | {_shown(e.error)} | "
+                    f"{_shown(e.validation_error)} | {self.note(t)} |"
+                )
         return "\n".join(lines) + "\n"
 
     def __str__(self) -> str:
@@ -178,9 +213,11 @@ class DiscoveredModel:
 
     def text(self, raw: bool = False) -> str:
         """The equations, one per line (raw=True: in the untrimmed inputs)."""
-        return "\n".join(self.equations[t].text(raw=raw)
-                         + (f"   [{self.note(t)}]" if self.note(t) else "")
-                         for t in TARGET_NAMES if t in self.equations)
+        return "\n".join(
+            self.equations[t].text(raw=raw) + (f"   [{self.note(t)}]" if self.note(t) else "")
+            for t in TARGET_NAMES
+            if t in self.equations
+        )
 
     def fly_states(self, inputs, initial_state=None, raw_inputs: bool = True) -> np.ndarray:
         """The flown states of `fly`: shape (N, 9), [phi, theta, psi, u, v, w, p, q, r]
@@ -196,16 +233,18 @@ class DiscoveredModel:
         inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
         n_in = len(self.input_names)
         if inputs.ndim != 2 or inputs.shape[1] != n_in or len(inputs) < 1:
-            raise GpquadError(f"inputs must have shape (N >= 1, {n_in}) for {self.input_names}",
-                              field="inputs")
+            raise GpquadError(
+                f"inputs must have shape (N >= 1, {n_in}) for {self.input_names}", field="inputs"
+            )
         state0 = np.zeros(9) if initial_state is None else np.asarray(initial_state, float)
         if state0.shape != (9,) or not np.all(np.isfinite(state0)):
-            raise GpquadError("initial_state needs 9 finite values [phi, theta, psi, u, v, w, "
-                              "p, q, r]", field="initial_state")
+            raise GpquadError(
+                "initial_state needs 9 finite values [phi, theta, psi, u, v, w, p, q, r]",
+                field="initial_state",
+            )
         trim = np.array([self.trim.get(n, 0.0) for n in self.input_names])
         model_inputs = inputs - trim if raw_inputs else inputs
-        history = max([int(e.tree.delays.max(initial=0)) for e in self.equations.values()]
-                      + [0])
+        history = max([int(e.tree.delays.max(initial=0)) for e in self.equations.values()] + [0])
         n = len(inputs)
         rows = history + n
         padded = np.vstack([np.repeat(model_inputs[:1], history, axis=0), model_inputs])
@@ -213,11 +252,15 @@ class DiscoveredModel:
         quat[history] = quat_from_euler(*state0[:3])
         states = np.zeros((rows, 9))
         states[history] = state0
-        arrays = FlightArrays(quat=quat, states=states, acc=np.zeros((rows, 6)),
-                              inputs=np.ascontiguousarray(padded), rot=np.zeros((rows, 9)),
-                              dt=float(self.dt))
-        return self._rollout(arrays, np.array([history]), n - 1, None,
-                             missing_from_data=False)[0]
+        arrays = FlightArrays(
+            quat=quat,
+            states=states,
+            acc=np.zeros((rows, 6)),
+            inputs=np.ascontiguousarray(padded),
+            rot=np.zeros((rows, 9)),
+            dt=float(self.dt),
+        )
+        return self._rollout(arrays, np.array([history]), n - 1, None, missing_from_data=False)[0]
 
     def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
         """Fly the model from an initial state with given inputs (no data needed).
@@ -232,18 +275,28 @@ class DiscoveredModel:
         inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
         n_in = len(self.input_names)
         if inputs.shape[1] != n_in or len(inputs) < 2:
-            raise GpquadError(f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}",
-                              field="inputs")
+            raise GpquadError(
+                f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}", field="inputs"
+            )
         flown = self.fly_states(inputs, initial_state, raw_inputs)
         n = len(inputs)
         out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
         world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
         pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
-        return Flight(name="simulated model", t=np.arange(n) * self.dt, quat=out_quat,
-                      vel=flown[:, 3:6].copy(), rates=flown[:, 6:9].copy(), inputs=inputs,
-                      input_names=self.input_names, pos=pos,
-                      meta={"source": "gpquad.models.equations.DiscoveredModel.fly",
-                            "equations": {t: e.text() for t, e in self.equations.items()}})
+        return Flight(
+            name="simulated model",
+            t=np.arange(n) * self.dt,
+            quat=out_quat,
+            vel=flown[:, 3:6].copy(),
+            rates=flown[:, 6:9].copy(),
+            inputs=inputs,
+            input_names=self.input_names,
+            pos=pos,
+            meta={
+                "source": "gpquad.models.equations.DiscoveredModel.fly",
+                "equations": {t: e.text() for t, e in self.equations.items()},
+            },
+        )
 
     def simulate(self, dataset, starts, n_steps: int, input_noise=None) -> np.ndarray:
         """Fly the model over data windows: states (n_windows, n_steps + 1, 9).
@@ -251,18 +304,19 @@ class DiscoveredModel:
         Targets without an equation use the data's accelerations. input_noise, if given,
         has shape (n_windows, n_steps, n_inputs) and is added to the recorded inputs.
         """
-        return self._rollout(dataset.arrays, starts, n_steps, input_noise,
-                             missing_from_data=True)
+        return self._rollout(dataset.arrays, starts, n_steps, input_noise, missing_from_data=True)
 
-    def _rollout(self, arrays: FlightArrays, starts, n_steps: int, input_noise,
-                 missing_from_data: bool) -> np.ndarray:
+    def _rollout(
+        self, arrays: FlightArrays, starts, n_steps: int, input_noise, missing_from_data: bool
+    ) -> np.ndarray:
         """The rollout kernel over `arrays`; targets without an equation take the data's
         acceleration (missing_from_data) or zero."""
-        from gpquad.engine.kernels.fitness import rollout
+        from gpquad.engine.kernels.rollout import rollout
         from gpquad.engine.lag import lag_alpha
 
         codes, values, sizes, delays = stack_rows(
-            {target_index(t): e.tree for t, e in self.equations.items()}, 6)
+            {target_index(t): e.tree for t, e in self.equations.items()}, 6
+        )
         check_stack(codes, sizes)
         modelled = np.zeros(6, dtype=np.bool_)
         modelled[[target_index(t) for t in self.equations]] = True
@@ -272,9 +326,20 @@ class DiscoveredModel:
         for t, e in self.equations.items():
             alphas[target_index(t)] = lag_alpha(e.lag, arrays.dt)
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
-        return rollout(codes, values, sizes, delays, modelled, alphas, arrays,
-                       np.ascontiguousarray(starts, dtype=np.int64), int(n_steps), noise,
-                       SCHEMES[self.integrator], int(self.substeps))
+        return rollout(
+            codes,
+            values,
+            sizes,
+            delays,
+            modelled,
+            alphas,
+            arrays,
+            np.ascontiguousarray(starts, dtype=np.int64),
+            int(n_steps),
+            noise,
+            SCHEMES[self.integrator],
+            int(self.substeps),
+        )
 
 
 def _rotate(quat, body_vector) -> np.ndarray:

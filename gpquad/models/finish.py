@@ -45,8 +45,7 @@ def _joint_fit(model, dataset, evolution, flipped):
     return dataclasses.replace(refitted, joint_fit=report)
 
 
-STEPS = {"symmetrize": _symmetrize, "refine": _refine, "repair": _repair,
-         "joint_fit": _joint_fit}
+STEPS = {"symmetrize": _symmetrize, "refine": _refine, "repair": _repair, "joint_fit": _joint_fit}
 
 
 @one_blas_thread

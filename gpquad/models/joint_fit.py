@@ -73,8 +73,11 @@ LARGE_DROP = 0.5
 
 def _slots(model) -> list[tuple[str, np.ndarray]]:
     """(target, indices of its CONST nodes) for each target the model has an equation for."""
-    return [(t, np.flatnonzero(model.equations[t].tree.codes == CONST))
-            for t in TARGET_NAMES if t in model.equations]
+    return [
+        (t, np.flatnonzero(model.equations[t].tree.codes == CONST))
+        for t in TARGET_NAMES
+        if t in model.equations
+    ]
 
 
 def with_constants(model, slots, x: np.ndarray):
@@ -83,7 +86,7 @@ def with_constants(model, slots, x: np.ndarray):
     for target, idx in slots:
         eq = eqs[target]
         values = eq.tree.values.copy()
-        values[idx] = x[at:at + len(idx)]
+        values[idx] = x[at : at + len(idx)]
         at += len(idx)
         eqs[target] = dataclasses.replace(eq, tree=Tree(eq.tree.codes, values, eq.tree.delays))
     return dataclasses.replace(model, equations=eqs)
@@ -176,19 +179,28 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     """
     t0 = time.perf_counter()
     states = measured_states(dataset)
-    fitted_targets = {t for t in TARGET_NAMES if TARGET_STATE[t] in
-                      {SCORED_STATES[i] for i in states}}
+    fitted_targets = {
+        t for t in TARGET_NAMES if TARGET_STATE[t] in {SCORED_STATES[i] for i in states}
+    }
     slots = [(t, idx) for t, idx in _slots(model) if t in fitted_targets and len(idx)]
-    x0 = np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots]) \
-        if slots else np.zeros(0)
+    x0 = (
+        np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots])
+        if slots
+        else np.zeros(0)
+    )
     history = model_history(model)
-    report = {"accepted": False, "horizon_s": float(horizons_s[-1]),
-              "states": [SCORED_STATES[i] for i in states], "constants": int(x0.size),
-              "rollouts": 0}
+    report = {
+        "accepted": False,
+        "horizon_s": float(horizons_s[-1]),
+        "states": [SCORED_STATES[i] for i in states],
+        "constants": int(x0.size),
+        "rollouts": 0,
+    }
     judge_starts, judge_steps, judged_on = judged_windows(dataset, model, horizons_s[-1])
     if x0.size == 0 or not states or len(judge_starts) == 0 or len(model.equations) < 6:
-        report.update(judged_on=None, error_before=None, error_after=None,
-                      time_s=time.perf_counter() - t0)
+        report.update(
+            judged_on=None, error_before=None, error_after=None, time_s=time.perf_counter() - t0
+        )
         return model, report
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
     before_w = judge.window_errors(model)
@@ -212,8 +224,13 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     after_w = judge.window_errors(refitted)
     after = float(after_w.sum())
     accepted = significant_drop(before_w, after_w)
-    report.update(accepted=accepted, judged_on=judged_on, error_before=before,
-                  error_after=after, time_s=time.perf_counter() - t0)
+    report.update(
+        accepted=accepted,
+        judged_on=judged_on,
+        error_before=before,
+        error_after=after,
+        time_s=time.perf_counter() - t0,
+    )
     return (refitted if accepted else model), report
 
 
@@ -222,7 +239,9 @@ def joint_fit_summary(report: dict) -> str:
     if report.get("error_before") is None:
         return "joint refit: not made (no measured state or no window fits)"
     verdict = "kept" if report["accepted"] else "not kept (not significantly better)"
-    return (f"joint refit of {report['constants']} constants on full-model rollouts: "
-            f"{verdict}; {report['judged_on']} error (sum of the RSE of "
-            f"{', '.join(report['states'])} over {report['horizon_s']:g} s windows) "
-            f"{report['error_before']:.4g} -> {report['error_after']:.4g}")
+    return (
+        f"joint refit of {report['constants']} constants on full-model rollouts: "
+        f"{verdict}; {report['judged_on']} error (sum of the RSE of "
+        f"{', '.join(report['states'])} over {report['horizon_s']:g} s windows) "
+        f"{report['error_before']:.4g} -> {report['error_after']:.4g}"
+    )

@@ -59,8 +59,10 @@ def checked_targets(targets) -> dict:
         fail("the model needs an object {target: equation}", "targets")
     unknown = [t for t in targets if t not in TARGET_NAMES]
     if unknown:
-        fail(f"unknown target {unknown[0]!r}; the targets are {list(TARGET_NAMES)}",
-             f"targets.{unknown[0]}")
+        fail(
+            f"unknown target {unknown[0]!r}; the targets are {list(TARGET_NAMES)}",
+            f"targets.{unknown[0]}",
+        )
     for t, e in targets.items():
         if not isinstance(e, dict):
             fail("an equation is an object", f"targets.{t}")
@@ -68,8 +70,12 @@ def checked_targets(targets) -> dict:
 
 
 def checked_number(value, field: str, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or (positive and value <= 0):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or (positive and value <= 0)
+    ):
         fail(f"{value!r} is not a {'positive ' if positive else ''}finite number", field)
     return float(value)
 
@@ -90,11 +96,12 @@ def checked_delays(delays, input_names, field: str) -> dict[str, int]:
         fail("the delays are an object {input: samples}", field)
     for name, d in delays.items():
         if base_input(name) not in input_names or tap_index(name) >= MAX_TAPS:
-            fail(f"delay of {name!r}, which is not an input {list(input_names)}",
-                 f"{field}.{name}")
+            fail(f"delay of {name!r}, which is not an input {list(input_names)}", f"{field}.{name}")
         if isinstance(d, bool) or not isinstance(d, int) or not 0 <= d <= MAX_MODEL_DELAY:
-            fail(f"a delay is a whole number of samples from 0 to {MAX_MODEL_DELAY}, not "
-                 f"{d!r}", f"{field}.{name}")
+            fail(
+                f"a delay is a whole number of samples from 0 to {MAX_MODEL_DELAY}, not {d!r}",
+                f"{field}.{name}",
+            )
     return delays
 
 
@@ -104,10 +111,12 @@ def checked_tree(target: str, record: dict, input_names) -> Tree:
     field = f"targets.{target}"
     delays = checked_delays(record.get("delays", {}), input_names, f"{field}.delays")
     prefix = record.get("prefix")
-    if not isinstance(prefix, dict) or not isinstance(prefix.get("codes"), list) \
-            or not isinstance(prefix.get("values"), list):
-        fail("the equation needs its prefix tree {codes: [...], values: [...]}",
-             f"{field}.prefix")
+    if (
+        not isinstance(prefix, dict)
+        or not isinstance(prefix.get("codes"), list)
+        or not isinstance(prefix.get("values"), list)
+    ):
+        fail("the equation needs its prefix tree {codes: [...], values: [...]}", f"{field}.prefix")
     codes, values = prefix["codes"], prefix["values"]
     taps = 1 + max((tap_index(n) for n in delays), default=0)
     leaves = len(terminal_names(tap_names(input_names, taps)))
@@ -117,17 +126,26 @@ def checked_tree(target: str, record: dict, input_names) -> Tree:
         fail(f"{len(codes)} codes but {len(values)} values", f"{field}.prefix.values")
     for i, c in enumerate(codes):
         if isinstance(c, bool) or not isinstance(c, int) or not 0 <= c < VAR_BASE + leaves:
-            fail(f"code {c!r} is not an operator, a constant or one of the model's "
-                 f"{leaves} variables", f"{field}.prefix.codes[{i}]")
+            fail(
+                f"code {c!r} is not an operator, a constant or one of the model's "
+                f"{leaves} variables",
+                f"{field}.prefix.codes[{i}]",
+            )
     if not is_valid(codes):
         fail("the codes are not one complete prefix tree", f"{field}.prefix.codes")
     if tree_depth(codes) > MAX_MODEL_DEPTH:
         fail(f"the tree is deeper than {MAX_MODEL_DEPTH}", f"{field}.prefix.codes")
     for i, v in enumerate(values):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                or abs(v) > MAX_CONSTANT:
-            fail(f"constant {v!r} is not a finite number of at most {MAX_CONSTANT:g}",
-                 f"{field}.prefix.values[{i}]")
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or not math.isfinite(v)
+            or abs(v) > MAX_CONSTANT
+        ):
+            fail(
+                f"constant {v!r} is not a finite number of at most {MAX_CONSTANT:g}",
+                f"{field}.prefix.values[{i}]",
+            )
     slots = [int(delays.get(n, 0)) for n in tap_names(input_names, taps)]
     return Tree.from_lists(codes, values, slots)
 
@@ -143,8 +161,7 @@ def parse_candidate(target: str, i: int, candidate, input_names) -> tuple[Tree, 
     if not isinstance(candidate, dict) or not isinstance(candidate.get("expr"), str):
         fail("a candidate is an object with its expr", field)
     delays = checked_delays(candidate.get("delays", {}), input_names, f"{field}.delays")
-    expr = parse_in_symbols(candidate["expr"], _leaf_symbols(input_names),
-                            field=f"{field}.expr")
+    expr = parse_in_symbols(candidate["expr"], _leaf_symbols(input_names), field=f"{field}.expr")
     return from_sympy(expr, delays, input_names), delays
 
 
@@ -164,15 +181,21 @@ def check_expr_agrees(target: str, text, tree: Tree, leaf_names, delays: dict) -
         for n in leaf_names:
             key = (base_input(n), delays.get(n, 0))
             point[n] = by_delay.setdefault(key, float(rng.uniform(0.5, 1.5)))
-        values = [float(e.xreplace({sp.Symbol(n, real=True): sp.Float(v)
-                                    for n, v in point.items()}).evalf())
-                  for e in (written, encoded)]
+        values = [
+            float(
+                e.xreplace({sp.Symbol(n, real=True): sp.Float(v) for n, v in point.items()}).evalf()
+            )
+            for e in (written, encoded)
+        ]
         a, b = values
         if not (math.isfinite(a) and math.isfinite(b)):
             continue
         if abs(a - b) > 1e-6 * max(1.0, abs(a), abs(b)):
-            fail(f"expr '{text[:60]}' is not the equation its prefix encodes ({a:.6g} "
-                 f"against {b:.6g} at a test point); the prefix is what flies", field)
+            fail(
+                f"expr '{text[:60]}' is not the equation its prefix encodes ({a:.6g} "
+                f"against {b:.6g} at a test point); the prefix is what flies",
+                field,
+            )
 
 
 @contextmanager
@@ -186,9 +209,18 @@ def naming(path):
             raise
         raise GpquadError(str(exc), source=str(path)) from None
     except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
-        raise GpquadError(f"damaged record (bad or missing entry {exc}); {FIX}",
-                          source=str(path)) from None
+        raise GpquadError(
+            f"damaged record (bad or missing entry {exc}); {FIX}", source=str(path)
+        ) from None
 
 
-__all__ = ["naming", "checked_input_names", "checked_targets", "checked_trim", "checked_number",
-           "checked_tree", "parse_candidate", "check_expr_agrees"]
+__all__ = [
+    "naming",
+    "checked_input_names",
+    "checked_targets",
+    "checked_trim",
+    "checked_number",
+    "checked_tree",
+    "parse_candidate",
+    "check_expr_agrees",
+]

@@ -34,8 +34,10 @@ SAMPLES = 2000
 def sample_rows(ranges, max_delay: int, count: int = SAMPLES) -> np.ndarray:
     """Up to `count` sample indices spread evenly over `ranges`, each with max_delay samples
     of input history inside its range."""
-    rows = np.concatenate([np.arange(a + max_delay, b) for a, b in ranges if b > a + max_delay]
-                          or [np.zeros(0, dtype=np.int64)])
+    rows = np.concatenate(
+        [np.arange(a + max_delay, b) for a, b in ranges if b > a + max_delay]
+        or [np.zeros(0, dtype=np.int64)]
+    )
     if len(rows) > count:
         rows = rows[np.linspace(0, len(rows) - 1, count).round().astype(np.int64)]
     return rows.astype(np.int64)
@@ -59,8 +61,7 @@ def _values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray
         return np.broadcast_to(np.asarray(func(*[columns[s.name] for s in symbols]), float), (n,))
 
 
-def faithful(expr: sp.Expr, exact: np.ndarray, columns: dict[str, np.ndarray],
-             digits: int) -> bool:
+def faithful(expr: sp.Expr, exact: np.ndarray, columns: dict[str, np.ndarray], digits: int) -> bool:
     """Whether `expr` rounded to `digits` stays within TOLERANCE x RMS of its own values
     `exact` (= _values(expr, columns))."""
     finite = np.isfinite(exact)
@@ -93,6 +94,8 @@ def with_printed_digits(model, dataset):
     rows = sample_rows(dataset.train or dataset.validation, max_delay)
     if len(rows) == 0:
         return model
-    equations = {t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
-                 for t, e in model.equations.items()}
+    equations = {
+        t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
+        for t, e in model.equations.items()
+    }
     return dataclasses.replace(model, equations=equations)

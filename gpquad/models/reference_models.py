@@ -32,8 +32,13 @@ def setpoint_model(input_names, dt: float) -> DiscoveredModel | None:
     model = zero_model(names, dt)
     n_state = len(STATE_NAMES)
     for target, (rate, setpoint) in SETPOINTS.items():
-        codes = [MUL, CONST, SUB, VAR_BASE + n_state + names.index(setpoint),
-                 VAR_BASE + STATE_NAMES.index(rate)]
+        codes = [
+            MUL,
+            CONST,
+            SUB,
+            VAR_BASE + n_state + names.index(setpoint),
+            VAR_BASE + STATE_NAMES.index(rate),
+        ]
         values = [0.0, 1.0 / dt, 0.0, 0.0, 0.0]
         tree = Tree.from_lists(codes, values, np.zeros(len(names), dtype=np.int64))
         model.equations[target] = Equation(target, tree, names, np.nan, np.nan)

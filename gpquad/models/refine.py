@@ -39,9 +39,9 @@ import numpy as np
 import sympy as sp
 
 from gpquad.data.mirror import mirror_dataset
-from gpquad.engine.evolve.coevolution import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.lag import LAG_GRID
@@ -78,11 +78,20 @@ class RefineProblem:
         tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
         window_steps = cfg.window_steps(dataset.dt)
-        self.ev = Evaluator(tapped, equation.target, window_steps, cfg.metric, cfg.max_depth,
-                            integrator=cfg.integrator, substeps=cfg.substeps)
+        self.ev = Evaluator(
+            tapped,
+            equation.target,
+            window_steps,
+            cfg.metric,
+            cfg.max_depth,
+            integrator=cfg.integrator,
+            substeps=cfg.substeps,
+        )
         self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
-        self.short = [(spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h),
-                       h) for h in SEED_HORIZONS]
+        self.short = [
+            (spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h), h)
+            for h in SEED_HORIZONS
+        ]
         samples = np.unique((self.starts[:, None] + np.arange(self.steps)[None, :]).ravel())
         self.samples = spread(samples[samples >= 1], SCREEN_SAMPLES)
         self.acc = self.arrays.acc[:, target_index(equation.target)]
@@ -91,8 +100,10 @@ class RefineProblem:
     def canonical(self, equation) -> sp.Expr:
         """The equation's expression with each delayed input written as the tap at its
         delay (u_R at delay 3 -> u_R__tap3)."""
-        reps = {sp.Symbol(n, real=True): sp.Symbol(tap_name(base_input(n), d), real=True)
-                for n, d in equation.delays.items()}
+        reps = {
+            sp.Symbol(n, real=True): sp.Symbol(tap_name(base_input(n), d), real=True)
+            for n, d in equation.delays.items()
+        }
         return sp.expand(equation.sympy().xreplace(reps))
 
     def tree(self, expr: sp.Expr) -> Tree:
@@ -102,8 +113,11 @@ class RefineProblem:
             t = from_sympy(term, self.delays, self.input_names)
             prefixes.append(list(zip(t.codes.tolist(), t.values.tolist(), strict=True)))
         prefix = shallow_sum(prefixes)
-        return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix],
-                               from_sympy(sp.Float(0.0), self.delays, self.input_names).delays)
+        return Tree.from_lists(
+            [c for c, _ in prefix],
+            [v for _, v in prefix],
+            from_sympy(sp.Float(0.0), self.delays, self.input_names).delays,
+        )
 
     def expr(self, tree: Tree) -> sp.Expr:
         """The expanded expression of a tree of this problem."""
@@ -112,8 +126,15 @@ class RefineProblem:
     def values(self, expr: sp.Expr) -> np.ndarray:
         """One-step values of an expression on the training samples."""
         t = self.tree(expr)
-        return eval_on_samples(t.codes, t.values, t.size, t.delays, self.arrays.states,
-                               self.arrays.inputs, self.samples)
+        return eval_on_samples(
+            t.codes,
+            t.values,
+            t.size,
+            t.delays,
+            self.arrays.states,
+            self.arrays.inputs,
+            self.samples,
+        )
 
     def commanded(self) -> np.ndarray:
         """The one-step target of the expression under the evaluator's lag: the data's
@@ -141,11 +162,17 @@ class RefineProblem:
         """(expr with its constants fitted through the integrator, training error)."""
         tree = self.tree(expr)
         start = self.error(tree)
-        fitted, error = continued_constants(self.ev, tree, start if np.isfinite(start)
-                                            else np.inf, self.starts, self.steps, self.error,
-                                            FIT_STEPS, self.short)
+        fitted, error = continued_constants(
+            self.ev,
+            tree,
+            start if np.isfinite(start) else np.inf,
+            self.starts,
+            self.steps,
+            self.error,
+            FIT_STEPS,
+            self.short,
+        )
         return self.expr(fitted), float(error)
-
 
 
 class Step(NamedTuple):
@@ -174,22 +201,29 @@ def library(problem: RefineProblem, flipped) -> list[sp.Expr]:
     return terms
 
 
-def screen(problem: RefineProblem, expr: sp.Expr, residual: np.ndarray, columns: np.ndarray,
-           offered: np.ndarray) -> list[int]:
+def screen(
+    problem: RefineProblem,
+    expr: sp.Expr,
+    residual: np.ndarray,
+    columns: np.ndarray,
+    offered: np.ndarray,
+) -> list[int]:
     """Indices of the SCREENED columns among `offered` (bool, one per column) that explain
     most of `expr`'s one-step residual beyond the span of its own monomials."""
     own = np.column_stack([problem.values(m) for m in monomials(expr)])
     q, _ = np.linalg.qr(own)
     residual = residual - q @ (q.T @ residual)
     projected = columns - q @ (q.T @ columns)
-    norms = (projected ** 2).sum(axis=0)
-    score = np.where(offered & (norms > 1e-12 * max(norms.max(), 1e-300)),
-                     (projected.T @ residual) ** 2 / np.maximum(norms, 1e-300), 0.0)
+    norms = (projected**2).sum(axis=0)
+    score = np.where(
+        offered & (norms > 1e-12 * max(norms.max(), 1e-300)),
+        (projected.T @ residual) ** 2 / np.maximum(norms, 1e-300),
+        0.0,
+    )
     return [int(k) for k in np.argsort(-score, kind="stable")[:SCREENED] if score[k] > 0]
 
 
-def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray,
-               residual: np.ndarray) -> sp.Expr:
+def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray, residual: np.ndarray) -> sp.Expr:
     """expr + c term, c the term's one-step least-squares coefficient on expr's residual:
     the equation keeps the constants it was fitted with through the integrator. (Refitting
     every constant by one-step least squares instead, the one-step fit a stiff closed loop
@@ -199,8 +233,9 @@ def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray,
     return expr + sp.Float(c) * term
 
 
-def choose_lag(problem: RefineProblem, expr: sp.Expr, error: float,
-               gain: float) -> tuple[float, sp.Expr, float]:
+def choose_lag(
+    problem: RefineProblem, expr: sp.Expr, error: float, gain: float
+) -> tuple[float, sp.Expr, float]:
     """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
     the equation's own terms flies best, if it beats the found equation by `gain`."""
     best = (0.0, expr, error)
@@ -225,25 +260,40 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     problem = RefineProblem(equation, dataset, evolution)
     found = problem.canonical(equation)
     found_error = problem.error(problem.tree(found))
-    path = [Step(0.0, found, found_error,
-                 problem.error(problem.tree(found), dataset.validation), [])]
+    path = [
+        Step(0.0, found, found_error, problem.error(problem.tree(found), dataset.validation), [])
+    ]
     if not np.isfinite(path[0].validation):  # nothing to judge a refinement on: not worth fitting
-        return equation, {"lag": 0.0, "added": [], "error_before": found_error,
-                          "error_after": found_error, "validation_before": None,
-                          "validation_after": None, "tried": 0, "no_validation": True}
+        return equation, {
+            "lag": 0.0,
+            "added": [],
+            "error_before": found_error,
+            "error_after": found_error,
+            "validation_before": None,
+            "validation_after": None,
+            "tried": 0,
+            "no_validation": True,
+        }
     zero_error = problem.error(problem.tree(sp.Float(0.0)))
 
     def gain(err: float) -> float:  # the least improvement that counts
         return min_gain * max(err, NEGLIGIBLE * zero_error)
 
     if found_error < gain(found_error):  # no error below 0 would count: nothing to try
-        return equation, {"lag": 0.0, "added": [], "error_before": found_error,
-                          "error_after": found_error, "validation_before": path[0].validation,
-                          "validation_after": path[0].validation, "tried": 0}
+        return equation, {
+            "lag": 0.0,
+            "added": [],
+            "error_before": found_error,
+            "error_after": found_error,
+            "validation_before": path[0].validation,
+            "validation_after": path[0].validation,
+            "tried": 0,
+        }
     tau, expr, error = choose_lag(problem, found, found_error, gain(found_error))
     if tau > 0:
-        path.append(Step(tau, expr, error,
-                         problem.error(problem.tree(expr), dataset.validation), []))
+        path.append(
+            Step(tau, expr, error, problem.error(problem.tree(expr), dataset.validation), [])
+        )
     added: list[sp.Expr] = []
     candidates = library(problem, frozenset(flipped))
     columns = np.column_stack([problem.values(c) for c in candidates])
@@ -253,44 +303,58 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
         residual = problem.residual(expr)
         best = None
         for k in screen(problem, expr, residual, columns, offered):
-            fitted, fitted_error = problem.fit(warm_start(expr, candidates[k], columns[:, k],
-                                                          residual))
+            fitted, fitted_error = problem.fit(
+                warm_start(expr, candidates[k], columns[:, k], residual)
+            )
             if best is None or fitted_error < best[1]:
                 best = (fitted, fitted_error, candidates[k])
         if best is None or not best[1] < error - gain(error):
             break
         expr, error = best[0], best[1]
         added.append(best[2])
-        path.append(Step(tau, expr, error,
-                         problem.error(problem.tree(expr), dataset.validation), list(added)))
+        path.append(
+            Step(
+                tau, expr, error, problem.error(problem.tree(expr), dataset.validation), list(added)
+            )
+        )
     # path[0] has a finite validation error (checked above); a later step may have diverged
     chosen = min((p for p in path if np.isfinite(p.validation)), key=lambda p: p.validation)
-    report = {"lag": chosen.lag, "added": [text(equation, t) for t in chosen.added],
-              "error_before": found_error, "error_after": chosen.error,
-              "validation_before": path[0].validation, "validation_after": chosen.validation,
-              "tried": len(path) - 1}
+    report = {
+        "lag": chosen.lag,
+        "added": [text(equation, t) for t in chosen.added],
+        "error_before": found_error,
+        "error_after": chosen.error,
+        "validation_before": path[0].validation,
+        "validation_after": chosen.validation,
+        "tried": len(path) - 1,
+    }
     if chosen is path[0]:
         return equation, report
 
     def as_equation(step: Step) -> object:
-        return dataclasses.replace(equation, tree=problem.tree(step.expr), lag=float(step.lag),
-                                   error=float(step.error),
-                                   validation_error=float(step.validation), candidates=[])
+        return dataclasses.replace(
+            equation,
+            tree=problem.tree(step.expr),
+            lag=float(step.lag),
+            error=float(step.error),
+            validation_error=float(step.validation),
+            candidates=[],
+        )
 
     # the found equation and the rest of the path become the first alternatives of the
     # stability repair: a refined equation that flies alone may diverge with the others
-    others = [equation.summary()] + [as_equation(p).summary() for p in path[1:]
-                                     if p is not chosen]
+    others = [equation.summary()] + [as_equation(p).summary() for p in path[1:] if p is not chosen]
     refined = dataclasses.replace(as_equation(chosen), candidates=others + equation.candidates)
     return refined, report
 
 
 def text(equation, term: sp.Expr) -> str:
     """A term as the equations print it: u_R__tap3 -> u_R(t-3)."""
-    reps = {s: sp.Symbol(f"{base_input(str(s))}(t-{d})" if d else base_input(str(s)),
-                         real=True)
-            for s in term.free_symbols
-            for d in [int(str(s).rsplit("__tap", 1)[1]) if "__tap" in str(s) else 0]}
+    reps = {
+        s: sp.Symbol(f"{base_input(str(s))}(t-{d})" if d else base_input(str(s)), real=True)
+        for s in term.free_symbols
+        for d in [int(str(s).rsplit("__tap", 1)[1]) if "__tap" in str(s) else 0]
+    }
     return str(round_constants(term, equation.digits).xreplace(reps))
 
 
@@ -302,10 +366,10 @@ def refine(model, dataset, evolution, flipped=()) -> tuple[object, dict]:
     for target, equation in model.equations.items():
         if evolution.refine_for(target) <= 0:
             continue
-        equations[target], report[target] = refine_equation(equation, dataset, evolution,
-                                                            flipped)
-    refined, reverted = keep_what_flies(dataclasses.replace(model, equations=equations), model,
-                                        dataset, flipped)
+        equations[target], report[target] = refine_equation(equation, dataset, evolution, flipped)
+    refined, reverted = keep_what_flies(
+        dataclasses.replace(model, equations=equations), model, dataset, flipped
+    )
     for target in reverted:
         report[target]["reverted"] = True
     return refined, report
@@ -317,16 +381,18 @@ def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[st
     putting one refined equation's found form back makes the six fly the stability repair's
     windows better (fewer diverged windows, then fewer diverged mirrored ones, then a lower
     full-model error), the best such reversion is made."""
-    changed = [t for t in TARGET_NAMES
-               if t in refined.equations and refined.equations[t] is not found.equations[t]]
+    changed = [
+        t
+        for t in TARGET_NAMES
+        if t in refined.equations and refined.equations[t] is not found.equations[t]
+    ]
     if not changed or not all(t in refined.equations for t in TARGET_NAMES):
         return refined, []
     starts, steps, _ = judged_windows(dataset, refined, JOINT_HORIZONS_S[-1])
     if len(starts) == 0:
         return refined, []
     flights = FullModelFlights(dataset, starts, steps)
-    mirrored = (FullModelFlights(mirror_dataset(dataset, mirror), starts, steps)
-                if mirror else None)
+    mirrored = FullModelFlights(mirror_dataset(dataset, mirror), starts, steps) if mirror else None
 
     def score(model) -> tuple[int, int, float]:
         n_div, windows = flights.windows(model)
@@ -335,8 +401,9 @@ def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[st
         return n_div, n_mirror, error if np.isfinite(error) else np.inf
 
     def reverted(model, target):
-        return dataclasses.replace(model, equations={**model.equations,
-                                                     target: found.equations[target]})
+        return dataclasses.replace(
+            model, equations={**model.equations, target: found.equations[target]}
+        )
 
     current, out = score(refined), []
     while changed:
@@ -358,13 +425,17 @@ def refined_summary(report: dict) -> str:
         if entry.get("reverted"):
             parts.append(f"{target}: kept as found (refined, it made the full model fly worse)")
         elif entry.get("no_validation"):
-            parts.append(f"{target}: kept as found (no validation window of window_s "
-                         "to judge a refinement on: raise data.validation_fraction or name "
-                         "validation files in data.validation)")
+            parts.append(
+                f"{target}: kept as found (no validation window of window_s "
+                "to judge a refinement on: raise data.validation_fraction or name "
+                "validation files in data.validation)"
+            )
         elif entry["validation_after"] < entry["validation_before"]:
             lag = f"lag {1000 * entry['lag']:.0f} ms, " if entry["lag"] > 0 else ""
-            parts.append(f"{target}: {lag}+{len(entry['added'])} terms, validation error "
-                         f"{entry['validation_before']:.4g} -> {entry['validation_after']:.4g}")
+            parts.append(
+                f"{target}: {lag}+{len(entry['added'])} terms, validation error "
+                f"{entry['validation_before']:.4g} -> {entry['validation_after']:.4g}"
+            )
         else:
             parts.append(f"{target}: kept as found")
     return "refined equations: " + "; ".join(parts)

@@ -35,13 +35,17 @@ SCORED_INDEX = (3, 4, 5, 6, 7, 8)
 DIVERGENCE_FACTOR = 10.0
 
 
-def validation_windows(dataset: Dataset, horizon_steps: int, max_delay: int = 0
-                       ) -> tuple[np.ndarray, int]:
+def validation_windows(
+    dataset: Dataset, horizon_steps: int, max_delay: int = 0
+) -> tuple[np.ndarray, int]:
     """Non-overlapping window starts over the validation ranges, and their step count."""
     starts, steps = tile(dataset.validation, horizon_steps, max_delay)
     if steps == 0 or len(starts) == 0:
-        raise GpquadError(f"no validation range fits a window of {horizon_steps} steps; give "
-                          "more validation data or a shorter horizon", field="horizon")
+        raise GpquadError(
+            f"no validation range fits a window of {horizon_steps} steps; give "
+            "more validation data or a shorter horizon",
+            field="horizon",
+        )
     return starts, steps
 
 
@@ -96,21 +100,29 @@ class Score:
     steps: int
 
 
-def score_model(model, dataset: Dataset, horizon_steps: int, trim: dict | None = None,
-                max_delay: int = 0) -> Score:
+def score_model(
+    model, dataset: Dataset, horizon_steps: int, trim: dict | None = None, max_delay: int = 0
+) -> Score:
     """Fly `model` over the validation windows of `dataset` (raw inputs) and score it."""
     missing = [n for n in model.input_names if n not in dataset.input_names]
     if missing or tuple(model.input_names) != tuple(dataset.input_names):
-        raise GpquadError(f"the model reads inputs {list(model.input_names)} but the scoring data "
-                          f"has {list(dataset.input_names)}", field="compare")
+        raise GpquadError(
+            f"the model reads inputs {list(model.input_names)} but the scoring data "
+            f"has {list(dataset.input_names)}",
+            field="compare",
+        )
     check_same_rate(model, dataset.dt, None)
     starts, steps = validation_windows(dataset, horizon_steps, max_delay)
     view = model_view(dataset, trim or {})
     pred = model.simulate(view, starts, steps)
     idx = starts[:, None] + np.arange(steps + 1)[None, :]
     values = rse(pred, dataset.arrays.states[idx])
-    return Score(dict(zip(SCORED_STATES, map(float, values), strict=True)), float(np.mean(values)),
-                 len(starts), steps)
+    return Score(
+        dict(zip(SCORED_STATES, map(float, values), strict=True)),
+        float(np.mean(values)),
+        len(starts),
+        steps,
+    )
 
 
 @dataclass
@@ -118,8 +130,8 @@ class RunInfo:
     """A run folder seen by the scorer."""
 
     path: Path
-    kind: str          # "gp" or the baseline method
-    model: object      # has simulate(dataset, starts, n_steps) and input_names
+    kind: str  # "gp" or the baseline method
+    model: object  # has simulate(dataset, starts, n_steps) and input_names
     n_parameters: int
     fit_time_s: float
     trim: dict
@@ -133,24 +145,39 @@ def load_run(run_dir) -> RunInfo:
     run_dir = Path(run_dir)
     fix = "give a folder written by `gpquad run` or `gpquad baseline`"
     d = read_json(run_dir / "model.json", "run folder", fix)
-    info = read_json(run_dir / "run.json", "run folder", fix) \
-        if (run_dir / "run.json").is_file() else {}
+    info = (
+        read_json(run_dir / "run.json", "run folder", fix)
+        if (run_dir / "run.json").is_file()
+        else {}
+    )
     if d.get("kind") == "baseline":
         from gpquad.baselines.flyable import from_model_dict
 
         with naming(run_dir / "model.json"):
             model = from_model_dict(d)
-        return RunInfo(run_dir, d["method"], model, model.n_parameters,
-                       float(info.get("fit_time_s", np.nan)), {}, 0)
+        return RunInfo(
+            run_dir,
+            d["method"],
+            model,
+            model.n_parameters,
+            float(info.get("fit_time_s", np.nan)),
+            {},
+            0,
+        )
     from gpquad.models.equations import DiscoveredModel
 
     with naming(run_dir / "model.json"):
         model = DiscoveredModel.from_dict(d)
-    max_delay = max([int(np.max(e.tree.delays, initial=0)) for e in model.equations.values()]
-                    + [0])
-    return RunInfo(run_dir, "gp", model, model.n_parameters,
-                   float(info.get("wall_time_s", np.nan)),
-                   dict(model.trim), max_delay)
+    max_delay = max([int(np.max(e.tree.delays, initial=0)) for e in model.equations.values()] + [0])
+    return RunInfo(
+        run_dir,
+        "gp",
+        model,
+        model.n_parameters,
+        float(info.get("wall_time_s", np.nan)),
+        dict(model.trim),
+        max_delay,
+    )
 
 
 def run_dataset(run_dir) -> Dataset:
@@ -161,8 +188,9 @@ def run_dataset(run_dir) -> Dataset:
     """
     run_dir = Path(run_dir)
     info_path = run_dir / "run.json"
-    info = read_json(info_path, "run folder",
-                     "give a folder written by `gpquad run` or `gpquad baseline`")
+    info = read_json(
+        info_path, "run folder", "give a folder written by `gpquad run` or `gpquad baseline`"
+    )
     if "scoring_data" in info:
         from gpquad.data.flight import read_flight_file
 
@@ -181,25 +209,34 @@ def run_dataset(run_dir) -> Dataset:
 def _scoring_data(sd, run_dir: Path, info_path: Path) -> dict:
     """run.json's scoring_data, checked: files are relative paths that stay inside the run
     folder (no "..", no absolute path, no link out of it), inputs are names."""
+
     def bad(message: str, field: str):
-        raise GpquadError(f"{message}; give a folder written by `gpquad baseline`",
-                          source=str(info_path), field=f"scoring_data.{field}")
+        raise GpquadError(
+            f"{message}; give a folder written by `gpquad baseline`",
+            source=str(info_path),
+            field=f"scoring_data.{field}",
+        )
 
     if not isinstance(sd, dict) or not isinstance(sd.get("files"), list) or not sd["files"]:
         bad("scoring_data lists its flight files", "files")
     inside = run_dir.resolve()
     for i, name in enumerate(sd["files"]):
-        if not isinstance(name, str) or Path(name).is_absolute() or ".." in Path(name).parts \
-                or inside not in (run_dir / name).resolve().parents:
+        if (
+            not isinstance(name, str)
+            or Path(name).is_absolute()
+            or ".." in Path(name).parts
+            or inside not in (run_dir / name).resolve().parents
+        ):
             bad(f"{str(name)[:60]!r} is not a file inside the run folder", f"files[{i}]")
     inputs = sd.get("inputs")
     if not isinstance(inputs, list) or not inputs or not all(isinstance(n, str) for n in inputs):
         bad("inputs is a list of input names", "inputs")
     fraction = sd.get("validation_fraction")
-    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) \
-            or not 0 < fraction < 1:
-        bad(f"validation_fraction is a number between 0 and 1, not {fraction!r}",
-            "validation_fraction")
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction < 1:
+        bad(
+            f"validation_fraction is a number between 0 and 1, not {fraction!r}",
+            "validation_fraction",
+        )
     return sd
 
 
@@ -208,10 +245,13 @@ def check_same_rate(model, dt: float, source: str | None) -> None:
     refuse a log sampled at another rate than the model's dt (one line)."""
     model_dt = getattr(model, "dt", None)
     if model_dt is not None and abs(dt - model_dt) > 1e-6 * model_dt:
-        raise GpquadError(f"the log is sampled at {1 / dt:.6g} Hz after the pipeline, the run's "
-                          f"equations at {1 / model_dt:.6g} Hz (their delays count samples); "
-                          "set data.resample_hz or data.downsample to give the run's rate",
-                          source=source, field="dt")
+        raise GpquadError(
+            f"the log is sampled at {1 / dt:.6g} Hz after the pipeline, the run's "
+            f"equations at {1 / model_dt:.6g} Hz (their delays count samples); "
+            "set data.resample_hz or data.downsample to give the run's rate",
+            source=source,
+            field="dt",
+        )
 
 
 #: Longest compare window (samples).
@@ -226,32 +266,47 @@ def compare(run_dirs, horizon_steps: int, data_from=None) -> list[dict]:
     """
     if not run_dirs:
         raise GpquadError("give at least one run folder", field="compare")
-    if isinstance(horizon_steps, bool) or not isinstance(horizon_steps, (int, np.integer)) \
-            or not 1 <= horizon_steps <= MAX_HORIZON_STEPS:
-        raise GpquadError(f"the window length is a whole number of samples from 1 to "
-                          f"{MAX_HORIZON_STEPS}, not {horizon_steps}", field="--horizon")
+    if (
+        isinstance(horizon_steps, bool)
+        or not isinstance(horizon_steps, (int, np.integer))
+        or not 1 <= horizon_steps <= MAX_HORIZON_STEPS
+    ):
+        raise GpquadError(
+            f"the window length is a whole number of samples from 1 to "
+            f"{MAX_HORIZON_STEPS}, not {horizon_steps}",
+            field="--horizon",
+        )
     dataset = run_dataset(data_from or run_dirs[0])
     rows = []
     for run_dir in run_dirs:
         run = load_run(run_dir)
-        row = {"run": str(run.path), "kind": run.kind, "n_parameters": run.n_parameters,
-               "fit_time_s": run.fit_time_s}
+        row = {
+            "run": str(run.path),
+            "kind": run.kind,
+            "n_parameters": run.n_parameters,
+            "fit_time_s": run.fit_time_s,
+        }
         try:
             score = score_model(run.model, dataset, horizon_steps, run.trim, run.max_delay)
         except GpquadError as exc:
-            row.update({f"rse_{s}": np.nan for s in SCORED_STATES}, mean_rse=np.nan,
-                       note=str(exc))
+            row.update({f"rse_{s}": np.nan for s in SCORED_STATES}, mean_rse=np.nan, note=str(exc))
         else:
-            row.update({f"rse_{s}": v for s, v in score.rse.items()}, mean_rse=score.mean_rse,
-                       windows=score.n_windows, steps=score.steps, note="")
+            row.update(
+                {f"rse_{s}": v for s, v in score.rse.items()},
+                mean_rse=score.mean_rse,
+                windows=score.n_windows,
+                steps=score.steps,
+                note="",
+            )
         rows.append(row)
     return rows
 
 
 def format_table(rows: list[dict]) -> str:
     """Markdown table of compare() rows."""
-    head = ["run", "kind"] + [f"RSE {s}" for s in SCORED_STATES] + ["mean RSE", "params",
-                                                                      "fit time s"]
+    head = (
+        ["run", "kind"] + [f"RSE {s}" for s in SCORED_STATES] + ["mean RSE", "params", "fit time s"]
+    )
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [Path(r["run"]).name, r["kind"]]

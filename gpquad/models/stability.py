@@ -84,8 +84,7 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirr
     if len(starts) == 0:
         return model, None
     flights = FullModelFlights(dataset, starts, steps)
-    mirrored = (FullModelFlights(mirror_dataset(dataset, mirror), starts, steps)
-                if mirror else None)
+    mirrored = FullModelFlights(mirror_dataset(dataset, mirror), starts, steps) if mirror else None
 
     def fly(candidate) -> tuple[tuple[int, int, float], np.ndarray]:
         n_div, windows = flights.windows(candidate)
@@ -93,12 +92,20 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirr
         return (n_div, n_mirror, float(windows.sum())), windows
 
     best = fly(model)[0]
-    report = {"horizon_s": float(seconds), "judged_on": judged_on, "windows": int(len(starts)),
-              "diverged_before": best[0], "error_before": best[2], "swaps": [], "flights": 1}
+    report = {
+        "horizon_s": float(seconds),
+        "judged_on": judged_on,
+        "windows": int(len(starts)),
+        "diverged_before": best[0],
+        "error_before": best[2],
+        "swaps": [],
+        "flights": 1,
+    }
     if mirrored is not None:
         report.update(mirrored=list(mirror), mirrored_diverged_before=best[1])
-    alternatives = ({t: model.equations[t].alternatives() for t in TARGET_NAMES}
-                    if best[0] or best[1] else {})
+    alternatives = (
+        {t: model.equations[t].alternatives() for t in TARGET_NAMES} if best[0] or best[1] else {}
+    )
     for _ in range(MAX_ROUNDS):
         if best[0] == 0 and best[1] == 0:
             break
@@ -113,8 +120,9 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirr
             break
         score, target, alt = pick
         why = "diverged" if best[0] else "mirror diverged"
-        report["swaps"].append({"target": target, "from": model.equations[target].text(),
-                                "to": alt.text(), "why": why})
+        report["swaps"].append(
+            {"target": target, "from": model.equations[target].text(), "to": alt.text(), "why": why}
+        )
         model, best = _swap(model, target, alt), score
     report.update(diverged_after=best[0], error_after=best[2])
     if mirrored is not None:
@@ -136,6 +144,8 @@ def stability_summary(report: dict) -> str:
         line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
         return line + mirror
     swapped = ", ".join(s["target"] for s in report["swaps"]) or "none"
-    return (f"full model diverged in {before} of {n} {report['horizon_s']:g} s "
-            f"{report['judged_on']} flights; equations swapped for front alternatives: "
-            f"{swapped}; diverged after: {after}{mirror}")
+    return (
+        f"full model diverged in {before} of {n} {report['horizon_s']:g} s "
+        f"{report['judged_on']} flights; equations swapped for front alternatives: "
+        f"{swapped}; diverged after: {after}{mirror}"
+    )

@@ -34,8 +34,9 @@ def without_wrong_parity(equation, flipped) -> tuple[sp.Expr, list[str]] | None:
         if rest == 1 or not wrong_parity(equation.target, str(rest), flipped):
             keep.append(term)
         else:
-            dropped.append(str(round_constants(term, equation.digits)
-                               .xreplace(equation.shown_inputs())))
+            dropped.append(
+                str(round_constants(term, equation.digits).xreplace(equation.shown_inputs()))
+            )
     if not dropped:
         return None
     return sp.Add(*keep) if keep else sp.Float(0.0), dropped
@@ -47,8 +48,15 @@ def refit(equation, tree, dataset, evolution):
     taps = taps_of(len(tree.delays), len(equation.input_names))
     cfg = evolution.for_target(equation.target)  # the search's evaluator for this target
     window_steps = cfg.window_steps(dataset.dt)
-    ev = Evaluator(with_taps(dataset, taps), equation.target, window_steps, cfg.metric,
-                   cfg.max_depth, integrator=cfg.integrator, substeps=cfg.substeps)
+    ev = Evaluator(
+        with_taps(dataset, taps),
+        equation.target,
+        window_steps,
+        cfg.metric,
+        cfg.max_depth,
+        integrator=cfg.integrator,
+        substeps=cfg.substeps,
+    )
     starts, steps = tile(dataset.train, window_steps, evolution.max_delay)
 
     def error_of(t) -> float:
@@ -70,8 +78,9 @@ def symmetrize(model, dataset, evolution, flipped):
         expr, dropped = found
         tree = from_sympy(expr, equation.used_delays(), equation.input_names)
         tree, error = refit(equation, tree, dataset, evolution)
-        equations[target] = dataclasses.replace(equation, tree=tree, error=float(error),
-                                                validation_error=np.nan)
+        equations[target] = dataclasses.replace(
+            equation, tree=tree, error=float(error), validation_error=np.nan
+        )
         report[target] = {"dropped": dropped, "error_after": float(error)}
     return dataclasses.replace(model, equations=equations), report
 
@@ -80,6 +89,5 @@ def symmetrized_summary(report: dict) -> str:
     """One line for the user: which equations lost which terms."""
     if not report:
         return "symmetric equations: no equation had a term of the wrong left-right parity"
-    parts = [f"{target} without {', '.join(entry['dropped'])}"
-             for target, entry in report.items()]
+    parts = [f"{target} without {', '.join(entry['dropped'])}" for target, entry in report.items()]
     return f"symmetric equations (terms of the wrong left-right parity removed): {'; '.join(parts)}"

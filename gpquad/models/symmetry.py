@@ -63,13 +63,15 @@ def mirror_odd_terms(model, dataset, flipped, share: float = PARITY_SHARE) -> di
         if not wrong or not target_rms > 0:
             continue
         part = np.sum([v for _, _, v in wrong], axis=0)
-        part_share = float(np.sqrt(np.mean(part ** 2))) / target_rms
+        part_share = float(np.sqrt(np.mean(part**2))) / target_rms
         if part_share >= share:
             shown = equation.shown_inputs()
             expr = sum(c * parse_in_symbols(t, None) for t, c, _ in wrong)
-            out[target] = {"share": part_share,
-                           "terms": [{"term": t, "coefficient": c} for t, c, _ in wrong],
-                           "text": str(round_constants(expr, 3).xreplace(shown))}
+            out[target] = {
+                "share": part_share,
+                "terms": [{"term": t, "coefficient": c} for t, c, _ in wrong],
+                "text": str(round_constants(expr, 3).xreplace(shown)),
+            }
     return out
 
 
@@ -77,9 +79,15 @@ def parity_summary(found: dict, flipped) -> str:
     """One line for the user."""
     head = f"left-right parity ({', '.join(flipped)} flipped)"
     if not found:
-        return (f"{head}: no equation has a part of the wrong parity above "
-                f"{100 * PARITY_SHARE:.0f} % of its target's RMS")
-    parts = [f"{target} {100 * entry['share']:.0f} % ({entry['text']})"
-             for target, entry in found.items()]
-    return (f"{head}: parts a left-right symmetric vehicle cannot have (RMS share of the "
-            f"target's): {'; '.join(parts)}")
+        return (
+            f"{head}: no equation has a part of the wrong parity above "
+            f"{100 * PARITY_SHARE:.0f} % of its target's RMS"
+        )
+    parts = [
+        f"{target} {100 * entry['share']:.0f} % ({entry['text']})"
+        for target, entry in found.items()
+    ]
+    return (
+        f"{head}: parts a left-right symmetric vehicle cannot have (RMS share of the "
+        f"target's): {'; '.join(parts)}"
+    )

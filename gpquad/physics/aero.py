@@ -18,17 +18,19 @@ THRUST_MODELS = {"standard": ["k_t"], "refined": ["k_t", "k_z", "k_h"]}
 
 def thrust_regressors(model: str, rotor: np.ndarray, vel_body: np.ndarray) -> np.ndarray:
     """Columns of X for m f_z = X theta, theta named by THRUST_MODELS[model]."""
-    sq = np.sum(rotor ** 2, axis=1)
+    sq = np.sum(rotor**2, axis=1)
     if model == "standard":
         return sq[:, None]
     if model == "refined":
-        return np.column_stack([sq, -vel_body[:, 2] * np.sum(rotor, axis=1),
-                                vel_body[:, 0] ** 2 + vel_body[:, 1] ** 2])
+        return np.column_stack(
+            [sq, -vel_body[:, 2] * np.sum(rotor, axis=1), vel_body[:, 0] ** 2 + vel_body[:, 1] ** 2]
+        )
     raise ValueError(f"unknown thrust model {model!r}")
 
 
-def drag_regressors(axis: int, rotor: np.ndarray, vel_body: np.ndarray,
-                    parasitic: bool) -> tuple[np.ndarray, list[str]]:
+def drag_regressors(
+    axis: int, rotor: np.ndarray, vel_body: np.ndarray, parasitic: bool
+) -> tuple[np.ndarray, list[str]]:
     """Columns of X for f_axis = X theta (axis 0: x, 1: y) and the coefficient names."""
     name = "xy"[axis]
     cols = [vel_body[:, axis] * np.mean(rotor, axis=1)]
@@ -39,8 +41,9 @@ def drag_regressors(axis: int, rotor: np.ndarray, vel_body: np.ndarray,
     return np.column_stack(cols), names
 
 
-def thrust_specific_force(coef: dict, model: str, rotor: np.ndarray, vel_body: np.ndarray,
-                          mass: float) -> np.ndarray:
+def thrust_specific_force(
+    coef: dict, model: str, rotor: np.ndarray, vel_body: np.ndarray, mass: float
+) -> np.ndarray:
     """f_z predicted by a thrust model with named coefficients."""
     X = thrust_regressors(model, rotor, vel_body)
     theta = np.array([coef[n] for n in THRUST_MODELS[model]])

@@ -56,20 +56,27 @@ def log_count(path) -> int:
 def _header_pair(headers: dict, key: str, source: str) -> tuple[float, float]:
     value = headers.get(key)
     if not isinstance(value, (list, tuple)) or len(value) < 2:
-        raise GpquadError(f"header '{key}' is missing or not 'low,high' ({value!r}); the log "
-                          "does not say the motor output range", source=source, field=key)
+        raise GpquadError(
+            f"header '{key}' is missing or not 'low,high' ({value!r}); the log "
+            "does not say the motor output range",
+            source=source,
+            field=key,
+        )
     return float(value[0]), float(value[1])
 
 
-def load_mixer_log(path, index: int, throttle_source: str = "setpoint",
-                   allow_truncated: bool = False) -> MixerLog:
+def load_mixer_log(
+    path, index: int, throttle_source: str = "setpoint", allow_truncated: bool = False
+) -> MixerLog:
     """PID sums, throttle and motors of log `index` (1-based); a user-facing error when the
     log lacks motor or PID fields, or when its decoding stopped early (unless allowed)."""
     from gpquad.data.betaflight import read_frames
 
     if throttle_source not in THROTTLE_SOURCES:
-        raise GpquadError(f"unknown throttle source '{throttle_source}'; use one of "
-                          f"{THROTTLE_SOURCES}", field="--throttle")
+        raise GpquadError(
+            f"unknown throttle source '{throttle_source}'; use one of {THROTTLE_SOURCES}",
+            field="--throttle",
+        )
     count = log_count(path)
     source = f"{path} (log {index} of {count})"
     try:
@@ -77,26 +84,39 @@ def load_mixer_log(path, index: int, throttle_source: str = "setpoint",
     except GpquadError:
         raise
     except Exception as exc:  # orangebox fails on a damaged header or frame definition
-        raise GpquadError(f"the log cannot be decoded ({type(exc).__name__}: {exc}); it is "
-                          "damaged", source=source) from None
+        raise GpquadError(
+            f"the log cannot be decoded ({type(exc).__name__}: {exc}); it is damaged", source=source
+        ) from None
     if stop and not allow_truncated:
-        raise GpquadError(f"truncated or corrupt log: {stop}; pass --allow-truncated to use "
-                          "the frames before the damage", source=source)
+        raise GpquadError(
+            f"truncated or corrupt log: {stop}; pass --allow-truncated to use "
+            "the frames before the damage",
+            source=source,
+        )
     if len(df) < 2:
         raise GpquadError(f"the log holds {len(df)} frames", source=source)
     motor_cols = [f"motor[{i}]" for i in range(8) if f"motor[{i}]" in df]
     if not motor_cols:
-        raise GpquadError("no motor field (motor[0..3]) in the log; enable motor logging "
-                          "(blackbox field MOTOR) to validate the mixer", source=source,
-                          field="motor[0]")
+        raise GpquadError(
+            "no motor field (motor[0..3]) in the log; enable motor logging "
+            "(blackbox field MOTOR) to validate the mixer",
+            source=source,
+            field="motor[0]",
+        )
     if len(motor_cols) != 4:
-        raise GpquadError(f"{len(motor_cols)} motors logged; only the quad-X mixer is built in",
-                          source=source, field="motor[0]")
+        raise GpquadError(
+            f"{len(motor_cols)} motors logged; only the quad-X mixer is built in",
+            source=source,
+            field="motor[0]",
+        )
     terms = ("axisP", "axisI", "axisD", "axisF")
     present = [f"{k}[{a}]" for k in terms for a in range(3) if f"{k}[{a}]" in df]
     if not any(c.startswith("axisP") for c in present):
-        raise GpquadError("no PID field (axisP/I/D/F) in the log; enable PID logging to "
-                          "validate the mixer", source=source, field="axisP[0]")
+        raise GpquadError(
+            "no PID field (axisP/I/D/F) in the log; enable PID logging to validate the mixer",
+            source=source,
+            field="axisP[0]",
+        )
     sums = np.zeros((len(df), 3))
     for a in range(3):
         for k in terms:
@@ -106,8 +126,11 @@ def load_mixer_log(path, index: int, throttle_source: str = "setpoint",
     missing = tuple(f"{k}[{a}]" for k in terms for a in range(3) if f"{k}[{a}]" not in df)
     if throttle_source == "setpoint":
         if "setpoint[3]" not in df:
-            raise GpquadError("no setpoint[3] (mixer throttle) in the log; use --throttle "
-                              "rccommand", source=source, field="setpoint[3]")
+            raise GpquadError(
+                "no setpoint[3] (mixer throttle) in the log; use --throttle rccommand",
+                source=source,
+                field="setpoint[3]",
+            )
         throttle = df["setpoint[3]"].to_numpy(float) / 1000.0
     else:
         if "rcCommand[3]" not in df:
@@ -117,16 +140,39 @@ def load_mixer_log(path, index: int, throttle_source: str = "setpoint",
     features = int(headers.get("features") or 0)
     motors = df[motor_cols].to_numpy(float)
     t = df["time"].to_numpy(float) * 1e-6 if "time" in df else np.arange(len(df), dtype=float)
-    ok = np.all(np.isfinite(motors), axis=1) & np.all(np.isfinite(sums), axis=1) \
-        & np.isfinite(throttle) & np.isfinite(t)
-    return MixerLog(source=source, index=index, t=t[ok], pid_sums=sums[ok],
-                    throttle=throttle[ok], motors=motors[ok], low=low, high=high,
-                    pidsum_limit=float(headers.get("pidsum_limit") or 500),
-                    pidsum_limit_yaw=float(headers.get("pidsum_limit_yaw") or 400),
-                    airmode_feature=bool(features & FEATURE_AIRMODE),
-                    yaw_reversed=bool(int(headers.get("yaw_motors_reversed") or 0)),
-                    header={k: headers.get(k) for k in (
-                        "Firmware revision", "Craft name", "motorOutput", "dshot_idle_value",
-                        "pidsum_limit", "pidsum_limit_yaw", "features", "motor_pwm_protocol",
-                        "airmode_activate_throttle") if k in headers},
-                    missing_terms=missing)
+    ok = (
+        np.all(np.isfinite(motors), axis=1)
+        & np.all(np.isfinite(sums), axis=1)
+        & np.isfinite(throttle)
+        & np.isfinite(t)
+    )
+    return MixerLog(
+        source=source,
+        index=index,
+        t=t[ok],
+        pid_sums=sums[ok],
+        throttle=throttle[ok],
+        motors=motors[ok],
+        low=low,
+        high=high,
+        pidsum_limit=float(headers.get("pidsum_limit") or 500),
+        pidsum_limit_yaw=float(headers.get("pidsum_limit_yaw") or 400),
+        airmode_feature=bool(features & FEATURE_AIRMODE),
+        yaw_reversed=bool(int(headers.get("yaw_motors_reversed") or 0)),
+        header={
+            k: headers.get(k)
+            for k in (
+                "Firmware revision",
+                "Craft name",
+                "motorOutput",
+                "dshot_idle_value",
+                "pidsum_limit",
+                "pidsum_limit_yaw",
+                "features",
+                "motor_pwm_protocol",
+                "airmode_activate_throttle",
+            )
+            if k in headers
+        },
+        missing_terms=missing,
+    )

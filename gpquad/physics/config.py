@@ -26,35 +26,35 @@ from gpquad.study.config_tables import read_toml
 class TruthConfig:
     vehicle: str = "hummingbird"
     dt: float = 0.01
-    side: float = 4.0          # leg of the L/U/square paths, m
-    speed: float = 3.0         # rotorpy MinSnap average speed, m/s
-    cache: str = "results/physics_flights"   # "" for no cache
+    side: float = 4.0  # leg of the L/U/square paths, m
+    speed: float = 3.0  # rotorpy MinSnap average speed, m/s
+    cache: str = "results/physics_flights"  # "" for no cache
 
 
 @dataclass(frozen=True)
 class RegressionConfig:
     method: str = "ols"
-    smoothing_window: int = 1        # causal moving average on the accelerometer, samples
+    smoothing_window: int = 1  # causal moving average on the accelerometer, samples
     validation_fraction: float = 0.3  # last part of each identification flight
     parasitic_drag: bool = True
-    drag_intercept: bool = False     # also fit a constant per axis (residual accelerometer bias)
+    drag_intercept: bool = False  # also fit a constant per axis (residual accelerometer bias)
     wls_window: int = 25
 
 
 @dataclass(frozen=True)
 class ThrustConfig:
-    hover: str = "hover"              # simulated truth: the manoeuvres flown
+    hover: str = "hover"  # simulated truth: the manoeuvres flown
     forward: str = "forward"
-    hover_max_speed: float = 0.5      # log: hover samples are slower than this (m/s) ...
-    hover_max_rate: float = 1.0       # ... and turn slower than this (rad/s)
-    min_height: float = 0.0           # log with position: fit only this high above the
+    hover_max_speed: float = 0.5  # log: hover samples are slower than this (m/s) ...
+    hover_max_rate: float = 1.0  # ... and turn slower than this (rad/s)
+    min_height: float = 0.0  # log with position: fit only this high above the
     #                                   segment's lowest point (m; drops ground contact)
 
 
 @dataclass(frozen=True)
 class VehicleConfig:
-    mass: float = 0.0                 # kg; required for a log
-    motor_pole_pairs: int = 0         # eRPM -> RPM; 0: from the log header (Betaflight)
+    mass: float = 0.0  # kg; required for a log
+    motor_pole_pairs: int = 0  # eRPM -> RPM; 0: from the log header (Betaflight)
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class DragConfig:
 class DeadReckonConfig:
     manoeuvres: tuple = ("L", "U", "square")
     yaw: tuple = (True, False)
-    window_s: float = 0.0      # log: dead-reckon windows of this length (0: whole segments)
+    window_s: float = 0.0  # log: dead-reckon windows of this length (0: whole segments)
 
 
 @dataclass(frozen=True)
@@ -80,12 +80,12 @@ class PhysicsConfig:
     drag: DragConfig = field(default_factory=DragConfig)
     deadreckon: DeadReckonConfig = field(default_factory=DeadReckonConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
-    data: dict = field(default_factory=dict)   # the [data] table as written
+    data: dict = field(default_factory=dict)  # the [data] table as written
     base_dir: str = "."
 
     @property
     def source(self) -> str:
-        """"log" when [data] lists files, else "truth" (rotorpy)."""
+        """ "log" when [data] lists files, else "truth" (rotorpy)."""
         return "log" if self.data.get("files") else "truth"
 
     def to_dict(self) -> dict:
@@ -106,9 +106,15 @@ class PhysicsConfig:
         return [(Path(self.base_dir) / f).resolve() for f in self.data.get("files", ())]
 
 
-SECTIONS = {"truth": TruthConfig, "noise": SensorNoise, "regression": RegressionConfig,
-            "thrust": ThrustConfig, "drag": DragConfig, "deadreckon": DeadReckonConfig,
-            "vehicle": VehicleConfig}
+SECTIONS = {
+    "truth": TruthConfig,
+    "noise": SensorNoise,
+    "regression": RegressionConfig,
+    "thrust": ThrustConfig,
+    "drag": DragConfig,
+    "deadreckon": DeadReckonConfig,
+    "vehicle": VehicleConfig,
+}
 
 
 def _section(cls, raw: dict, name: str, source: str):
@@ -116,8 +122,9 @@ def _section(cls, raw: dict, name: str, source: str):
     kwargs = {}
     for key, value in raw.items():
         if key not in names:
-            raise GpquadError(f"unknown key; known: {sorted(names)}", source=source,
-                              field=f"{name}.{key}")
+            raise GpquadError(
+                f"unknown key; known: {sorted(names)}", source=source, field=f"{name}.{key}"
+            )
         default = getattr(cls(), key)
         if isinstance(default, tuple):
             if not isinstance(value, list):
@@ -127,8 +134,9 @@ def _section(cls, raw: dict, name: str, source: str):
             if not isinstance(value, bool):
                 raise GpquadError("must be true or false", source=source, field=f"{name}.{key}")
         elif isinstance(default, (int, float)) and not isinstance(value, (int, float)):
-            raise GpquadError(f"must be a number, not {value!r}", source=source,
-                              field=f"{name}.{key}")
+            raise GpquadError(
+                f"must be a number, not {value!r}", source=source, field=f"{name}.{key}"
+            )
         kwargs[key] = value
     return cls(**kwargs)
 
@@ -157,8 +165,7 @@ def _check(cfg: PhysicsConfig, source: str) -> None:
     for key, value in dataclasses.asdict(cfg.noise).items():
         if value < 0:
             bad(f"noise.{key}", "must be >= 0")
-    for fl in (cfg.thrust.hover, cfg.thrust.forward, *cfg.drag.flights,
-               *cfg.deadreckon.manoeuvres):
+    for fl in (cfg.thrust.hover, cfg.thrust.forward, *cfg.drag.flights, *cfg.deadreckon.manoeuvres):
         if fl not in MANOEUVRES:
             bad("deadreckon.manoeuvres", f"unknown manoeuvre '{fl}'; use {MANOEUVRES}")
     if not all(isinstance(y, bool) for y in cfg.deadreckon.yaw):
@@ -171,25 +178,38 @@ def _check_log(cfg: PhysicsConfig, source: str) -> None:
 
     v = cfg.vehicle
     if not v.mass > 0:
-        raise GpquadError("the vehicle's mass in kg is needed to turn specific force into "
-                          "thrust (m f_z = k_t sum w^2); set [vehicle] mass = ...",
-                          source=source, field="vehicle.mass")
+        raise GpquadError(
+            "the vehicle's mass in kg is needed to turn specific force into "
+            "thrust (m f_z = k_t sum w^2); set [vehicle] mass = ...",
+            source=source,
+            field="vehicle.mass",
+        )
     if not isinstance(v.motor_pole_pairs, int) or v.motor_pole_pairs < 0:
-        raise GpquadError("an integer >= 0 (0: from the log header)", source=source,
-                          field="vehicle.motor_pole_pairs")
+        raise GpquadError(
+            "an integer >= 0 (0: from the log header)",
+            source=source,
+            field="vehicle.motor_pole_pairs",
+        )
     for name in ("hover_max_speed", "hover_max_rate"):
         if not getattr(cfg.thrust, name) > 0:
             raise GpquadError("must be > 0", source=source, field=f"thrust.{name}")
     if cfg.thrust.min_height < 0:
-        raise GpquadError("must be >= 0 m (0: keep every in-flight sample)", source=source,
-                          field="thrust.min_height")
+        raise GpquadError(
+            "must be >= 0 m (0: keep every in-flight sample)",
+            source=source,
+            field="thrust.min_height",
+        )
     if cfg.deadreckon.window_s < 0:
-        raise GpquadError("must be >= 0 (0: whole segments)", source=source,
-                          field="deadreckon.window_s")
+        raise GpquadError(
+            "must be >= 0 (0: whole segments)", source=source, field="deadreckon.window_s"
+        )
     data = cfg.data_config(source)
     if data.format not in FORMATS:
-        raise GpquadError(f"no motor-speed reader for format '{data.format}'; use one of "
-                          f"{list(FORMATS)}", source=source, field="data.format")
+        raise GpquadError(
+            f"no motor-speed reader for format '{data.format}'; use one of {list(FORMATS)}",
+            source=source,
+            field="data.format",
+        )
 
 
 def load_physics_config(path) -> PhysicsConfig:
@@ -208,17 +228,26 @@ def load_physics_config(path) -> PhysicsConfig:
         elif key in ("name", "seed"):
             top[key] = value
         else:
-            raise GpquadError(f"unknown key; known: name, seed, data, {sorted(SECTIONS)}",
-                              source=str(path), field=key)
+            raise GpquadError(
+                f"unknown key; known: name, seed, data, {sorted(SECTIONS)}",
+                source=str(path),
+                field=key,
+            )
     if not isinstance(top.get("seed", 1), int):
         raise GpquadError("must be an integer", source=str(path), field="seed")
     if top.get("data", {}).get("files") and "truth" in top:
-        raise GpquadError("[data] files and [truth] name two sources of flights; keep one",
-                          source=str(path), field="truth")
+        raise GpquadError(
+            "[data] files and [truth] name two sources of flights; keep one",
+            source=str(path),
+            field="truth",
+        )
     if "vehicle" in top and not top.get("data", {}).get("files"):
-        raise GpquadError("[vehicle] describes a logged vehicle but [data] lists no files; "
-                          "the simulated truth takes its vehicle from [truth] vehicle",
-                          source=str(path), field="vehicle")
+        raise GpquadError(
+            "[vehicle] describes a logged vehicle but [data] lists no files; "
+            "the simulated truth takes its vehicle from [truth] vehicle",
+            source=str(path),
+            field="vehicle",
+        )
     cfg = PhysicsConfig(**top, base_dir=str(path.resolve().parent))
     _check(cfg, str(path))
     return cfg

@@ -25,8 +25,9 @@ MODELS = ("accelerometer", "base", "refined", "coriolis")
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
-def _specific_force(model: str, V: np.ndarray, rotor: np.ndarray, f_meas_z: float,
-                    coef: dict, mass: float) -> np.ndarray:
+def _specific_force(
+    model: str, V: np.ndarray, rotor: np.ndarray, f_meas_z: float, coef: dict, mass: float
+) -> np.ndarray:
     fxy = drag_specific_force(coef["drag"], rotor, V)
     if model == "accelerometer":
         fz = f_meas_z
@@ -37,8 +38,9 @@ def _specific_force(model: str, V: np.ndarray, rotor: np.ndarray, f_meas_z: floa
     return np.array([fxy[0], fxy[1], fz])
 
 
-def integrate(model: str, meas: dict, coef: dict, mass: float, start: int = 0,
-              stop: int | None = None) -> np.ndarray:
+def integrate(
+    model: str, meas: dict, coef: dict, mass: float, start: int = 0, stop: int | None = None
+) -> np.ndarray:
     """Positions (n, 3) from `start` to `stop` (exclusive) estimated by one model.
 
     meas: t, pos, vel (world), rot (N, 3, 3), rotor, force (measured specific force).
@@ -67,8 +69,9 @@ def position_rmse(estimate: np.ndarray, truth: np.ndarray) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean((estimate - truth) ** 2, axis=0))]
 
 
-def compare_models(meas: dict, coef: dict, mass: float, start: int = 0,
-                   stop: int | None = None) -> dict:
+def compare_models(
+    meas: dict, coef: dict, mass: float, start: int = 0, stop: int | None = None
+) -> dict:
     """Tracks and per-axis RMSE of the four models over one window."""
     stop = len(meas["t"]) if stop is None else stop
     truth = meas["pos"][start:stop]

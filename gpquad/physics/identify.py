@@ -29,11 +29,16 @@ def load_flight(cfg: PhysicsConfig, manoeuvre: str, yaw: bool = False) -> dict:
     if tc.cache:
         cache = Path(tc.cache)
         cache = cache if cache.is_absolute() else Path.cwd() / cache
-    spec = {"manoeuvre": manoeuvre, "side": tc.side, "speed": tc.speed, "yaw": yaw,
-            "vehicle": tc.vehicle, "dt": tc.dt}
+    spec = {
+        "manoeuvre": manoeuvre,
+        "side": tc.side,
+        "speed": tc.speed,
+        "yaw": yaw,
+        "vehicle": tc.vehicle,
+        "dt": tc.dt,
+    }
     flight = cached_flight(spec, cache)
-    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed,
-                                                        flight_number(manoeuvre, yaw)]))
+    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, flight_number(manoeuvre, yaw)]))
     meas = measure(flight, cfg.noise, rng)
     if cfg.regression.smoothing_window > 1:
         meas["force"] = causal_moving_average(meas["force"], cfg.regression.smoothing_window)
@@ -50,8 +55,15 @@ def _fit_thrust(meas: dict, model: str, cfg: PhysicsConfig, mass: float) -> dict
     X = thrust_regressors(model, meas["rotor"], meas["vel_body"])
     y = mass * meas["force"][:, 2]
     tr, va = split(len(y), cfg.regression.validation_fraction)
-    res = fit(X[tr], y[tr], THRUST_MODELS[model], cfg.regression.method, X_val=X[va],
-              y_val=y[va], window=cfg.regression.wls_window)
+    res = fit(
+        X[tr],
+        y[tr],
+        THRUST_MODELS[model],
+        cfg.regression.method,
+        X_val=X[va],
+        y_val=y[va],
+        window=cfg.regression.wls_window,
+    )
     res["flight"] = meas["name"]
     return res
 
@@ -79,7 +91,9 @@ def identify_thrust(cfg: PhysicsConfig) -> dict:
     from gpquad.physics.regression import r_squared
 
     out["hover_fit_on_forward_validation"] = {
-        "r2": r_squared(yf[va], pf[va]), "rmse": float(np.sqrt(np.mean((yf[va] - pf[va]) ** 2)))}
+        "r2": r_squared(yf[va], pf[va]),
+        "rmse": float(np.sqrt(np.mean((yf[va] - pf[va]) ** 2))),
+    }
     for res in out["fits"].values():
         res["relative_error"] = {n: _rel(c, truth[n]) for n, c in zip(res["names"], res["coef"])}
     ref, std = out["fits"]["refined_forward"], out["fits"]["standard_forward"]
@@ -92,8 +106,11 @@ def identify_drag(cfg: PhysicsConfig) -> dict:
     """k_dx, k_dy of eq. (18) pooled over the drag flights, with and without parasitic drag."""
     truth = true_coefficients(vehicle_params(cfg.truth.vehicle))
     flights = [load_flight(cfg, name) for name in cfg.drag.flights]
-    out = {"truth": {k: truth[k] for k in ("k_dx", "k_dy", "c_dx", "c_dy")}, "fits": {},
-           "flights": [f["name"] for f in flights]}
+    out = {
+        "truth": {k: truth[k] for k in ("k_dx", "k_dy", "c_dx", "c_dy")},
+        "fits": {},
+        "flights": [f["name"] for f in flights],
+    }
     variants = [False, True] if cfg.regression.parasitic_drag else [False]
     for axis in (0, 1):
         for parasitic in variants:
@@ -109,29 +126,40 @@ def identify_drag(cfg: PhysicsConfig) -> dict:
                 ys.append(y[tr])
                 Xv.append(X[va])
                 yv.append(y[va])
-            res = fit(np.vstack(Xs), np.concatenate(ys), names, cfg.regression.method,
-                      X_val=np.vstack(Xv), y_val=np.concatenate(yv),
-                      window=cfg.regression.wls_window)
-            res["relative_error"] = {n: _rel(c, truth[n]) for n, c in zip(names, res["coef"])
-                                     if n in truth}
+            res = fit(
+                np.vstack(Xs),
+                np.concatenate(ys),
+                names,
+                cfg.regression.method,
+                X_val=np.vstack(Xv),
+                y_val=np.concatenate(yv),
+                window=cfg.regression.wls_window,
+            )
+            res["relative_error"] = {
+                n: _rel(c, truth[n]) for n, c in zip(names, res["coef"]) if n in truth
+            }
             key = f"{'xy'[axis]}{'_parasitic' if parasitic else ''}"
             out["fits"][key] = res
             if res["coef"][0] >= 0:
                 out.setdefault("warnings", []).append(
                     f"{key}: {names[0]} = {res['coef'][0]:.3g} is not negative (drag must "
                     f"oppose the velocity); the flights {out['flights']} barely move along "
-                    f"{'xy'[axis]}")
+                    f"{'xy'[axis]}"
+                )
     out["_series"] = {"flights": flights}
     return out
 
 
 def coefficients(thrust: dict, drag: dict, parasitic: bool) -> dict:
     """Named coefficients for dead reckoning from the identification results."""
+
     def named(res):
         return dict(zip(res["names"], res["coef"]))
 
     fits = drag["fits"]
     use = "_parasitic" if parasitic and "x_parasitic" in fits else ""
-    return {"standard": named(thrust["fits"]["standard_hover"]),
-            "refined": named(thrust["fits"]["refined_forward"]),
-            "drag": {**named(fits[f"x{use}"]), **named(fits[f"y{use}"])}}
+    return {
+        "standard": named(thrust["fits"]["standard_hover"]),
+        "refined": named(thrust["fits"]["refined_forward"]),
+        "drag": {**named(fits[f"x{use}"]), **named(fits[f"y{use}"])},
+    }

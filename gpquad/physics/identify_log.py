@@ -41,12 +41,21 @@ def _pooled(segs, masks, build, fraction: float):
 
 def _fit_pooled(p: dict, names, cfg, what: str, source: str, fix: str) -> dict:
     if len(p["ytr"]) < MIN_SAMPLES:
-        raise GpquadError(f"{len(p['ytr'])} training samples for the {what} fit; {fix}",
-                          source=source, field="thrust")
+        raise GpquadError(
+            f"{len(p['ytr'])} training samples for the {what} fit; {fix}",
+            source=source,
+            field="thrust",
+        )
     has_val = len(p["yva"]) >= 2
-    res = fit(p["Xtr"], p["ytr"], names, cfg.regression.method,
-              X_val=p["Xva"] if has_val else None, y_val=p["yva"] if has_val else None,
-              window=cfg.regression.wls_window)
+    res = fit(
+        p["Xtr"],
+        p["ytr"],
+        names,
+        cfg.regression.method,
+        X_val=p["Xva"] if has_val else None,
+        y_val=p["yva"] if has_val else None,
+        window=cfg.regression.wls_window,
+    )
     res["relative_error"] = {}
     if not has_val:
         res["r2_val"] = res["rmse_val"] = float("nan")
@@ -64,37 +73,54 @@ def identify_thrust_log(cfg, segs: list[dict]) -> dict:
         def make(seg):
             vel = seg.get("vel_body", np.zeros((len(seg["t"]), 3)))
             return thrust_regressors(model, seg["rotor"], vel), mass * seg["force"][:, 2]
+
         return make
 
     every = [s["airborne"] for s in segs]
     hover = _pooled(segs, [s["hover"] for s in segs], build("standard"), frac)
-    fits = {"standard_hover": _fit_pooled(
-        hover, THRUST_MODELS["standard"], cfg, "hover thrust", source,
-        f"the log has few near-hover samples (speed < {cfg.thrust.hover_max_speed:g} m/s, "
-        f"rate < {cfg.thrust.hover_max_rate:g} rad/s); raise thrust.hover_max_speed or "
-        "hover_max_rate")}
+    fits = {
+        "standard_hover": _fit_pooled(
+            hover,
+            THRUST_MODELS["standard"],
+            cfg,
+            "hover thrust",
+            source,
+            f"the log has few near-hover samples (speed < {cfg.thrust.hover_max_speed:g} m/s, "
+            f"rate < {cfg.thrust.hover_max_rate:g} rad/s); raise thrust.hover_max_speed or "
+            "hover_max_rate",
+        )
+    }
     forward = _pooled(segs, every, build("standard"), frac)
-    fits["standard_forward"] = _fit_pooled(forward, THRUST_MODELS["standard"], cfg,
-                                           "forward thrust", source, "log a longer flight")
-    out = {"source": "log", "mass": mass, "truth": {}, "fits": fits,
-           "velocity_measured": has_vel}
+    fits["standard_forward"] = _fit_pooled(
+        forward, THRUST_MODELS["standard"], cfg, "forward thrust", source, "log a longer flight"
+    )
+    out = {"source": "log", "mass": mass, "truth": {}, "fits": fits, "velocity_measured": has_vel}
     pf = predict(fits["standard_hover"], forward["Xva"])
     out["hover_fit_on_forward_validation"] = {
         "r2": r_squared(forward["yva"], pf) if len(pf) > 1 else float("nan"),
-        "rmse": float(np.sqrt(np.mean((forward["yva"] - pf) ** 2))) if len(pf) else float("nan")}
-    series = {"hover": hover, "forward": forward, "mass": mass,
-              "preds": {"standard": predict(fits["standard_forward"], forward["Xva"])}}
+        "rmse": float(np.sqrt(np.mean((forward["yva"] - pf) ** 2))) if len(pf) else float("nan"),
+    }
+    series = {
+        "hover": hover,
+        "forward": forward,
+        "mass": mass,
+        "preds": {"standard": predict(fits["standard_forward"], forward["Xva"])},
+    }
     if has_vel:
         refined = _pooled(segs, every, build("refined"), frac)
-        fits["refined_forward"] = _fit_pooled(refined, THRUST_MODELS["refined"], cfg,
-                                              "refined thrust", source, "log a longer flight")
-        out["refined_beats_standard"] = bool(fits["refined_forward"]["rmse_val"]
-                                             < fits["standard_forward"]["rmse_val"])
+        fits["refined_forward"] = _fit_pooled(
+            refined, THRUST_MODELS["refined"], cfg, "refined thrust", source, "log a longer flight"
+        )
+        out["refined_beats_standard"] = bool(
+            fits["refined_forward"]["rmse_val"] < fits["standard_forward"]["rmse_val"]
+        )
         series["preds"]["refined"] = predict(fits["refined_forward"], refined["Xva"])
     else:
         out["refined_beats_standard"] = None
-        out["notes"] = ["no measured velocity: the refined thrust (eq. 19) needs u, v, w; "
-                        "only the standard model (eq. 5) is fitted"]
+        out["notes"] = [
+            "no measured velocity: the refined thrust (eq. 19) needs u, v, w; "
+            "only the standard model (eq. 5) is fitted"
+        ]
     out["_series"] = series
     return out
 
@@ -112,13 +138,19 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
     """k_dx, k_dy of eq. (18) pooled over the segments, with and without parasitic drag."""
     frac = cfg.regression.validation_fraction
     source = segs[0]["source"]
-    out = {"source": "log", "mass": cfg.vehicle.mass, "truth": {}, "fits": {},
-           "flights": [s["name"] for s in segs]}
+    out = {
+        "source": "log",
+        "mass": cfg.vehicle.mass,
+        "truth": {},
+        "fits": {},
+        "flights": [s["name"] for s in segs],
+    }
     every = [s["airborne"] for s in segs]
     variants = [False, True] if cfg.regression.parasitic_drag else [False]
     series = {}
     for axis in (0, 1):
         for parasitic in variants:
+
             def make(seg, axis=axis, parasitic=parasitic):
                 X, _ = _drag_design(seg, axis, parasitic, cfg.regression.drag_intercept)
                 return X, seg["force"][:, axis]
@@ -135,11 +167,13 @@ def identify_drag_log(cfg, segs: list[dict]) -> dict:
                 if not abs(se) < 0.5 * abs(c):
                     out.setdefault("warnings", []).append(
                         f"{key}: {name} = {c:.3g} +- {se:.2g} is not identified: the "
-                        f"training parts barely move along {'xy'[axis]}")
+                        f"training parts barely move along {'xy'[axis]}"
+                    )
                 elif c >= 0:
                     out.setdefault("warnings", []).append(
                         f"{key}: {name} = {c:.3g} is not negative (drag must oppose the "
-                        f"velocity); the log barely moves along {'xy'[axis]}")
+                        f"velocity); the log barely moves along {'xy'[axis]}"
+                    )
     out["_series"] = series
     return out
 

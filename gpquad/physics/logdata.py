@@ -29,10 +29,18 @@ from gpquad.physics.sync import causal_moving_average
 G = 9.81
 C_WORLD = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 C_BODY = np.diag([1.0, -1.0, -1.0])
-SHORT = {"rotor": "motor speeds", "acc": "accelerometer", "vel": "measured velocity",
-         "pos": "measured position"}
-NEEDS = {"rotor": "the four rotor speeds", "acc": "the accelerometer (body specific force)",
-         "vel": "a measured velocity", "pos": "a measured position (motion capture or GPS)"}
+SHORT = {
+    "rotor": "motor speeds",
+    "acc": "accelerometer",
+    "vel": "measured velocity",
+    "pos": "measured position",
+}
+NEEDS = {
+    "rotor": "the four rotor speeds",
+    "acc": "the accelerometer (body specific force)",
+    "vel": "a measured velocity",
+    "pos": "a measured position (motion capture or GPS)",
+}
 #: Hover level of |specific force| (m/s^2) accepted as m/s^2; about 1 is a log in g.
 LEVEL_RANGE = (6.0, 15.0)
 
@@ -43,9 +51,12 @@ def require(logs, needs: tuple[str, ...], command: str) -> None:
         for log in logs:
             if getattr(log, key) is None:
                 what = log.missing.get(key, key)
-                raise GpquadError(f"no {SHORT[key]} in the log ({what}); "
-                                  f"physics {command} needs {_needs_text(needs)}",
-                                  source=log.source, field=key)
+                raise GpquadError(
+                    f"no {SHORT[key]} in the log ({what}); "
+                    f"physics {command} needs {_needs_text(needs)}",
+                    source=log.source,
+                    field=key,
+                )
 
 
 def _needs_text(needs) -> str:
@@ -66,6 +77,7 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
             ok &= np.all(np.isfinite(arr), axis=1)
     rate = 1.0 / float(np.median(np.diff(log.t)))
     need = max(int(round(data.min_segment_s * rate)), 2 * smoothing_window, 20)
+
     def smooth(x):
         return causal_moving_average(x, smoothing_window) if smoothing_window > 1 else x
 
@@ -75,8 +87,13 @@ def physics_segments(log, data, smoothing_window: int) -> list[dict]:
             continue
         q = log.quat[a:b]
         rot = C_WORLD @ Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix() @ C_BODY
-        seg = {"name": f"{log.name}@{log.t[a] - log.t[0]:.1f}s", "source": log.source,
-               "t": log.t[a:b] - log.t[a], "t0": float(log.t[a]), "rot": rot}
+        seg = {
+            "name": f"{log.name}@{log.t[a] - log.t[0]:.1f}s",
+            "source": log.source,
+            "t": log.t[a:b] - log.t[a],
+            "t0": float(log.t[a]),
+            "rot": rot,
+        }
         if log.rotor is not None:
             seg["rotor"] = smooth(log.rotor[a:b])
         if log.acc is not None:
@@ -128,20 +145,31 @@ def check_levels(segs: list[dict], masks: list[np.ndarray], data) -> str:
     source = segs[0]["source"]
     level = float(np.median(np.linalg.norm(f, axis=1)))
     if 0.5 < level < 2.0:
-        raise GpquadError(f"the accelerometer reads {level:.3f} in hover, about 1: it is in g, "
-                          "not m/s^2; multiply it by 9.81 (specific force in m/s^2 is needed)",
-                          source=source, field="acc_z")
+        raise GpquadError(
+            f"the accelerometer reads {level:.3f} in hover, about 1: it is in g, "
+            "not m/s^2; multiply it by 9.81 (specific force in m/s^2 is needed)",
+            source=source,
+            field="acc_z",
+        )
     if not LEVEL_RANGE[0] < level < LEVEL_RANGE[1]:
-        raise GpquadError(f"the accelerometer reads {level:.3g} in hover, not about 9.81 m/s^2; "
-                          "give the body specific force in m/s^2", source=source, field="acc_z")
+        raise GpquadError(
+            f"the accelerometer reads {level:.3g} in hover, not about 9.81 m/s^2; "
+            "give the body specific force in m/s^2",
+            source=source,
+            field="acc_z",
+        )
     body_z = float(np.median(f[:, 2]))
     world_z = float(np.median(np.einsum("nij,nj->ni", rot, f)[:, 2]))
     if body_z < 0 or world_z < 0:
         which = "body z axis" if body_z < 0 else "world vertical (attitude)"
-        raise GpquadError(f"in hover the specific force points down along the {which} "
-                          f"(body {body_z:+.2f}, world {world_z:+.2f} m/s^2, expected about "
-                          f"+9.81 up): data.frame = '{data.frame}' does not match the log's "
-                          "axes", source=source, field="data.frame")
+        raise GpquadError(
+            f"in hover the specific force points down along the {which} "
+            f"(body {body_z:+.2f}, world {world_z:+.2f} m/s^2, expected about "
+            f"+9.81 up): data.frame = '{data.frame}' does not match the log's "
+            "axes",
+            source=source,
+            field="data.frame",
+        )
     return note
 
 
@@ -159,20 +187,35 @@ def load_log_segments(cfg, needs: tuple[str, ...], command: str) -> tuple[list[d
         segs.extend(physics_segments(log, data, cfg.regression.smoothing_window))
     if not segs:
         total = sum(float(np.sum(lg.valid & lg.in_flight)) / max(len(lg.t), 1) for lg in logs)
-        raise GpquadError(f"no valid in-flight segment of at least {data.min_segment_s:g} s "
-                          f"(mean in-flight valid fraction {total / len(logs):.0%}); lower "
-                          "data.min_segment_s or check the segmentation", source=logs[0].source,
-                          field="data.min_segment_s")
+        raise GpquadError(
+            f"no valid in-flight segment of at least {data.min_segment_s:g} s "
+            f"(mean in-flight valid fraction {total / len(logs):.0%}); lower "
+            "data.min_segment_s or check the segmentation",
+            source=logs[0].source,
+            field="data.min_segment_s",
+        )
     for s in segs:
         s["airborne"] = airborne_mask(s, cfg.thrust.min_height)
-    masks = [hover_mask(s, cfg.thrust.hover_max_speed, cfg.thrust.hover_max_rate)
-             & s["airborne"] for s in segs]
+    masks = [
+        hover_mask(s, cfg.thrust.hover_max_speed, cfg.thrust.hover_max_rate) & s["airborne"]
+        for s in segs
+    ]
     note = check_levels(segs, masks, data)
     for s, m in zip(segs, masks):
         s["hover"] = m
     notes = [note] + [n for lg in logs for n in lg.notes]
-    return segs, {"files": [str(p) for p in cfg.data_paths()], "format": data.format,
-                  "frame": data.frame, "notes": notes,
-                  "segments": [{"name": s["name"], "duration_s": float(s["t"][-1]),
-                                "hover_samples": int(s["hover"].sum()),
-                                "airborne_samples": int(s["airborne"].sum())} for s in segs]}
+    return segs, {
+        "files": [str(p) for p in cfg.data_paths()],
+        "format": data.format,
+        "frame": data.frame,
+        "notes": notes,
+        "segments": [
+            {
+                "name": s["name"],
+                "duration_s": float(s["t"][-1]),
+                "hover_samples": int(s["hover"].sum()),
+                "airborne_samples": int(s["airborne"].sum()),
+            }
+            for s in segs
+        ],
+    }

@@ -24,21 +24,31 @@ DSHOT_MIN, DSHOT_MAX = 48, 2047
 
 # columns: throttle, roll, pitch, yaw (Betaflight mixerQuadX; the thesis's Table I)
 LAYOUTS = {
-    "quadx": np.array([[1.0, -1.0, 1.0, -1.0],    # motor 1, rear right
-                       [1.0, -1.0, -1.0, 1.0],    # motor 2, front right
-                       [1.0, 1.0, 1.0, 1.0],      # motor 3, rear left
-                       [1.0, 1.0, -1.0, -1.0]]),  # motor 4, front left
+    "quadx": np.array(
+        [
+            [1.0, -1.0, 1.0, -1.0],  # motor 1, rear right
+            [1.0, -1.0, -1.0, 1.0],  # motor 2, front right
+            [1.0, 1.0, 1.0, 1.0],  # motor 3, rear left
+            [1.0, 1.0, -1.0, -1.0],
+        ]
+    ),  # motor 4, front left
 }
 
 
-def idle_value(idle_fraction: float, cmd_min: float = DSHOT_MIN,
-               cmd_max: float = DSHOT_MAX) -> float:
+def idle_value(
+    idle_fraction: float, cmd_min: float = DSHOT_MIN, cmd_max: float = DSHOT_MAX
+) -> float:
     """Idle DShot command, eq. (15): cmd_min + idle% (cmd_max - cmd_min); 5.5 % gives 158."""
     return cmd_min + idle_fraction * (cmd_max - cmd_min)
 
 
-def rate_mix(pid_sums: np.ndarray, mixer: np.ndarray, pidsum_limit: float,
-             pidsum_limit_yaw: float, yaw_reversed: bool = False) -> np.ndarray:
+def rate_mix(
+    pid_sums: np.ndarray,
+    mixer: np.ndarray,
+    pidsum_limit: float,
+    pidsum_limit_yaw: float,
+    yaw_reversed: bool = False,
+) -> np.ndarray:
     """Rate mix M (N, motors) from PID sums (N, 3: roll, pitch, yaw), eq. (13)."""
     limits = np.array([pidsum_limit, pidsum_limit, pidsum_limit_yaw], dtype=float)
     scaled = np.clip(pid_sums, -limits, limits) / PID_MIXER_SCALING
@@ -47,8 +57,9 @@ def rate_mix(pid_sums: np.ndarray, mixer: np.ndarray, pidsum_limit: float,
     return scaled @ mixer[:, 1:4].T
 
 
-def motor_commands(mix: np.ndarray, throttle: np.ndarray, mixer: np.ndarray,
-                   airmode: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def motor_commands(
+    mix: np.ndarray, throttle: np.ndarray, mixer: np.ndarray, airmode: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Motor commands M_cmd (N, motors) in [0, 1] units (eq. 14, not yet clipped) and the
     per-sample flag 'the rate mix did not fit' (range > 1: Betaflight scales it down)."""
     mix_max = np.maximum(mix.max(axis=1), 0.0)
@@ -83,10 +94,18 @@ def dshot_output(commands: np.ndarray, low: float, high: float) -> np.ndarray:
     return np.trunc(out)
 
 
-def predict_motors(pid_sums: np.ndarray, throttle: np.ndarray, *, mixer: np.ndarray,
-                   low: float, high: float, pidsum_limit: float, pidsum_limit_yaw: float,
-                   airmode: bool = True, yaw_reversed: bool = False
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def predict_motors(
+    pid_sums: np.ndarray,
+    throttle: np.ndarray,
+    *,
+    mixer: np.ndarray,
+    low: float,
+    high: float,
+    pidsum_limit: float,
+    pidsum_limit_yaw: float,
+    airmode: bool = True,
+    yaw_reversed: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
     """Predicted DShot motor values (N, motors) and the 'mix did not fit' flag (N,)."""
     mix = rate_mix(pid_sums, mixer, pidsum_limit, pidsum_limit_yaw, yaw_reversed)
     cmd, over = motor_commands(mix, throttle, mixer, airmode)

@@ -39,13 +39,17 @@ def output_range(log: MixerLog) -> tuple[float, float, str]:
     idle = log.header.get("dshot_idle_value")
     proto = log.header.get("motor_pwm_protocol")
     if idle is not None and proto in DSHOT_PROTOCOLS:
-        return idle_value(float(idle) / 10000.0), float(DSHOT_MAX), \
-            f"eq. (15): 48 + {float(idle) / 100:.2f} % x 1999"
+        return (
+            idle_value(float(idle) / 10000.0),
+            float(DSHOT_MAX),
+            f"eq. (15): 48 + {float(idle) / 100:.2f} % x 1999",
+        )
     return log.low, log.high, "header motorOutput"
 
 
-def motor_metrics(pred: np.ndarray, logged: np.ndarray, keep: np.ndarray,
-                  unsaturated: np.ndarray) -> list[dict]:
+def motor_metrics(
+    pred: np.ndarray, logged: np.ndarray, keep: np.ndarray, unsaturated: np.ndarray
+) -> list[dict]:
     """RMSE, R^2 and bias per motor over `keep`, and the RMSE over `keep & unsaturated`."""
     out = []
     for k in range(logged.shape[1]):
@@ -53,17 +57,25 @@ def motor_metrics(pred: np.ndarray, logged: np.ndarray, keep: np.ndarray,
         e = p - y
         sst = float(np.sum((y - y.mean()) ** 2))
         calm = unsaturated[keep]
-        out.append({
-            "rmse": float(np.sqrt(np.mean(e ** 2))),
-            "r2": float(1.0 - np.sum(e ** 2) / sst) if sst > 0 else None,
-            "bias": float(np.mean(e)),
-            "rmse_unsaturated": float(np.sqrt(np.mean(e[calm] ** 2))) if calm.any() else None,
-        })
+        out.append(
+            {
+                "rmse": float(np.sqrt(np.mean(e**2))),
+                "r2": float(1.0 - np.sum(e**2) / sst) if sst > 0 else None,
+                "bias": float(np.mean(e)),
+                "rmse_unsaturated": float(np.sqrt(np.mean(e[calm] ** 2))) if calm.any() else None,
+            }
+        )
     return out
 
 
-def _predict(log: MixerLog, low: float, high: float, airmode: bool, yaw_reversed: bool,
-             thrust_linear: float = 0.0):
+def _predict(
+    log: MixerLog,
+    low: float,
+    high: float,
+    airmode: bool,
+    yaw_reversed: bool,
+    thrust_linear: float = 0.0,
+):
     mixer = LAYOUTS["quadx"]
     mix = rate_mix(log.pid_sums, mixer, log.pidsum_limit, log.pidsum_limit_yaw, yaw_reversed)
     cmd, over = motor_commands(mix, log.throttle, mixer, airmode)
@@ -79,23 +91,29 @@ def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear=0) -> dic
     low, high, low_from = output_range(log)
     armed = np.all(log.motors >= DSHOT_MIN, axis=1)
     if armed.sum() < 2:
-        raise GpquadError(f"only {int(armed.sum())} armed frames (motor values >= "
-                          f"{DSHOT_MIN}); nothing to compare", source=log.source,
-                          field="motor[0]")
+        raise GpquadError(
+            f"only {int(armed.sum())} armed frames (motor values >= "
+            f"{DSHOT_MIN}); nothing to compare",
+            source=log.source,
+            field="motor[0]",
+        )
     at_top = np.any(log.motors >= high - 1, axis=1)
     airmode = log.airmode_feature
     choices = {"auto": (False, True), "yes": (True,), "no": (False,)}
     if yaw_reversed not in choices:
-        raise GpquadError(f"yaw_reversed must be auto, yes or no, not '{yaw_reversed}'",
-                          field="--yaw-reversed")
+        raise GpquadError(
+            f"yaw_reversed must be auto, yes or no, not '{yaw_reversed}'", field="--yaw-reversed"
+        )
     if thrust_linear == "auto":
         linears = range(0, 41)
     else:
         try:
             linears = [float(thrust_linear)]
         except ValueError:
-            raise GpquadError(f"thrust_linear must be auto or a percent, not '{thrust_linear}'",
-                              field="--thrust-linear") from None
+            raise GpquadError(
+                f"thrust_linear must be auto or a percent, not '{thrust_linear}'",
+                field="--thrust-linear",
+            ) from None
         if not 0 <= linears[0] <= 150:
             raise GpquadError("thrust_linear must be in 0..150 %", field="--thrust-linear")
     best = None
@@ -107,36 +125,57 @@ def check_log(log: MixerLog, yaw_reversed: str = "auto", thrust_linear=0) -> dic
                 best = (sse, rev, pred, flag, lin)
     _, rev, pred, flag, lin = best
     saturated = flag | at_top
-    result = {"index": log.index, "source": log.source, "frames": int(len(log.t)),
-              "armed_frames": int(armed.sum()),
-              "duration_s": float(log.t[armed][-1] - log.t[armed][0]),
-              "yaw_reversed": rev, "yaw_reversed_from": "fit" if yaw_reversed == "auto"
-              else "given", "thrust_linear": lin,
-              "thrust_linear_from": "fit" if thrust_linear == "auto" else "given",
-              "airmode_feature": airmode, "low": low, "high": high,
-              "low_from": low_from, "pidsum_limit": log.pidsum_limit,
-              "pidsum_limit_yaw": log.pidsum_limit_yaw, "missing_pid_terms":
-              list(log.missing_terms), "header": log.header}
+    result = {
+        "index": log.index,
+        "source": log.source,
+        "frames": int(len(log.t)),
+        "armed_frames": int(armed.sum()),
+        "duration_s": float(log.t[armed][-1] - log.t[armed][0]),
+        "yaw_reversed": rev,
+        "yaw_reversed_from": "fit" if yaw_reversed == "auto" else "given",
+        "thrust_linear": lin,
+        "thrust_linear_from": "fit" if thrust_linear == "auto" else "given",
+        "airmode_feature": airmode,
+        "low": low,
+        "high": high,
+        "low_from": low_from,
+        "pidsum_limit": log.pidsum_limit,
+        "pidsum_limit_yaw": log.pidsum_limit_yaw,
+        "missing_pid_terms": list(log.missing_terms),
+        "header": log.header,
+    }
     result["motors"] = motor_metrics(pred, log.motors, armed, ~saturated)
     result["saturated_fraction"] = float(saturated[armed].mean())
     other, other_flag = _predict(log, low, high, not airmode, rev, lin)
     key = "without_airmode" if airmode else "with_airmode"
-    result[key] = {"motors": motor_metrics(other, log.motors, armed,
-                                           ~(other_flag | at_top)),
-                   "saturated_fraction": float((other_flag | at_top)[armed].mean())}
+    result[key] = {
+        "motors": motor_metrics(other, log.motors, armed, ~(other_flag | at_top)),
+        "saturated_fraction": float((other_flag | at_top)[armed].mean()),
+    }
     stretches = [(a, b) for a, b in runs_of(saturated & armed)]
     stretches.sort(key=lambda ab: ab[0] - ab[1])
     result["saturated_stretches"] = len(stretches)
     result["longest_saturated_stretches_s"] = [
-        [float(log.t[a]), float(log.t[b - 1])] for a, b in sorted(stretches[:MAX_STRETCHES])]
-    result["_series"] = {"t": log.t, "logged": log.motors, "predicted": pred,
-                         "saturated": saturated, "armed": armed}
+        [float(log.t[a]), float(log.t[b - 1])] for a, b in sorted(stretches[:MAX_STRETCHES])
+    ]
+    result["_series"] = {
+        "t": log.t,
+        "logged": log.motors,
+        "predicted": pred,
+        "saturated": saturated,
+        "armed": armed,
+    }
     return result
 
 
-def check_file(path, log_index: int | None = None, throttle_source: str = "setpoint",
-               yaw_reversed: str = "auto", allow_truncated: bool = False,
-               thrust_linear=0) -> tuple[list[dict], list[str]]:
+def check_file(
+    path,
+    log_index: int | None = None,
+    throttle_source: str = "setpoint",
+    yaw_reversed: str = "auto",
+    allow_truncated: bool = False,
+    thrust_linear=0,
+) -> tuple[list[dict], list[str]]:
     """Every log of a file (or only `log_index`): results and skipped-log reasons.
 
     With a log index, or a file of one log, a bad log is an error (GpquadError). In a file of
@@ -155,6 +194,9 @@ def check_file(path, log_index: int | None = None, throttle_source: str = "setpo
                 raise
             skipped.append(str(exc))
     if not results:
-        raise GpquadError(f"no log with PID and motor fields among {len(indices)}; first "
-                          f"reason: {skipped[0] if skipped else 'none'}", source=str(path))
+        raise GpquadError(
+            f"no log with PID and motor fields among {len(indices)}; first "
+            f"reason: {skipped[0] if skipped else 'none'}",
+            source=str(path),
+        )
     return results, skipped

@@ -31,8 +31,7 @@ def motors_figure(series: dict, title: str, path: Path) -> Path:
     fig, axes = plt.subplots(4, 1, figsize=(11, 8), sharex=True)
     for k, ax in enumerate(axes):
         ax.plot(t[armed], series["logged"][armed, k], lw=0.6, label="logged")
-        ax.plot(t[armed], series["predicted"][armed, k], lw=0.6, label="mixer model",
-                alpha=0.8)
+        ax.plot(t[armed], series["predicted"][armed, k], lw=0.6, label="mixer model", alpha=0.8)
         _shade(ax, t, series["saturated"] & armed)
         ax.set_ylabel(f"motor[{k}] (DShot)")
     axes[0].legend(loc="upper right", fontsize=8)
@@ -44,8 +43,15 @@ def motors_figure(series: dict, title: str, path: Path) -> Path:
     return path
 
 
-def regression_figure(x: np.ndarray, y: np.ndarray, fitted: np.ndarray, xlabel: str,
-                      ylabel: str, title: str, path: Path) -> Path:
+def regression_figure(
+    x: np.ndarray,
+    y: np.ndarray,
+    fitted: np.ndarray,
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    path: Path,
+) -> Path:
     """Measured target against one regressor, with the fitted values."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4.5))
@@ -55,8 +61,9 @@ def regression_figure(x: np.ndarray, y: np.ndarray, fitted: np.ndarray, xlabel: 
     return _finish(plt, fig, ax, xlabel, ylabel, title, path)
 
 
-def series_figure(t: np.ndarray, measured: np.ndarray, predicted: dict, ylabel: str,
-                  title: str, path: Path) -> Path:
+def series_figure(
+    t: np.ndarray, measured: np.ndarray, predicted: dict, ylabel: str, title: str, path: Path
+) -> Path:
     """Measured target over time with the predictions of several fits."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -78,8 +85,9 @@ def _finish(plt, fig, ax, xlabel: str, ylabel: str, title: str, path: Path) -> P
     return path
 
 
-def tracks_figure(t: np.ndarray, truth: np.ndarray, estimates: dict, title: str,
-                  path: Path) -> Path:
+def tracks_figure(
+    t: np.ndarray, truth: np.ndarray, estimates: dict, title: str, path: Path
+) -> Path:
     """Position per axis: ground truth and the dead-reckoning models (thesis Figs. 14-16)."""
     plt = _plt()
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)

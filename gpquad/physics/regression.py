@@ -25,28 +25,35 @@ def r_squared(y: np.ndarray, fitted: np.ndarray) -> float:
 
 def _local_variance(resid: np.ndarray, window: int) -> np.ndarray:
     kernel = np.ones(window) / window
-    var = np.convolve(resid ** 2, kernel, mode="same")
-    return np.maximum(var, 1e-6 * max(float(np.mean(resid ** 2)), 1e-300))
+    var = np.convolve(resid**2, kernel, mode="same")
+    return np.maximum(var, 1e-6 * max(float(np.mean(resid**2)), 1e-300))
 
 
-def fit(X: np.ndarray, y: np.ndarray, names: list[str], method: str = "ols", *,
-        X_val: np.ndarray | None = None, y_val: np.ndarray | None = None,
-        window: int = 25) -> dict:
+def fit(
+    X: np.ndarray,
+    y: np.ndarray,
+    names: list[str],
+    method: str = "ols",
+    *,
+    X_val: np.ndarray | None = None,
+    y_val: np.ndarray | None = None,
+    window: int = 25,
+) -> dict:
     """Fit y = X theta; coefficients, standard errors, R^2 and RMSE (training, validation)."""
     from gpquad.extras import require
 
     sm = require("statsmodels.api", "the physics regressions")
 
     if method not in METHODS:
-        raise GpquadError(f"unknown regression method '{method}'; use one of {METHODS}",
-                          field="regression.method")
+        raise GpquadError(
+            f"unknown regression method '{method}'; use one of {METHODS}", field="regression.method"
+        )
     X = np.asarray(X, dtype=float).reshape(len(y), -1)
     y = np.asarray(y, dtype=float)
     ok = np.all(np.isfinite(X), axis=1) & np.isfinite(y)
     X, y = X[ok], y[ok]
     if len(y) <= X.shape[1]:
-        raise GpquadError(f"{len(y)} samples for {X.shape[1]} coefficients",
-                          field="regression")
+        raise GpquadError(f"{len(y)} samples for {X.shape[1]} coefficients", field="regression")
     extra = {}
     if method == "ols":
         res = sm.OLS(y, X).fit()
@@ -65,17 +72,25 @@ def fit(X: np.ndarray, y: np.ndarray, names: list[str], method: str = "ols", *,
         theta0 = np.linalg.lstsq(X, y, rcond=None)[0]
         scale = np.where(theta0 != 0, np.abs(theta0), 1.0)
         f_scale = float(np.std(y - X @ theta0)) or 1.0
-        sol = least_squares(lambda th: X @ (th * scale) - y, theta0 / scale, loss="soft_l1",
-                            f_scale=f_scale)
+        sol = least_squares(
+            lambda th: X @ (th * scale) - y, theta0 / scale, loss="soft_l1", f_scale=f_scale
+        )
         coef = sol.x * scale
         resid = y - X @ coef
         dof = max(len(y) - X.shape[1], 1)
         cov = np.linalg.pinv(X.T @ X) * float(resid @ resid) / dof
         se = np.sqrt(np.diag(cov))
     fitted = X @ coef
-    out = {"method": method, "names": list(names), "coef": [float(c) for c in coef],
-           "se": [float(s) for s in se], "r2": r_squared(y, fitted),
-           "rmse": float(np.sqrt(np.mean((y - fitted) ** 2))), "n": int(len(y)), **extra}
+    out = {
+        "method": method,
+        "names": list(names),
+        "coef": [float(c) for c in coef],
+        "se": [float(s) for s in se],
+        "r2": r_squared(y, fitted),
+        "rmse": float(np.sqrt(np.mean((y - fitted) ** 2))),
+        "n": int(len(y)),
+        **extra,
+    }
     if X_val is not None and y_val is not None:
         Xv = np.asarray(X_val, dtype=float).reshape(len(y_val), -1)
         pv = Xv @ coef

@@ -50,8 +50,16 @@ def versions() -> dict:
     return out
 
 
-def write_run(out: Path, kind: str, result: dict, markdown: str, *, config: dict | None,
-              seed: int | None, started: float) -> Path:
+def write_run(
+    out: Path,
+    kind: str,
+    result: dict,
+    markdown: str,
+    *,
+    config: dict | None,
+    seed: int | None,
+    started: float,
+) -> Path:
     """Write result.json, result.md and run.json into `out`; return `out`."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -59,9 +67,18 @@ def write_run(out: Path, kind: str, result: dict, markdown: str, *, config: dict
     atomic_write_text(out / f"{kind}.md", markdown)
     prov = provenance()
     prov["versions"] = versions()
-    write_json(out / "run.json", _plain({"command": f"physics {kind}", "seed": seed,
-                                         "config": config, **prov,
-                                         "wall_time_s": time.time() - started}))
+    write_json(
+        out / "run.json",
+        _plain(
+            {
+                "command": f"physics {kind}",
+                "seed": seed,
+                "config": config,
+                **prov,
+                "wall_time_s": time.time() - started,
+            }
+        ),
+    )
     return out
 
 

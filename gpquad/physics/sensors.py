@@ -23,7 +23,7 @@ class SensorNoise:
     accel_bias_sd: float = 0.0
     rotor_noise_sd: float = 0.0
     velocity_noise_sd: float = 0.0
-    calibration_s: float = 0.0   # accelerometer bias removed using the first seconds (hover)
+    calibration_s: float = 0.0  # accelerometer bias removed using the first seconds (hover)
 
 
 def rotations(quat_xyzw: np.ndarray) -> np.ndarray:
@@ -39,20 +39,35 @@ def measure(flight: dict, noise: SensorNoise, rng: np.random.Generator) -> dict:
     n = len(flight["t"])
     rot = rotations(flight["quat"])
     bias = rng.normal(0.0, noise.accel_bias_sd, 3) if noise.accel_bias_sd > 0 else np.zeros(3)
-    acc_white = rng.normal(0.0, noise.accel_noise_sd, (n, 3)) if noise.accel_noise_sd > 0 \
+    acc_white = (
+        rng.normal(0.0, noise.accel_noise_sd, (n, 3))
+        if noise.accel_noise_sd > 0
         else np.zeros((n, 3))
-    rotor_white = rng.normal(0.0, noise.rotor_noise_sd, flight["rotor"].shape) \
-        if noise.rotor_noise_sd > 0 else 0.0
-    vel_white = rng.normal(0.0, noise.velocity_noise_sd, (n, 3)) \
-        if noise.velocity_noise_sd > 0 else 0.0
+    )
+    rotor_white = (
+        rng.normal(0.0, noise.rotor_noise_sd, flight["rotor"].shape)
+        if noise.rotor_noise_sd > 0
+        else 0.0
+    )
+    vel_white = (
+        rng.normal(0.0, noise.velocity_noise_sd, (n, 3)) if noise.velocity_noise_sd > 0 else 0.0
+    )
     vel_meas = flight["vel"] + vel_white
     force = flight["force"] + bias + acc_white
     if noise.calibration_s > 0:
         still = flight["t"] - flight["t"][0] < noise.calibration_s
         expected = -np.einsum("nji,j->ni", rot[still], np.array([0.0, 0.0, -9.81]))
         force = force - np.mean(force[still] - expected, axis=0)
-    return {"t": flight["t"], "pos": flight["pos"], "vel": flight["vel"], "rot": rot,
-            "omega": flight["omega"], "force_true": flight["force"],
-            "rotor_true": flight["rotor"], "force": force,
-            "rotor": flight["rotor"] + rotor_white,
-            "vel_body": np.einsum("nji,nj->ni", rot, vel_meas), "accel_bias": bias}
+    return {
+        "t": flight["t"],
+        "pos": flight["pos"],
+        "vel": flight["vel"],
+        "rot": rot,
+        "omega": flight["omega"],
+        "force_true": flight["force"],
+        "rotor_true": flight["rotor"],
+        "force": force,
+        "rotor": flight["rotor"] + rotor_white,
+        "vel_body": np.einsum("nji,nj->ni", rot, vel_meas),
+        "accel_bias": bias,
+    }

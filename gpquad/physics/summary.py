@@ -13,10 +13,20 @@ from __future__ import annotations
 
 import math
 
-UNITS = {"k_t": "N/(rad/s)^2", "k_z": "N/((rad/s)(m/s))", "k_h": "N/(m/s)^2",
-         "k_dx": "N/((rad/s)(m/s))", "k_dy": "N/((rad/s)(m/s))", "c_dx": "N/(m/s)^2",
-         "c_dy": "N/(m/s)^2", "bias_x": "m/s^2", "bias_y": "m/s^2",
-         "k_dx_specific": "(m/s^2)/((rad/s)(m/s))", "rmse_val": "N", "rmse_val_x": "m/s^2"}
+UNITS = {
+    "k_t": "N/(rad/s)^2",
+    "k_z": "N/((rad/s)(m/s))",
+    "k_h": "N/(m/s)^2",
+    "k_dx": "N/((rad/s)(m/s))",
+    "k_dy": "N/((rad/s)(m/s))",
+    "c_dx": "N/(m/s)^2",
+    "c_dy": "N/(m/s)^2",
+    "bias_x": "m/s^2",
+    "bias_y": "m/s^2",
+    "k_dx_specific": "(m/s^2)/((rad/s)(m/s))",
+    "rmse_val": "N",
+    "rmse_val_x": "m/s^2",
+}
 
 
 def _num(x):
@@ -27,8 +37,14 @@ def _num(x):
 
 def thrust_json(res: dict, mass: float) -> dict:
     hover = res["fits"]["standard_hover"]
-    out = {"k_t": hover["coef"][0], "k_t_se": hover["se"][0], "rmse_val": hover["rmse_val"],
-           "r2": hover["r2"], "n": hover["n"], "mass": mass}
+    out = {
+        "k_t": hover["coef"][0],
+        "k_t_se": hover["se"][0],
+        "rmse_val": hover["rmse_val"],
+        "r2": hover["r2"],
+        "n": hover["n"],
+        "mass": mass,
+    }
     ref = res["fits"].get("refined_forward")
     if ref is not None:
         for name, c, se in zip(ref["names"], ref["coef"], ref["se"]):
@@ -52,14 +68,23 @@ def drag_json(res: dict, mass: float, parasitic: bool) -> dict:
                 out[f"{name}_specific"], out[f"{name}_specific_se"] = c, se
         out[f"rmse_val_{axis}"] = fit["rmse_val"]
         out[f"r2_{axis}"] = fit["r2"]
-    out["units"] = {k: v for k, v in UNITS.items()
-                    if k[0] in "cb" or k.startswith(("k_d", "rmse_val_"))}
+    out["units"] = {
+        k: v for k, v in UNITS.items() if k[0] in "cb" or k.startswith(("k_d", "rmse_val_"))
+    }
     return {k: _num(v) if not isinstance(v, dict) else v for k, v in out.items()}
 
 
 def deadreckon_json(res: dict) -> dict:
-    return {"segments": [{"name": f["name"], "duration_s": f["duration_s"],
-                          "rmse_m": {m: v["rmse"] for m, v in f["models"].items()},
-                          "best": f["best"]} for f in res["flights"]],
-            "coriolis_best_count": res["coriolis_best_count"],
-            "ordered_count": res["ordered_count"]}
+    return {
+        "segments": [
+            {
+                "name": f["name"],
+                "duration_s": f["duration_s"],
+                "rmse_m": {m: v["rmse"] for m, v in f["models"].items()},
+                "best": f["best"],
+            }
+            for f in res["flights"]
+        ],
+        "coriolis_best_count": res["coriolis_best_count"],
+        "ordered_count": res["ordered_count"],
+    }

@@ -19,8 +19,9 @@ def causal_moving_average(x: np.ndarray, window: int) -> np.ndarray:
     """Mean of the last `window` samples (fewer at the start, where the window is not full).
     Works along axis 0."""
     if window < 1:
-        raise GpquadError(f"smoothing window must be >= 1 sample, not {window}",
-                          field="smoothing.window")
+        raise GpquadError(
+            f"smoothing window must be >= 1 sample, not {window}", field="smoothing.window"
+        )
     x = np.asarray(x, dtype=float)
     c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), x]), axis=0)
     k = np.arange(1, len(x) + 1)
@@ -29,21 +30,28 @@ def causal_moving_average(x: np.ndarray, window: int) -> np.ndarray:
     return (c[k] - c[lo]) / counts
 
 
-def peak_sync(t_a, angle_a, t_b, angle_b, t_in_a: float | None = None,
-              t_end_a: float | None = None) -> dict:
+def peak_sync(
+    t_a, angle_a, t_b, angle_b, t_in_a: float | None = None, t_end_a: float | None = None
+) -> dict:
     """Offset of clock B vs clock A from the peak of |angle| in each log (eq. 12), and log A's
     arm/disarm times on clock B (t_inOT, t_endOT). The peak must be one clear event."""
     t_a, t_b = np.asarray(t_a, float), np.asarray(t_b, float)
     a, b = np.abs(np.asarray(angle_a, float)), np.abs(np.asarray(angle_b, float))
     if len(a) < 3 or len(b) < 3 or not np.isfinite(a).any() or not np.isfinite(b).any():
-        raise GpquadError("need at least 3 finite samples of the shared angle in each log",
-                          field="angle")
+        raise GpquadError(
+            "need at least 3 finite samples of the shared angle in each log", field="angle"
+        )
     t_peak_a = float(t_a[np.nanargmax(a)])
     t_peak_b = float(t_b[np.nanargmax(b)])
     t_in_a = float(t_a[0]) if t_in_a is None else t_in_a
     t_end_a = float(t_a[-1]) if t_end_a is None else t_end_a
-    return {"offset_s": t_peak_b - t_peak_a, "t_peak_a": t_peak_a, "t_peak_b": t_peak_b,
-            "t_in_b": t_peak_b - (t_peak_a - t_in_a), "t_end_b": t_peak_b + (t_end_a - t_peak_a)}
+    return {
+        "offset_s": t_peak_b - t_peak_a,
+        "t_peak_a": t_peak_a,
+        "t_peak_b": t_peak_b,
+        "t_in_b": t_peak_b - (t_peak_a - t_in_a),
+        "t_end_b": t_peak_b + (t_end_a - t_peak_a),
+    }
 
 
 def xcorr_sync(t_a, angle_a, t_b, angle_b, rate_hz: float = 100.0) -> dict:

@@ -12,16 +12,20 @@ def pct(x):
 
 
 def fits_table(fits: dict, truth: dict) -> list[str]:
-    lines = ["| fit | coefficient | estimate | SE | truth | error | R^2 | R^2 val | RMSE val |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| fit | coefficient | estimate | SE | truth | error | R^2 | R^2 val | RMSE val |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for key, res in fits.items():
         for name, c, se in zip(res["names"], res["coef"], res["se"]):
             true = truth.get(name)
             true_text = "-" if true is None else f"{true:.4g}"
-            lines.append(f"| {key} | {name} | {c:.4g} | {se:.2g} | {true_text} | "
-                         f"{pct(res['relative_error'].get(name))} | {res['r2']:.4f} | "
-                         f"{res.get('r2_val', float('nan')):.4f} | "
-                         f"{res.get('rmse_val', float('nan')):.4f} |")
+            lines.append(
+                f"| {key} | {name} | {c:.4g} | {se:.2g} | {true_text} | "
+                f"{pct(res['relative_error'].get(name))} | {res['r2']:.4f} | "
+                f"{res.get('r2_val', float('nan')):.4f} | "
+                f"{res.get('rmse_val', float('nan')):.4f} |"
+            )
     return lines
 
 

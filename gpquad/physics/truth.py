@@ -37,22 +37,30 @@ def vehicle_params(name: str) -> dict:
     elif name == "crazyflie":
         from rotorpy.vehicles.crazyflie_params import quad_params
     else:
-        raise GpquadError(f"unknown rotorpy vehicle '{name}'; use one of {PARAM_SETS}",
-                          field="truth.vehicle")
+        raise GpquadError(
+            f"unknown rotorpy vehicle '{name}'; use one of {PARAM_SETS}", field="truth.vehicle"
+        )
     return dict(quad_params)
 
 
 def true_coefficients(params: dict) -> dict:
     """The coefficients of eqs. (5), (18), (19) implied by rotorpy's parameters."""
     n, m = params["num_rotors"], params["mass"]
-    return {"mass": m, "k_t": params["k_eta"], "k_z": params.get("k_z", 0.0),
-            "k_h": n * params.get("k_h", 0.0), "k_dx": -n * params.get("k_d", 0.0) / m,
-            "k_dy": -n * params.get("k_d", 0.0) / m, "c_dx": -params.get("c_Dx", 0.0) / m,
-            "c_dy": -params.get("c_Dy", 0.0) / m}
+    return {
+        "mass": m,
+        "k_t": params["k_eta"],
+        "k_z": params.get("k_z", 0.0),
+        "k_h": n * params.get("k_h", 0.0),
+        "k_dx": -n * params.get("k_d", 0.0) / m,
+        "k_dy": -n * params.get("k_d", 0.0) / m,
+        "c_dx": -params.get("c_Dx", 0.0) / m,
+        "c_dy": -params.get("c_Dy", 0.0) / m,
+    }
 
 
-def waypoints(manoeuvre: str, side: float, altitude: float = 1.0,
-              yaw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def waypoints(
+    manoeuvre: str, side: float, altitude: float = 1.0, yaw: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Waypoints (m, world z up) and yaw angles: the thesis's L, U and square paths (with yaw,
     the vehicle faces its direction of travel), plus identification flights."""
     s, h = side, altitude
@@ -60,17 +68,28 @@ def waypoints(manoeuvre: str, side: float, altitude: float = 1.0,
         "hover": [[0, 0, h], [0, 0, h + 0.4], [0, 0, h - 0.4], [0, 0, h + 0.2], [0, 0, h]],
         # out and back (forward then backward flight): the sign change of the body velocity
         # separates drag from a constant accelerometer bias
-        "forward": [[0, 0, h], [1.5 * s, 0, h + 0.4 * s], [3 * s, 0, h], [1.5 * s, 0, h - 0.2 * s],
-                    [0, 0, h]],
-        "lateral": [[0, 0, h], [0, 1.5 * s, h + 0.4 * s], [0, 3 * s, h],
-                    [0, 1.5 * s, h - 0.2 * s], [0, 0, h]],
+        "forward": [
+            [0, 0, h],
+            [1.5 * s, 0, h + 0.4 * s],
+            [3 * s, 0, h],
+            [1.5 * s, 0, h - 0.2 * s],
+            [0, 0, h],
+        ],
+        "lateral": [
+            [0, 0, h],
+            [0, 1.5 * s, h + 0.4 * s],
+            [0, 3 * s, h],
+            [0, 1.5 * s, h - 0.2 * s],
+            [0, 0, h],
+        ],
         "L": [[0, 0, h], [s, 0, h], [s, s, h]],
         "U": [[0, 0, h], [s, 0, h], [s, s, h], [0, s, h]],
         "square": [[0, 0, h], [s, 0, h], [s, s, h], [0, s, h], [0, 0, h]],
     }
     if manoeuvre not in paths:
-        raise GpquadError(f"unknown manoeuvre '{manoeuvre}'; use one of {MANOEUVRES}",
-                          field="manoeuvre")
+        raise GpquadError(
+            f"unknown manoeuvre '{manoeuvre}'; use one of {MANOEUVRES}", field="manoeuvre"
+        )
     corners = np.array(paths[manoeuvre], dtype=float)
     # two intermediate points per leg keep the minimum-snap path close to the straight legs
     # (not on short legs: rotorpy's MinSnap drops segments under 0.1 m and then fails)
@@ -87,9 +106,17 @@ def waypoints(manoeuvre: str, side: float, altitude: float = 1.0,
     return pts, yaws
 
 
-def simulate(manoeuvre: str, *, side: float = 4.0, speed: float = 3.0, yaw: bool = False,
-             vehicle: str = "hummingbird", dt: float = 0.01, tail: float = 0.5,
-             pre: float = 0.5) -> dict:
+def simulate(
+    manoeuvre: str,
+    *,
+    side: float = 4.0,
+    speed: float = 3.0,
+    yaw: bool = False,
+    vehicle: str = "hummingbird",
+    dt: float = 0.01,
+    tail: float = 0.5,
+    pre: float = 0.5,
+) -> dict:
     """Fly one manoeuvre with rotorpy; arrays per sample (see the module docstring). The
     vehicle hovers `pre` s before the trajectory starts (for sensor calibration) and `tail` s
     after it ends."""
@@ -105,9 +132,14 @@ def simulate(manoeuvre: str, *, side: float = 4.0, speed: float = 3.0, yaw: bool
     v_avg = 0.15 * speed if manoeuvre == "hover" else speed
     traj = MinSnap(pts, yaw_angles=yaws, v_avg=v_avg, v_max=3.0 * v_avg, verbose=False)
     hover = np.sqrt(params["mass"] * G / (params["num_rotors"] * params["k_eta"]))
-    state = {"x": pts[0].copy(), "v": np.zeros(3), "q": np.array([0.0, 0.0, 0.0, 1.0]),
-             "w": np.zeros(3), "wind": np.zeros(3),
-             "rotor_speeds": np.full(params["num_rotors"], hover)}
+    state = {
+        "x": pts[0].copy(),
+        "v": np.zeros(3),
+        "q": np.array([0.0, 0.0, 0.0, 1.0]),
+        "w": np.zeros(3),
+        "wind": np.zeros(3),
+        "rotor_speeds": np.full(params["num_rotors"], hover),
+    }
     quad = Multirotor(params, initial_state=state)
     ctrl = SE3Control(params)
     t_end = pre + float(traj.t_keyframes[-1]) + tail
@@ -124,9 +156,15 @@ def simulate(manoeuvre: str, *, side: float = 4.0, speed: float = 3.0, yaw: bool
             rows[key].append(np.array(state[key], dtype=float))
         rows["f"].append(rot.T @ (vdot - np.array([0.0, 0.0, -G])))
         state = quad.step(state, control, dt)
-    out = {"t": np.arange(n) * dt, "pos": np.array(rows["x"]), "vel": np.array(rows["v"]),
-           "quat": np.array(rows["q"]), "omega": np.array(rows["w"]),
-           "rotor": np.array(rows["rotor_speeds"]), "force": np.array(rows["f"])}
+    out = {
+        "t": np.arange(n) * dt,
+        "pos": np.array(rows["x"]),
+        "vel": np.array(rows["v"]),
+        "quat": np.array(rows["q"]),
+        "omega": np.array(rows["w"]),
+        "rotor": np.array(rows["rotor_speeds"]),
+        "force": np.array(rows["f"]),
+    }
     if not np.all(np.isfinite(out["pos"])):
         raise GpquadError("the rotorpy flight diverged", field="truth")
     return out
@@ -142,9 +180,13 @@ def cached_flight(spec: dict, cache_dir: Path | None) -> dict:
 
     spec = dict(spec)
     pts, yaws = waypoints(spec["manoeuvre"], spec.get("side", 4.0), yaw=spec.get("yaw", False))
-    key_spec = {**spec, "rotorpy": getattr(rotorpy, "__version__", "3"),
-                "version": FLIGHT_VERSION, "waypoints": pts.round(9).tolist(),
-                "yaws": yaws.round(9).tolist()}
+    key_spec = {
+        **spec,
+        "rotorpy": getattr(rotorpy, "__version__", "3"),
+        "version": FLIGHT_VERSION,
+        "waypoints": pts.round(9).tolist(),
+        "yaws": yaws.round(9).tolist(),
+    }
     if cache_dir is not None:
         path = Path(cache_dir) / f"{spec['manoeuvre']}-{flight_key(key_spec)}.npz"
         if path.is_file():

@@ -81,8 +81,9 @@ def _equation_latex(eq: Equation, shared: set[str], digits: int = 3) -> str:
     return text
 
 
-def median_tables(model: DiscoveredModel, runs: dict[str, list[Equation]], fraction: float
-                  ) -> tuple[str, str]:
+def median_tables(
+    model: DiscoveredModel, runs: dict[str, list[Equation]], fraction: float
+) -> tuple[str, str]:
     """(LaTeX, Markdown) of the median model with shared structures in bold."""
     tex_rows, md_rows = [], []
     for t in TARGET_NAMES:
@@ -97,12 +98,18 @@ def median_tables(model: DiscoveredModel, runs: dict[str, list[Equation]], fract
         top = ", ".join(f"`{_short(k)}` {100 * s:.0f}%" for k, s in list(shares.items())[:4])
         md_rows.append(f"| {t} | ${lhs} = {body}$ | {eq.validation_error:.4g} | {top} |")
     n = {len(v) for v in runs.values()}
-    note = (f"Bold: term structures (numeric factor aside, delays included) found in more than "
-            f"{100 * fraction:.0f}% of the {'/'.join(map(str, sorted(n)))} runs per equation.")
-    tex = ("% " + note + "\n\\begin{tabular}{ll}\n\\hline\nmedian model & validation error \\\\\n"
-           "\\hline\n" + "\n".join(tex_rows) + "\n\\hline\n\\end{tabular}\n")
-    md = ("| target | median model | validation error | most shared structures (runs) |\n"
-          "|---|---|---|---|\n" + "\n".join(md_rows) + f"\n\n{note}\n")
+    note = (
+        f"Bold: term structures (numeric factor aside, delays included) found in more than "
+        f"{100 * fraction:.0f}% of the {'/'.join(map(str, sorted(n)))} runs per equation."
+    )
+    tex = (
+        "% " + note + "\n\\begin{tabular}{ll}\n\\hline\nmedian model & validation error \\\\\n"
+        "\\hline\n" + "\n".join(tex_rows) + "\n\\hline\n\\end{tabular}\n"
+    )
+    md = (
+        "| target | median model | validation error | most shared structures (runs) |\n"
+        "|---|---|---|---|\n" + "\n".join(md_rows) + f"\n\n{note}\n"
+    )
     return tex, md
 
 
@@ -119,20 +126,30 @@ def metrics_rows(assembly: dict) -> list[dict]:
     fulls = assembly["full_models"]
     median = fulls[assembly["median_index"]]
     for h in assembly["best"]["metrics"]:
-        for label, group in (("best", [assembly["best"]]), ("median", [median]),
-                             (f"all {len(fulls)} full models", fulls)):
+        for label, group in (
+            ("best", [assembly["best"]]),
+            ("median", [median]),
+            (f"all {len(fulls)} full models", fulls),
+        ):
             ms = [g["metrics"][h] for g in group]
             windows = ms[0]["windows"]
-            row = {"horizon": h, "model": label, "windows": windows * len(ms),
-                   "diverged": sum(m["diverged"] for m in ms)}
+            row = {
+                "horizon": h,
+                "model": label,
+                "windows": windows * len(ms),
+                "diverged": sum(m["diverged"] for m in ms),
+            }
             for s in SCORED_STATES:
                 vals = np.array([m["rse"].get(s, np.nan) for m in ms], dtype=float)
                 vals = vals[np.isfinite(vals)]
                 if len(group) == 1:
                     row[s] = _fmt(vals[0]) if vals.size else "--"
                 else:
-                    row[s] = (f"{np.median(vals):.3g} [{vals.min():.3g}, {vals.max():.3g}]"
-                              if vals.size else "--")
+                    row[s] = (
+                        f"{np.median(vals):.3g} [{vals.min():.3g}, {vals.max():.3g}]"
+                        if vals.size
+                        else "--"
+                    )
             rows.append(row)
     return rows
 
@@ -146,12 +163,16 @@ def size_rows(assembly: dict) -> list[dict]:
         sizes = np.array([f["sizes"][t] for f in fulls])
         runs = np.array([r["size"] for r in assembly["runs_errors"][t]])
         val = np.array([r["validation_error"] for r in assembly["runs_errors"][t]])
-        rows.append({"target": t, "best": assembly["best"]["sizes"][t],
-                     "median": median["sizes"][t],
-                     "full": f"{sizes.mean():.1f} [{sizes.min()}, {sizes.max()}]",
-                     "runs": f"{np.median(runs):.0f} [{runs.min()}, {runs.max()}]",
-                     "val": f"{np.nanmedian(val):.3g} [{np.nanmin(val):.3g}, "
-                            f"{np.nanmax(val):.3g}]"})
+        rows.append(
+            {
+                "target": t,
+                "best": assembly["best"]["sizes"][t],
+                "median": median["sizes"][t],
+                "full": f"{sizes.mean():.1f} [{sizes.min()}, {sizes.max()}]",
+                "runs": f"{np.median(runs):.0f} [{runs.min()}, {runs.max()}]",
+                "val": f"{np.nanmedian(val):.3g} [{np.nanmin(val):.3g}, {np.nanmax(val):.3g}]",
+            }
+        )
     return rows
 
 
@@ -161,30 +182,59 @@ def metrics_tables(assembly: dict) -> tuple[str, str]:
     noise = assembly.get("input_noise_fraction", 0)
     missing = [TARGET_STATE[t] for t in TARGET_NAMES if t not in assembly["best"]["sizes"]]
     head = ["horizon", "model", *SCORED_STATES, "diverged / windows"]
-    md = [f"RSE of the integrated states on validation windows (input noise SD = "
-          f"{100 * noise:.0f}% of max input; for groups: median [min, max]). "
-          "Diverged windows are left out of the RSE."
-          + (f" Not identified in this sweep (flown with the data's accelerations): "
-             f"{', '.join(missing)}." if missing else ""), "",
-          "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    tex = ["\\begin{tabular}{ll" + "r" * (len(SCORED_STATES) + 1) + "}", "\\hline",
-           " & ".join(head) + " \\\\", "\\hline"]
+    md = [
+        f"RSE of the integrated states on validation windows (input noise SD = "
+        f"{100 * noise:.0f}% of max input; for groups: median [min, max]). "
+        "Diverged windows are left out of the RSE."
+        + (
+            f" Not identified in this sweep (flown with the data's accelerations): "
+            f"{', '.join(missing)}."
+            if missing
+            else ""
+        ),
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    tex = [
+        "\\begin{tabular}{ll" + "r" * (len(SCORED_STATES) + 1) + "}",
+        "\\hline",
+        " & ".join(head) + " \\\\",
+        "\\hline",
+    ]
     for r in rows:
-        cells = [r["horizon"], r["model"], *[r[s] for s in SCORED_STATES],
-                 f"{r['diverged']} / {r['windows']}"]
+        cells = [
+            r["horizon"],
+            r["model"],
+            *[r[s] for s in SCORED_STATES],
+            f"{r['diverged']} / {r['windows']}",
+        ]
         md.append("| " + " | ".join(cells) + " |")
         tex.append(" & ".join(c.replace("%", "\\%") for c in cells) + " \\\\")
     tex += ["\\hline", "\\end{tabular}", ""]
     sizes = size_rows(assembly)
-    md += ["", "Model sizes (tree nodes) and run validation errors (median [min, max]).", "",
-           "| target | best | median model | full models | all runs | run validation error |",
-           "|---|---|---|---|---|---|"]
-    tex += ["\\begin{tabular}{lrrlll}", "\\hline",
-            "target & best & median & full models & all runs & run validation error \\\\",
-            "\\hline"]
+    md += [
+        "",
+        "Model sizes (tree nodes) and run validation errors (median [min, max]).",
+        "",
+        "| target | best | median model | full models | all runs | run validation error |",
+        "|---|---|---|---|---|---|",
+    ]
+    tex += [
+        "\\begin{tabular}{lrrlll}",
+        "\\hline",
+        "target & best & median & full models & all runs & run validation error \\\\",
+        "\\hline",
+    ]
     for r in sizes:
-        cells = [r["target"].replace("_", "\\_"), str(r["best"]), str(r["median"]), r["full"],
-                 r["runs"], r["val"]]
+        cells = [
+            r["target"].replace("_", "\\_"),
+            str(r["best"]),
+            str(r["median"]),
+            r["full"],
+            r["runs"],
+            r["val"],
+        ]
         md.append("| " + " | ".join([r["target"]] + cells[1:]) + " |")
         tex.append(" & ".join(cells) + " \\\\")
     tex += ["\\hline", "\\end{tabular}", ""]
@@ -200,8 +250,11 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
     if not (folder / "sweep.json").exists():
         if (folder / "model.json").exists() and (folder / "history.csv").exists():
             return make_run_report(folder, formats)
-        raise GpquadError("not a sweep folder (no sweep.json) nor a run folder (no model.json); "
-                          "give the --out of a sweep or a run", source=str(folder))
+        raise GpquadError(
+            "not a sweep folder (no sweep.json) nor a run folder (no model.json); "
+            "give the --out of a sweep or a run",
+            source=str(folder),
+        )
     with naming(folder / "sweep.json"):
         info = json.loads((folder / "sweep.json").read_text())
         int(info["runs"])
@@ -223,20 +276,27 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
             d = run_dir(folder, RunKey(t, k))
             with naming(d / "result.json"):
                 res = json.loads((d / "result.json").read_text())
-                runs[t].append(Equation.from_dict(t, res["equation"], median.input_names,
-                                                  median.trim))
+                runs[t].append(
+                    Equation.from_dict(t, res["equation"], median.input_names, median.trim)
+                )
             histories[t].append(d / "history.csv")
     if (folder / "predictions.npz").exists():
-        written += plotting.prediction_figure(folder / "predictions.npz", out / "prediction",
-                                              formats)
-    written += plotting.convergence_figure(histories, out / "convergence",
-                                           cfg.evolution.metric, formats)
+        written += plotting.prediction_figure(
+            folder / "predictions.npz", out / "prediction", formats
+        )
+    written += plotting.convergence_figure(
+        histories, out / "convergence", cfg.evolution.metric, formats
+    )
     tex, md = median_tables(median, runs, cfg.sweep.shared_fraction)
-    written += [atomic_write_text(out / "median_model.tex", tex),
-                atomic_write_text(out / "median_model.md", md)]
+    written += [
+        atomic_write_text(out / "median_model.tex", tex),
+        atomic_write_text(out / "median_model.md", md),
+    ]
     tex, md = metrics_tables(assembly)
-    written += [atomic_write_text(out / "metrics.tex", tex),
-                atomic_write_text(out / "metrics.md", md)]
+    written += [
+        atomic_write_text(out / "metrics.tex", tex),
+        atomic_write_text(out / "metrics.md", md),
+    ]
     return written
 
 
@@ -260,22 +320,34 @@ def make_run_report(folder, formats=("png", "pdf"), window_s: float = 7.0) -> li
     cfg = load_folder_config(folder)
     model = DiscoveredModel.load(folder)
     out = folder / "report"
-    written = plotting.convergence_figure({t: [folder / "history.csv"] for t in model.equations},
-                                          out / "convergence", cfg.evolution.metric, formats)
+    written = plotting.convergence_figure(
+        {t: [folder / "history.csv"] for t in model.equations},
+        out / "convergence",
+        cfg.evolution.metric,
+        formats,
+    )
     dataset = load_dataset(cfg)
     steps_wanted = max(1, int(round(window_s / dataset.dt)))
     starts, steps = tile(dataset.validation, steps_wanted, cfg.evolution.max_delay)
     if len(starts):
         start = starts[:1]
         pred = model.simulate(dataset, start, steps)[0]
-        data = np.stack([dataset.arrays.states[s:s + steps + 1] for s in start])[0]
+        data = np.stack([dataset.arrays.states[s : s + steps + 1] for s in start])[0]
         buf = io.BytesIO()
-        np.savez(buf, t=np.arange(steps + 1) * dataset.dt, data=data, best=pred,
-                 full=np.zeros((0, steps + 1, 9)), start=start, dt=dataset.dt,
-                 state_names=np.array(STATE_NAMES), targets=np.array(sorted(model.equations)),
-                 unmeasured=np.array([s for s in STATE_NAMES if dataset.unmeasured(s)],
-                                     dtype=str))
+        np.savez(
+            buf,
+            t=np.arange(steps + 1) * dataset.dt,
+            data=data,
+            best=pred,
+            full=np.zeros((0, steps + 1, 9)),
+            start=start,
+            dt=dataset.dt,
+            state_names=np.array(STATE_NAMES),
+            targets=np.array(sorted(model.equations)),
+            unmeasured=np.array([s for s in STATE_NAMES if dataset.unmeasured(s)], dtype=str),
+        )
         atomic_write_bytes(out / "predictions.npz", buf.getvalue())
-        written += plotting.prediction_figure(out / "predictions.npz", out / "prediction",
-                                              formats, best_label="discovered equations")
+        written += plotting.prediction_figure(
+            out / "predictions.npz", out / "prediction", formats, best_label="discovered equations"
+        )
     return written

@@ -71,13 +71,16 @@ def load_runs(out, targets, runs: int, input_names, trim) -> dict[str, list[RunR
         for k in range(runs):
             path = run_dir(Path(out), RunKey(t, k)) / "result.json"
             if not path.exists():
-                raise GpquadError("run not finished; run the same `gpquad sweep` command again "
-                                  "to complete it", source=str(path))
+                raise GpquadError(
+                    "run not finished; run the same `gpquad sweep` command again to complete it",
+                    source=str(path),
+                )
             with naming(path):
                 d = json.loads(path.read_text())
                 eq = Equation.from_dict(t, d["equation"], input_names, trim)
-                found[t].append(RunResult(t, k, eq, float(d["train_error"]),
-                                          float(d["validation_error"])))
+                found[t].append(
+                    RunResult(t, k, eq, float(d["train_error"]), float(d["validation_error"]))
+                )
     return found
 
 
@@ -113,8 +116,15 @@ def members(runs: dict[str, list[RunResult]], cfg: Config) -> list[dict[str, int
 def model_of(choice: dict[str, int], runs, dataset: Dataset, cfg: Config) -> DiscoveredModel:
     """The full model of the chosen repetitions (jointly refitted if evolution.joint_fit)."""
     eqs = {t: runs[t][k].equation for t, k in choice.items()}
-    model = DiscoveredModel(eqs, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                            cfg.to_dict(), envelope=training_envelope(dataset))
+    model = DiscoveredModel(
+        eqs,
+        dataset.input_names,
+        dataset.trim,
+        dataset.dt,
+        cfg.seed,
+        cfg.to_dict(),
+        envelope=training_envelope(dataset),
+    )
     return finish_model(model, dataset, cfg.evolution, cfg.vehicle)
 
 
@@ -130,8 +140,14 @@ def horizon_windows(dataset: Dataset, seconds: float, max_delay: int) -> tuple[n
     return tile(dataset.validation, steps, max_delay)
 
 
-def fly(model: DiscoveredModel, dataset: Dataset, starts, steps: int, sd: np.ndarray,
-        rng: np.random.Generator | None) -> np.ndarray:
+def fly(
+    model: DiscoveredModel,
+    dataset: Dataset,
+    starts,
+    steps: int,
+    sd: np.ndarray,
+    rng: np.random.Generator | None,
+) -> np.ndarray:
     """States (n_windows, steps + 1, 9) of the model, with input noise if rng is given."""
     noise = None
     if rng is not None and np.any(sd > 0):
@@ -172,10 +188,13 @@ def evaluate(model: DiscoveredModel, dataset: Dataset, cfg: Config, seed_seq) ->
         data = truth(dataset, starts, steps)
         div = diverged(pred, bound)
         r = rse(pred, data, ~div)
-        out[key] = {"windows": int(len(starts)), "steps": int(steps),
-                    "seconds": float(steps * dataset.dt),
-                    "rse": {STATE_NAMES[j]: float(v) for j, v in zip(SCORED, r, strict=True)},
-                    "diverged": int(div.sum())}
+        out[key] = {
+            "windows": int(len(starts)),
+            "steps": int(steps),
+            "seconds": float(steps * dataset.dt),
+            "rse": {STATE_NAMES[j]: float(v) for j, v in zip(SCORED, r, strict=True)},
+            "diverged": int(div.sum()),
+        }
     return out
 
 
@@ -219,20 +238,40 @@ def assemble_sweep(out, cfg: Config, dataset: Dataset, runs: int) -> Path:
     median = order[(len(order) - 1) // 2]
     write_model(out / "models" / "median", fulls[median])
     info = {
-        "selection": sw.selection, "assembly": sw.assembly, "runs": runs,
+        "selection": sw.selection,
+        "assembly": sw.assembly,
+        "runs": runs,
         "input_noise_fraction": sw.input_noise,
-        "input_noise_sd": dict(zip(dataset.input_names,
-                                   noise_sd(dataset, sw.input_noise).tolist(), strict=True)),
-        "best": {"members": best_choice, "metrics": best_metrics,
-                 "sizes": {t: best.equations[t].tree.size for t in targets}},
-        "full_models": [{"members": c, "metrics": m, "score": float(s),
-                         "sizes": {t: fulls[k].equations[t].tree.size for t in targets}}
-                        for k, (c, m, s) in enumerate(
-                            zip(chosen, full_metrics, scores, strict=True))],
+        "input_noise_sd": dict(
+            zip(dataset.input_names, noise_sd(dataset, sw.input_noise).tolist(), strict=True)
+        ),
+        "best": {
+            "members": best_choice,
+            "metrics": best_metrics,
+            "sizes": {t: best.equations[t].tree.size for t in targets},
+        },
+        "full_models": [
+            {
+                "members": c,
+                "metrics": m,
+                "score": float(s),
+                "sizes": {t: fulls[k].equations[t].tree.size for t in targets},
+            }
+            for k, (c, m, s) in enumerate(zip(chosen, full_metrics, scores, strict=True))
+        ],
         "median_index": int(median),
-        "runs_errors": {t: [{"repetition": r.repetition, "train_error": r.train_error,
-                             "validation_error": r.validation_error, "size": r.equation.tree.size}
-                            for r in results[t]] for t in targets},
+        "runs_errors": {
+            t: [
+                {
+                    "repetition": r.repetition,
+                    "train_error": r.train_error,
+                    "validation_error": r.validation_error,
+                    "size": r.equation.tree.size,
+                }
+                for r in results[t]
+            ]
+            for t in targets
+        },
     }
     write_json(out / "assembly.json", json.loads(json.dumps(info, default=_jsonable)))
     write_predictions(out, cfg, dataset, best, fulls)
@@ -245,8 +284,9 @@ def _jsonable(x):
     raise TypeError(type(x))
 
 
-def write_predictions(out: Path, cfg: Config, dataset: Dataset, best: DiscoveredModel,
-                      fulls: list[DiscoveredModel]) -> None:
+def write_predictions(
+    out: Path, cfg: Config, dataset: Dataset, best: DiscoveredModel, fulls: list[DiscoveredModel]
+) -> None:
     """One random validation window of sweep.window_s: data, best and every full model."""
     steps = max(1, int(round(cfg.sweep.window_s / dataset.dt)))
     try:
@@ -261,14 +301,23 @@ def write_predictions(out: Path, cfg: Config, dataset: Dataset, best: Discovered
     sd = noise_sd(dataset, cfg.sweep.input_noise)
     noisy = cfg.sweep.input_noise > 0
     best_pred = fly(best, dataset, start, steps, sd, rng if noisy else None)[0]
-    full_pred = np.stack([fly(m, dataset, start, steps, sd, rng if noisy else None)[0]
-                          for m in fulls])
+    full_pred = np.stack(
+        [fly(m, dataset, start, steps, sd, rng if noisy else None)[0] for m in fulls]
+    )
     import io
 
     buf = io.BytesIO()
-    np.savez(buf, t=np.arange(steps + 1) * dataset.dt, data=truth(dataset, start, steps)[0],
-             best=best_pred, full=full_pred, start=start, dt=dataset.dt,
-             state_names=np.array(STATE_NAMES), targets=np.array(sorted(best.equations)))
+    np.savez(
+        buf,
+        t=np.arange(steps + 1) * dataset.dt,
+        data=truth(dataset, start, steps)[0],
+        best=best_pred,
+        full=full_pred,
+        start=start,
+        dt=dataset.dt,
+        state_names=np.array(STATE_NAMES),
+        targets=np.array(sorted(best.equations)),
+    )
     atomic_write_bytes(out / "predictions.npz", buf.getvalue())
 
 
@@ -284,4 +333,3 @@ def reassemble(out) -> Path:
     cfg = load_sweep_config(out)
     info = json.loads((Path(out) / "sweep.json").read_text())
     return assemble_sweep(out, cfg, load_dataset(cfg), int(info["runs"]))
-

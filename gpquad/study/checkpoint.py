@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.engine.evolve.coevolution import RunState
+from gpquad.engine.evolve.state import RunState
 from gpquad.engine.tree.encoding import Tree, is_valid
 from gpquad.engine.tree.operators import VAR_BASE
 from gpquad.study.store import atomic_write_bytes
@@ -51,24 +51,39 @@ def state_to_dict(state: RunState) -> dict:
         if f.name == "history":
             continue
         if f.name == "models":
-            value = [{"codes": t.codes.tolist(), "values": t.values.tolist(),
-                      "delays": t.delays.tolist()} for t in value]
+            value = [
+                {
+                    "codes": t.codes.tolist(),
+                    "values": t.values.tolist(),
+                    "delays": t.delays.tolist(),
+                }
+                for t in value
+            ]
         elif isinstance(value, np.ndarray):
-            value = {"dtype": str(value.dtype), "shape": list(value.shape),
-                     "data": value.ravel().tolist()}
+            value = {
+                "dtype": str(value.dtype),
+                "shape": list(value.shape),
+                "data": value.ravel().tolist(),
+            }
         out[f.name] = value
     return out
 
 
 def _array(record, name: str) -> np.ndarray:
     dtype = _ARRAYS[name]
-    if not isinstance(record, dict) or record.get("dtype") != dtype \
-            or not isinstance(record.get("shape"), list) or not isinstance(record.get("data"),
-                                                                          list):
+    if (
+        not isinstance(record, dict)
+        or record.get("dtype") != dtype
+        or not isinstance(record.get("shape"), list)
+        or not isinstance(record.get("data"), list)
+    ):
         raise CorruptCheckpoint(f"{name} is not a {dtype} array record")
     shape = record["shape"]
-    if not all(isinstance(n, int) and n >= 0 for n in shape) or len(shape) > 2 \
-            or math.prod(shape) != len(record["data"]):
+    if (
+        not all(isinstance(n, int) and n >= 0 for n in shape)
+        or len(shape) > 2
+        or math.prod(shape) != len(record["data"])
+    ):
         raise CorruptCheckpoint(f"{name} has a bad shape {shape}")
     kind = float if dtype == "float64" else int
     if not all(type(v) is kind or (kind is float and type(v) is int) for v in record["data"]):
@@ -80,12 +95,17 @@ def _tree(record, i: int) -> Tree:
     if not isinstance(record, dict):
         raise CorruptCheckpoint(f"model {i} is not a tree record")
     codes, values, delays = (record.get(k) for k in ("codes", "values", "delays"))
-    ok = (isinstance(codes, list) and isinstance(values, list) and isinstance(delays, list)
-          and len(codes) == len(values) and codes
-          and all(type(c) is int and c >= 0 for c in codes)
-          and all(type(v) in (float, int) for v in values)
-          and all(type(d) is int and 0 <= d <= 1_000_000 for d in delays)
-          and is_valid(codes))
+    ok = (
+        isinstance(codes, list)
+        and isinstance(values, list)
+        and isinstance(delays, list)
+        and len(codes) == len(values)
+        and codes
+        and all(type(c) is int and c >= 0 for c in codes)
+        and all(type(v) in (float, int) for v in values)
+        and all(type(d) is int and 0 <= d <= 1_000_000 for d in delays)
+        and is_valid(codes)
+    )
     if not ok:
         raise CorruptCheckpoint(f"model {i} is not a valid tree")
     return Tree.from_lists(codes, values, delays)
@@ -93,18 +113,21 @@ def _tree(record, i: int) -> Tree:
 
 def _rng_state(record) -> dict:
     """A numpy bit generator state: a dict of strings, ints and such dicts only."""
+
     def plain(x, depth=0):
         if isinstance(x, dict) and depth < 3:
             return all(isinstance(k, str) and plain(v, depth + 1) for k, v in x.items())
         return type(x) in (int, str)
 
-    if not (isinstance(record, dict) and plain(record)
-            and isinstance(record.get("bit_generator"), str)):
+    if not (
+        isinstance(record, dict) and plain(record) and isinstance(record.get("bit_generator"), str)
+    ):
         raise CorruptCheckpoint("rng_state is not a bit generator state")
     try:
         bit_generator = getattr(np.random, record["bit_generator"])
-        if not (isinstance(bit_generator, type)
-                and issubclass(bit_generator, np.random.BitGenerator)):
+        if not (
+            isinstance(bit_generator, type) and issubclass(bit_generator, np.random.BitGenerator)
+        ):
             raise TypeError(record["bit_generator"])
         bit_generator().state = record  # numpy checks every entry
     except (AttributeError, TypeError, ValueError, KeyError, OverflowError) as exc:
@@ -117,19 +140,30 @@ def state_from_dict(fields: dict) -> RunState:
     names = {f.name for f in dataclasses.fields(RunState)} - {"history"}
     if not isinstance(fields, dict) or set(fields) != names:
         raise CorruptCheckpoint("the state's fields are not RunState's")
-    if not isinstance(fields["target"], str) or type(fields["iteration"]) is not int \
-            or type(fields["inserted"]) is not int or fields["iteration"] < 0:
+    if (
+        not isinstance(fields["target"], str)
+        or type(fields["iteration"]) is not int
+        or type(fields["inserted"]) is not int
+        or fields["iteration"] < 0
+    ):
         raise CorruptCheckpoint("target, iteration or inserted has a bad value")
     if not isinstance(fields["models"], list) or not fields["models"]:
         raise CorruptCheckpoint("models is not a list of trees")
     arrays = {name: _array(fields[name], name) for name in _ARRAYS}
     models = [_tree(t, i) for i, t in enumerate(fields["models"])]
-    if arrays["model_errors"].shape != (len(models),) \
-            or arrays["suite"].shape != arrays["suite_age"].shape:
+    if (
+        arrays["model_errors"].shape != (len(models),)
+        or arrays["suite"].shape != arrays["suite_age"].shape
+    ):
         raise CorruptCheckpoint("the arrays' lengths do not match the population")
-    return RunState(target=fields["target"], iteration=fields["iteration"], models=models,
-                    inserted=fields["inserted"], rng_state=_rng_state(fields["rng_state"]),
-                    **arrays)
+    return RunState(
+        target=fields["target"],
+        iteration=fields["iteration"],
+        models=models,
+        inserted=fields["inserted"],
+        rng_state=_rng_state(fields["rng_state"]),
+        **arrays,
+    )
 
 
 def encode(state: RunState, meta: dict) -> bytes:
@@ -148,7 +182,7 @@ def decode(blob: bytes) -> tuple[RunState, dict]:
         raise CorruptCheckpoint("an older pickled checkpoint, not read (a pickle can run code)")
     if magic != MAGIC:
         raise CorruptCheckpoint("not a gpquad checkpoint (bad magic)")
-    payload = blob[_HEADER.size:]
+    payload = blob[_HEADER.size :]
     if len(payload) != length:
         raise CorruptCheckpoint(f"payload is {len(payload)} bytes, header says {length}")
     if hashlib.sha256(payload).digest() != digest:
@@ -194,17 +228,23 @@ def check_fits(state: RunState, co) -> RunState:
     n_rows = len(co.dataset.arrays.states)
     if state.target != co.target:
         raise CorruptCheckpoint(f"written for target {state.target!r}, not {co.target!r}")
-    if len(state.models) != cfg.n_models or len(state.tests) != cfg.n_tests \
-            or len(state.suite) != cfg.suite_size:
+    if (
+        len(state.models) != cfg.n_models
+        or len(state.tests) != cfg.n_tests
+        or len(state.suite) != cfg.suite_size
+    ):
         raise CorruptCheckpoint("its population sizes are not this config's")
     for i, tree in enumerate(state.models):
-        if int(tree.codes.max()) >= VAR_BASE + params.n_variables \
-                or len(tree.delays) != params.n_inputs or tree.delays.max(initial=0) > \
-                cfg.max_delay:
+        if (
+            int(tree.codes.max()) >= VAR_BASE + params.n_variables
+            or len(tree.delays) != params.n_inputs
+            or tree.delays.max(initial=0) > cfg.max_delay
+        ):
             raise CorruptCheckpoint(f"model {i} uses leaves or delays this config has not")
     tests, suite = state.tests, state.suite
-    if (len(tests) and (tests.min() < 0 or tests.max() >= co.space.size)) \
-            or (len(suite) and (suite.min() < 0 or suite.max() + co.window_steps >= n_rows)):
+    if (len(tests) and (tests.min() < 0 or tests.max() >= co.space.size)) or (
+        len(suite) and (suite.min() < 0 or suite.max() + co.window_steps >= n_rows)
+    ):
         raise CorruptCheckpoint("its windows lie outside the training data")
     return state
 
@@ -214,6 +254,7 @@ def history_bytes(meta: dict, header: int, size: int) -> int:
     from the header's end to the file's current size (CorruptCheckpoint otherwise)."""
     value = meta.get("history_bytes")
     if type(value) is not int or not header <= value <= size:
-        raise CorruptCheckpoint(f"it records a history of {value!r} bytes; history.csv has "
-                                f"{size} (header {header})")
+        raise CorruptCheckpoint(
+            f"it records a history of {value!r} bytes; history.csv has {size} (header {header})"
+        )
     return value

@@ -78,14 +78,17 @@ class SimulatorConfig:
     equations: dict[str, str] = field(default_factory=lambda: dict(MEDIAN_MODEL))
     trim: dict[str, float] = field(default_factory=lambda: {"u_T": 9.81 / 28.2})
     stick_sd: dict[str, float] = field(
-        default_factory=lambda: {"u_P": 0.08, "u_R": 0.08, "u_Y": 0.08, "u_T": 0.03})
+        default_factory=lambda: {"u_P": 0.08, "u_R": 0.08, "u_Y": 0.08, "u_T": 0.03}
+    )
     stick_time_constant_s: float = 0.6
     # Pilot feedback: input -> {state: gain}; keeps attitude and speed bounded.
-    pilot_gains: dict[str, dict[str, float]] = field(default_factory=lambda: {
-        "u_R": {"phi": -0.6, "v": 0.05},
-        "u_P": {"theta": 0.6, "u": 0.05},
-        "u_Y": {"psi": 0.15},
-    })
+    pilot_gains: dict[str, dict[str, float]] = field(
+        default_factory=lambda: {
+            "u_R": {"phi": -0.6, "v": 0.05},
+            "u_P": {"theta": 0.6, "u": 0.05},
+            "u_Y": {"psi": 0.15},
+        }
+    )
     input_limit: float = 1.0
     # Gaussian measurement noise on the recorded flight (not on the dynamics), SD per signal:
     # "attitude" (rad, a random small rotation), "velocity" (m/s), "rates" (rad/s).
@@ -230,10 +233,13 @@ class EvolutionConfig:
 
     def for_target(self, target: str) -> EvolutionConfig:
         """This config with the per-target tables resolved for `target`."""
-        return dataclasses.replace(self, input_taps=self.taps_for(target),
-                                   max_depth=self.depth_for(target),
-                                   max_degree=self.degree_for(target),
-                                   refine_terms=self.refine_for(target))
+        return dataclasses.replace(
+            self,
+            input_taps=self.taps_for(target),
+            max_depth=self.depth_for(target),
+            max_degree=self.degree_for(target),
+            refine_terms=self.refine_for(target),
+        )
 
 
 @dataclass(frozen=True)
@@ -286,8 +292,13 @@ class Config:
         return [(Path(self.base_dir) / f).resolve() for f in self.data.files]
 
 
-def config_from_dict(table: dict, source: str = "config", base_dir: str = ".",
-                     dt: float | None = None, notes: list[str] | None = None) -> Config:
+def config_from_dict(
+    table: dict,
+    source: str = "config",
+    base_dir: str = ".",
+    dt: float | None = None,
+    notes: list[str] | None = None,
+) -> Config:
     """A validated Config from a TOML-like table: older keys migrated (their notes appended
     to `notes`), the preset laid underneath. `dt`: the data's sample period, when known."""
     table, found = migrate(table, source, dt)
@@ -304,8 +315,12 @@ def load_config(path, quiet: bool = False) -> Config:
     table, _ = read_toml(path)
     data = table.get("data")
     if isinstance(data, dict) and data.get("files") == []:
-        raise GpquadError("files = [] lists no flight; list flight files, or remove the key to "
-                          "fly the reference simulator", source=str(path), field="data.files")
+        raise GpquadError(
+            "files = [] lists no flight; list flight files, or remove the key to "
+            "fly the reference simulator",
+            source=str(path),
+            field="data.files",
+        )
     notes: list[str] = []
     cfg = config_from_dict(table, str(path), str(path.parent.resolve()), notes=notes)
     if not quiet:
@@ -314,8 +329,9 @@ def load_config(path, quiet: bool = False) -> Config:
     return cfg
 
 
-def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=None,
-             out=None) -> Config:
+def override(
+    cfg: Config, *, files=None, targets=None, iterations=None, seed=None, out=None
+) -> Config:
     """Apply command-line overrides; file paths are taken relative to the current folder."""
     data, ev, output = cfg.data, cfg.evolution, cfg.output
     base_dir = cfg.base_dir
@@ -327,8 +343,14 @@ def override(cfg: Config, *, files=None, targets=None, iterations=None, seed=Non
         ev = dataclasses.replace(ev, iterations=int(iterations))
     if out is not None:
         output = dataclasses.replace(output, dir=str(Path(out).resolve()))
-    new = dataclasses.replace(cfg, data=data, evolution=ev, output=output, base_dir=base_dir,
-                              seed=cfg.seed if seed is None else int(seed))
+    new = dataclasses.replace(
+        cfg,
+        data=data,
+        evolution=ev,
+        output=output,
+        base_dir=base_dir,
+        seed=cfg.seed if seed is None else int(seed),
+    )
     return validate(new, "command line")
 
 
@@ -353,14 +375,19 @@ def load_folder_config(folder) -> Config:
     from gpquad.study.store import read_json
 
     path = Path(folder) / "config.json"
-    table = read_json(path, "gpquad run or sweep folder",
-                      "give a folder written by `gpquad run` or `gpquad sweep`")
+    table = read_json(
+        path,
+        "gpquad run or sweep folder",
+        "give a folder written by `gpquad run` or `gpquad sweep`",
+    )
     base = table.pop("base_dir", ".")
     return config_from_dict(table, str(path), base, dt=_folder_dt(Path(folder)))
 
 
 def preset_evolution(name: str = "paper", **fields) -> EvolutionConfig:
     """The [evolution] of preset `name` with `fields` replaced (validated as a config is)."""
-    table = {"preset": name, "evolution": {k: list(v) if isinstance(v, tuple) else v
-                                           for k, v in fields.items()}}
+    table = {
+        "preset": name,
+        "evolution": {k: list(v) if isinstance(v, tuple) else v for k, v in fields.items()},
+    }
     return config_from_dict(table, f"preset {name}").evolution

@@ -9,16 +9,30 @@ import copy
 from gpquad.errors import GpquadError
 
 #: evolution.<old> -> evolution.gp.<same>: the paper's variation probabilities.
-MOVED_TO_GP = ("p_leaf", "p_constant_leaf", "const_low", "const_high", "const_variance",
-               "p_const_perturb", "p_delay")
+MOVED_TO_GP = (
+    "p_leaf",
+    "p_constant_leaf",
+    "const_low",
+    "const_high",
+    "const_variance",
+    "p_const_perturb",
+    "p_delay",
+)
 #: evolution.<old> -> evolution.<new>.
 RENAMED = {"final_selection": "selection", "local_search_evals": "nelder_mead_evals"}
 #: Options measured and not adopted (docs/decisions): their value that changes nothing.
-REMOVED = {"front_selection": False, "attitude_weight": 0.0, "angle_tangents": False,
-           "fit_horizons": []}
+REMOVED = {
+    "front_selection": False,
+    "attitude_weight": 0.0,
+    "angle_tangents": False,
+    "fit_horizons": [],
+}
 #: The finishing steps that were switches, in their place in evolution.finish.
-FINISH_SWITCHES = {"symmetric_equations": "symmetrize", "stability_repair": "repair",
-                   "joint_fit": "joint_fit"}
+FINISH_SWITCHES = {
+    "symmetric_equations": "symmetrize",
+    "stability_repair": "repair",
+    "joint_fit": "joint_fit",
+}
 
 
 def migrate(table: dict, source: str, dt: float | None = None) -> tuple[dict, list[str]]:
@@ -40,8 +54,11 @@ def migrate(table: dict, source: str, dt: float | None = None) -> tuple[dict, li
     if "window_steps" in ev:
         steps = ev.pop("window_steps")
         if dt is None:
-            raise refuse("window_steps", f"the window is now in seconds: write window_s = "
-                         f"{steps} x the sample period (at 25 Hz: window_s = {steps * 0.04:g})")
+            raise refuse(
+                "window_steps",
+                f"the window is now in seconds: write window_s = "
+                f"{steps} x the sample period (at 25 Hz: window_s = {steps * 0.04:g})",
+            )
         ev.setdefault("window_s", steps * dt)
         note(f"evolution.window_steps = {steps} is now evolution.window_s = {steps * dt:g}")
     if "test_offset_max" in ev:
@@ -60,8 +77,10 @@ def migrate(table: dict, source: str, dt: float | None = None) -> tuple[dict, li
         if key in ev:
             value = ev.pop(key)
             if value != inert and not (isinstance(inert, list) and list(value) == inert):
-                raise refuse(key, "was measured and not adopted (docs/decisions), and is "
-                             "removed; delete the key")
+                raise refuse(
+                    key,
+                    "was measured and not adopted (docs/decisions), and is removed; delete the key",
+                )
             note(f"evolution.{key} is removed (it was off); delete the key")
     if any(k in ev for k in FINISH_SWITCHES):
         on = {step for key, step in FINISH_SWITCHES.items() if ev.pop(key, False)}
@@ -69,8 +88,10 @@ def migrate(table: dict, source: str, dt: float | None = None) -> tuple[dict, li
             on.add("refine")
         order = ("symmetrize", "refine", "repair", "joint_fit")
         ev["finish"] = [s for s in order if s in on]
-        note(f"symmetric_equations, stability_repair and joint_fit are now evolution.finish = "
-             f"{ev['finish']}")
+        note(
+            f"symmetric_equations, stability_repair and joint_fit are now evolution.finish = "
+            f"{ev['finish']}"
+        )
     if "mirror_inputs" in ev:
         flipped = ev.pop("mirror_inputs")
         vehicle = table.setdefault("vehicle", {})
@@ -91,15 +112,20 @@ def _migrate_constant_fit(ev: dict, note, refuse) -> None:
     search = ev.pop("local_search", None)
     fit = ev.get("constant_fit", "nelder-mead")
     if search == "delays":
-        raise refuse("local_search", 'local_search = "delays" is removed; write constant_fit = '
-                     '"lm" (delays and constants) or "none"')
+        raise refuse(
+            "local_search",
+            'local_search = "delays" is removed; write constant_fit = '
+            '"lm" (delays and constants) or "none"',
+        )
     if search == "none":
         if fit == "gauss-newton":
-            raise refuse("local_search", 'local_search = "none" with constant_fit = '
-                         '"gauss-newton" is no longer offered; write constant_fit = "lm" '
-                         '(local search by LM) or "none"')
+            raise refuse(
+                "local_search",
+                'local_search = "none" with constant_fit = '
+                '"gauss-newton" is no longer offered; write constant_fit = "lm" '
+                '(local search by LM) or "none"',
+            )
         ev["constant_fit"] = "none"
     else:
         ev["constant_fit"] = "lm" if fit == "gauss-newton" else fit
-    note(f"evolution.local_search and constant_fit are now constant_fit = "
-         f"\"{ev['constant_fit']}\"")
+    note(f'evolution.local_search and constant_fit are now constant_fit = "{ev["constant_fit"]}"')

@@ -15,23 +15,33 @@ if TYPE_CHECKING:
 
 def validate_names(cfg: Config, source: str) -> None:
     """Seeds, names and lists whose mistakes would otherwise pass silently."""
-    if not 0 <= cfg.seed < 2 ** 63:
-        raise GpquadError(f"seed {cfg.seed} is out of range; give an integer in [0, 2^63)",
-                          source=source, field="seed")
+    if not 0 <= cfg.seed < 2**63:
+        raise GpquadError(
+            f"seed {cfg.seed} is out of range; give an integer in [0, 2^63)",
+            source=source,
+            field="seed",
+        )
     targets = cfg.evolution.targets
     if len(set(targets)) != len(targets):
-        raise GpquadError(f"a target is listed twice in {list(targets)}; give each once",
-                          source=source, field="evolution.targets")
+        raise GpquadError(
+            f"a target is listed twice in {list(targets)}; give each once",
+            source=source,
+            field="evolution.targets",
+        )
     files = [str(Path(cfg.base_dir, f).resolve()) for f in cfg.data.files]
     twice = sorted({f for f in files if files.count(f) > 1})
     if twice:
-        raise GpquadError(f"{twice[0]} is given twice; give each flight once",
-                          source=source, field="data.files")
+        raise GpquadError(
+            f"{twice[0]} is given twice; give each flight once", source=source, field="data.files"
+        )
     for name in cfg.data.inputs if not isinstance(cfg.data.inputs, str) else ():
         reason = reserved_name(name)
         if reason:
-            raise GpquadError(f"input name '{name}' {reason}; rename it (e.g. 'u_{name}') with "
-                              "[data.columns]", source=source, field="data.inputs")
+            raise GpquadError(
+                f"input name '{name}' {reason}; rename it (e.g. 'u_{name}') with [data.columns]",
+                source=source,
+                field="data.inputs",
+            )
 
 
 def reserved_name(name: str) -> str | None:

@@ -12,12 +12,16 @@ from gpquad.study import config as config_module
 from gpquad.study.config import Config, config_from_dict
 
 #: The sections, in page order: (TOML table, dataclass).
-SECTIONS = (("", Config), ("data", config_module.DataConfig),
-            ("vehicle", config_module.VehicleConfig),
-            ("evolution", config_module.EvolutionConfig),
-            ("evolution.gp", config_module.GPConfig),
-            ("simulator", config_module.SimulatorConfig),
-            ("sweep", config_module.SweepConfig), ("output", config_module.OutputConfig))
+SECTIONS = (
+    ("", Config),
+    ("data", config_module.DataConfig),
+    ("vehicle", config_module.VehicleConfig),
+    ("evolution", config_module.EvolutionConfig),
+    ("evolution.gp", config_module.GPConfig),
+    ("simulator", config_module.SimulatorConfig),
+    ("sweep", config_module.SweepConfig),
+    ("output", config_module.OutputConfig),
+)
 
 
 def field_comments(cls) -> dict[str, str]:
@@ -64,22 +68,32 @@ def _get(cfg, section: str):
 def markdown() -> str:
     """The page."""
     default, paper = Config(), config_from_dict({"preset": "paper"})
-    out = ["# Configuration reference", "",
-           "Every key of a config file (TOML), its default, and its value under "
-           '`preset = "paper"` where that differs (the paper\'s method, '
-           "`gpquad.study.presets`). A config sets only what differs from the defaults; "
-           "`gpquad.fit(..., key=value)` takes the [evolution], [data] and [vehicle] keys by "
-           "name. Keys of older versions are migrated with a note or refused in one line "
-           "(`gpquad.study.config_migrate`). This page is generated from "
-           "`gpquad/study/config.py` (`gpquad.study.config_reference`).", ""]
+    out = [
+        "# Configuration reference",
+        "",
+        "Every key of a config file (TOML), its default, and its value under "
+        '`preset = "paper"` where that differs (the paper\'s method, '
+        "`gpquad.study.presets`). A config sets only what differs from the defaults; "
+        "`gpquad.fit(..., key=value)` takes the [evolution], [data] and [vehicle] keys by "
+        "name. Keys of older versions are migrated with a note or refused in one line "
+        "(`gpquad.study.config_migrate`). This page is generated from "
+        "`gpquad/study/config.py` (`gpquad.study.config_reference`).",
+        "",
+    ]
     for section, cls in SECTIONS:
         comments = field_comments(cls)
-        out += [f"## [{section}]" if section else "## Top level", "",
-                "| key | default | paper | meaning |", "|---|---|---|---|"]
+        out += [
+            f"## [{section}]" if section else "## Top level",
+            "",
+            "| key | default | paper | meaning |",
+            "|---|---|---|---|",
+        ]
         for f in dataclasses.fields(cls):
-            if not f.metadata.get("toml", True) or dataclasses.is_dataclass(f.type) or \
-                    f.name in ("data", "simulator", "vehicle", "evolution", "output", "sweep",
-                               "gp"):
+            if (
+                not f.metadata.get("toml", True)
+                or dataclasses.is_dataclass(f.type)
+                or f.name in ("data", "simulator", "vehicle", "evolution", "output", "sweep", "gp")
+            ):
                 continue
             d = getattr(_get(default, section), f.name)
             p = getattr(_get(paper, section), f.name)

@@ -25,8 +25,11 @@ def read_toml(path) -> tuple[dict, str]:
     try:
         text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise GpquadError(f"not UTF-8 text (byte {exc.start + 1} is 0x{exc.object[exc.start]:02x});"
-                          " a TOML file is UTF-8: save it as UTF-8", source=str(path)) from None
+        raise GpquadError(
+            f"not UTF-8 text (byte {exc.start + 1} is 0x{exc.object[exc.start]:02x});"
+            " a TOML file is UTF-8: save it as UTF-8",
+            source=str(path),
+        ) from None
     except OSError as exc:
         raise GpquadError(f"cannot read ({exc.strerror})", source=str(path)) from None
     try:
@@ -45,8 +48,11 @@ def _coerce(value, tp, source: str, where: str):
     args = typing.get_args(tp)
 
     def bad():
-        return GpquadError(f"expected {_type_name(tp)}, got {type(value).__name__} {value!r}",
-                           source=source, field=where)
+        return GpquadError(
+            f"expected {_type_name(tp)}, got {type(value).__name__} {value!r}",
+            source=source,
+            field=where,
+        )
 
     if origin in (typing.Union, types.UnionType):
         for arg in args:
@@ -102,8 +108,9 @@ def build_dataclass(cls, table: dict, source: str, prefix: str = ""):
 
             close = difflib.get_close_matches(key, names, n=1)
             hint = f"did you mean '{close[0]}'? " if close else ""
-            raise GpquadError(f"unknown key; {hint}allowed keys here are {names}",
-                              source=source, field=where)
+            raise GpquadError(
+                f"unknown key; {hint}allowed keys here are {names}", source=source, field=where
+            )
         tp = hints[key]
         if dataclasses.is_dataclass(tp):
             if not isinstance(value, dict):

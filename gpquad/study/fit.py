@@ -27,8 +27,12 @@ from gpquad.study.config import Config
 from gpquad.study.search import Progress, identify
 from gpquad.study.store import HistoryWriter, write_json
 
-FINISH_WORDS = {"symmetrize": "symmetric equations", "refine": "refining the rate equations",
-                "repair": "full-model stability repair", "joint_fit": "joint refit"}
+FINISH_WORDS = {
+    "symmetrize": "symmetric equations",
+    "refine": "refining the rate equations",
+    "repair": "full-model stability repair",
+    "joint_fit": "joint refit",
+}
 
 
 def warn_unmeasured(dataset: Dataset, targets) -> None:
@@ -36,9 +40,12 @@ def warn_unmeasured(dataset: Dataset, targets) -> None:
     for target in targets:
         missing = dataset.unmeasured(TARGET_STATE[target])
         if missing:
-            print(f"gpquad: warning: {target} integrates {TARGET_STATE[target]}, which "
-                  f"{', '.join(missing)} does not measure; its equation fits the log's "
-                  "placeholder values", file=sys.stderr)
+            print(
+                f"gpquad: warning: {target} integrates {TARGET_STATE[target]}, which "
+                f"{', '.join(missing)} does not measure; its equation fits the log's "
+                "placeholder values",
+                file=sys.stderr,
+            )
 
 
 def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
@@ -46,22 +53,37 @@ def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
     when the record is damaged (the target is then identified again)."""
     try:
         record = json.loads(path.read_text())
-        equation = Equation.from_dict(path.stem, record["equation"], dataset.input_names,
-                                      dataset.trim)
+        equation = Equation.from_dict(
+            path.stem, record["equation"], dataset.input_names, dataset.trim
+        )
         end = record["history_bytes"]
         if type(end) is not int or not 0 < end <= (path.parents[1] / "history.csv").stat().st_size:
             raise ValueError(f"history_bytes {end!r} is not within history.csv")
         return equation, end
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError,
-            GpquadError) as exc:
-        print(f"gpquad: warning: {path}: damaged record of a finished equation "
-              f"({type(exc).__name__}); identifying {path.stem} again", file=sys.stderr)
+    except (
+        OSError,
+        UnicodeDecodeError,
+        ValueError,
+        KeyError,
+        TypeError,
+        IndexError,
+        GpquadError,
+    ) as exc:
+        print(
+            f"gpquad: warning: {path}: damaged record of a finished equation "
+            f"({type(exc).__name__}); identifying {path.stem} again",
+            file=sys.stderr,
+        )
         return None
 
 
-def search_equations(dataset: Dataset, cfg: Config, report: Progress,
-                     run_dir: Path | None = None, resuming: bool = False
-                     ) -> tuple[dict[str, Equation], dict[str, float]]:
+def search_equations(
+    dataset: Dataset,
+    cfg: Config,
+    report: Progress,
+    run_dir: Path | None = None,
+    resuming: bool = False,
+) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
     KeyboardInterrupt the exception carries `partial` = the equations found so far."""
@@ -71,12 +93,18 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
     try:
         # Where the history of finished targets ends (the header, before any target).
-        history_end = (len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
-                       if run_dir is not None else 0)
+        history_end = (
+            len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
+            if run_dir is not None
+            else 0
+        )
         for target in ev.targets:
             done = run_dir / "checkpoints" / f"{target}.json" if run_dir is not None else None
-            record = (_finished_record(done, dataset)
-                      if done is not None and resuming and done.exists() else None)
+            record = (
+                _finished_record(done, dataset)
+                if done is not None and resuming and done.exists()
+                else None
+            )
             if record is not None:  # finished before the interruption
                 equations[target], history_end = record
                 report.done += ev.iterations
@@ -84,16 +112,24 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
                 continue
             t0 = time.perf_counter()
             equations[target], _ = identify(
-                dataset, target, cfg, history, report,
+                dataset,
+                target,
+                cfg,
+                history,
+                report,
                 checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
-                history_start=history_end)
+                history_start=history_end,
+            )
             timings[target] = time.perf_counter() - t0
             if done is not None and history is not None:
                 history_end = history.size()
-                write_json(done, {"equation": equations[target].to_dict(),
-                                  "history_bytes": history_end})
-            report.say(f"  -> {equations[target].text()}  (validation error "
-                       f"{equations[target].validation_error:.4g})")
+                write_json(
+                    done, {"equation": equations[target].to_dict(), "history_bytes": history_end}
+                )
+            report.say(
+                f"  -> {equations[target].text()}  (validation error "
+                f"{equations[target].validation_error:.4g})"
+            )
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
         if partial is not None:
@@ -108,8 +144,11 @@ def search_equations(dataset: Dataset, cfg: Config, report: Progress,
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
     """{target: note} for the targets whose integrated state the data does not measure."""
-    notes = {t: f"{TARGET_STATE[t]} not measured by the log: fitted to its placeholder values"
-             for t in targets if dataset.unmeasured(TARGET_STATE[t])}
+    notes = {
+        t: f"{TARGET_STATE[t]} not measured by the log: fitted to its placeholder values"
+        for t in targets
+        if dataset.unmeasured(TARGET_STATE[t])
+    }
     return notes or None
 
 
@@ -119,8 +158,9 @@ def _identify_one(dataset: Dataset, target: str, cfg: Config) -> tuple[str, Equa
     return target, equation, time.perf_counter() - t0
 
 
-def search_in_parallel(dataset: Dataset, cfg: Config, report: Progress, jobs: int
-                       ) -> tuple[dict[str, Equation], dict[str, float]]:
+def search_in_parallel(
+    dataset: Dataset, cfg: Config, report: Progress, jobs: int
+) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation, the targets searched in `jobs` worker processes: each search
     is seeded by its target alone and runs BLAS on one thread, so the equations are the
     same bits for any `jobs` (no history or checkpoint is written)."""
@@ -132,11 +172,14 @@ def search_in_parallel(dataset: Dataset, cfg: Config, report: Progress, jobs: in
     report.say(f"gpquad: searching {len(ev.targets)} equations in {jobs} processes ...")
     with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as parallel:
         for target, equation, seconds in parallel(
-                delayed(_identify_one)(dataset, t, cfg) for t in ev.targets):
+            delayed(_identify_one)(dataset, t, cfg) for t in ev.targets
+        ):
             found[target], timings[target] = equation, seconds
             report.done += ev.iterations
-            report.say(f"  -> {equation.text()}  (validation error "
-                       f"{equation.validation_error:.4g}; {seconds:.1f} s)")
+            report.say(
+                f"  -> {equation.text()}  (validation error "
+                f"{equation.validation_error:.4g}; {seconds:.1f} s)"
+            )
     return {t: found[t] for t in ev.targets}, timings
 
 
@@ -147,9 +190,16 @@ def default_jobs(n_targets: int) -> int:
 
 def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> DiscoveredModel:
     """The unfinished model of `equations` with what is needed to reproduce and fly it."""
-    return DiscoveredModel(equations, dataset.input_names, dataset.trim, dataset.dt, cfg.seed,
-                           cfg.to_dict(), envelope=training_envelope(dataset),
-                           unmeasured=unmeasured_notes(dataset, equations))
+    return DiscoveredModel(
+        equations,
+        dataset.input_names,
+        dataset.trim,
+        dataset.dt,
+        cfg.seed,
+        cfg.to_dict(),
+        envelope=training_envelope(dataset),
+        unmeasured=unmeasured_notes(dataset, equations),
+    )
 
 
 class StepClock:
@@ -172,9 +222,13 @@ class StepClock:
             self._current = None
 
 
-def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
-           report: Progress | None = None,
-           seconds: dict[str, float] | None = None) -> DiscoveredModel:
+def finish(
+    model: DiscoveredModel,
+    dataset: Dataset,
+    cfg: Config,
+    report: Progress | None = None,
+    seconds: dict[str, float] | None = None,
+) -> DiscoveredModel:
     """The finished model (cfg.evolution.finish), each step's summary line reported, and
     its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
     given, receives each step's wall time."""
@@ -184,8 +238,12 @@ def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
     clock.stop()
     if seconds is not None:
         seconds.update(clock.seconds)
-    for name, summary in (("symmetrized", symmetrized_summary), ("refined", refined_summary),
-                          ("stability", stability_summary), ("joint_fit", joint_fit_summary)):
+    for name, summary in (
+        ("symmetrized", symmetrized_summary),
+        ("refined", refined_summary),
+        ("stability", stability_summary),
+        ("joint_fit", joint_fit_summary),
+    ):
         if getattr(model, name) is not None:
             say(summary(getattr(model, name)))
     flipped = cfg.vehicle.flipped(dataset.input_names)
@@ -196,9 +254,14 @@ def finish(model: DiscoveredModel, dataset: Dataset, cfg: Config,
     return model
 
 
-def fit_dataset(dataset: Dataset, cfg: Config, report: Progress | None = None,
-                run_dir: Path | None = None, resuming: bool = False,
-                jobs: int = 1) -> DiscoveredModel:
+def fit_dataset(
+    dataset: Dataset,
+    cfg: Config,
+    report: Progress | None = None,
+    run_dir: Path | None = None,
+    resuming: bool = False,
+    jobs: int = 1,
+) -> DiscoveredModel:
     """Search every configured target and finish the model (module notes). Without a run
     folder the searches may run in `jobs` processes (the same equations for any value)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))

@@ -13,16 +13,22 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
 from gpquad.study.store import HistoryWriter
 
 
-def evolve(co: Coevolution, state: RunState, iterations: int,
-           history: HistoryWriter | None = None, checkpoint_path: Path | None = None,
-           meta: dict | None = None,
-           on_iteration: Callable[[RunState], None] | None = None) -> RunState:
+def evolve(
+    co: Coevolution,
+    state: RunState,
+    iterations: int,
+    history: HistoryWriter | None = None,
+    checkpoint_path: Path | None = None,
+    meta: dict | None = None,
+    on_iteration: Callable[[RunState], None] | None = None,
+) -> RunState:
     """Iterate `state` until `iterations`; history, checkpoint, then `on_iteration(state)`."""
     while state.iteration < iterations:
         co.iterate(state)
@@ -30,15 +36,17 @@ def evolve(co: Coevolution, state: RunState, iterations: int,
             history.write(state.history)
         state.history.clear()
         if checkpoint_path is not None:
-            checkpoint.save(checkpoint_path, state,
-                            {**(meta or {}), "history_bytes": history.size() if history else 0})
+            checkpoint.save(
+                checkpoint_path,
+                state,
+                {**(meta or {}), "history_bytes": history.size() if history else 0},
+            )
         if on_iteration is not None:
             on_iteration(state)
     return state
 
 
-def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str
-                   ) -> Equation:
+def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:
     """The reported equation and the run's size/error Pareto front (training errors).
 
     The equation is the final climbers' best, pruned or chosen by the configured
@@ -55,6 +63,8 @@ def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: s
         if better:
             tree, train = min(better, key=lambda te: (te[1], te[0].size))
             val = float(co.tiled_errors([tree], dataset.validation)[0])
-    summaries = [Equation(target, t, dataset.input_names, err, float("nan"),
-                          dataset.trim).summary() for t, err in front]
+    summaries = [
+        Equation(target, t, dataset.input_names, err, float("nan"), dataset.trim).summary()
+        for t, err in front
+    ]
     return Equation(target, tree, dataset.input_names, train, val, dataset.trim, summaries)

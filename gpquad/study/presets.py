@@ -53,6 +53,9 @@ def with_preset(table: dict, source: str) -> dict:
     """The config table with its `preset` (default "recommended") laid underneath."""
     name = table.get("preset", "recommended")
     if name not in PRESETS:
-        raise GpquadError(f"unknown preset '{name}'; choose one of {sorted(PRESETS)}",
-                          source=source, field="preset")
+        raise GpquadError(
+            f"unknown preset '{name}'; choose one of {sorted(PRESETS)}",
+            source=source,
+            field="preset",
+        )
     return _merged(PRESETS[name], table)

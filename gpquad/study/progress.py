@@ -36,13 +36,15 @@ def _fmt_time(seconds: float | None) -> str:
 class SweepProgress:
     """Polls the run folders of a sweep and reports in one of MODES."""
 
-    def __init__(self, mode: str = "live", stream=None, interval: float = 1.0,
-                 interval_log: float = 30.0):
+    def __init__(
+        self, mode: str = "live", stream=None, interval: float = 1.0, interval_log: float = 30.0
+    ):
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}")
         self.mode = mode
-        self.stream = stream if stream is not None else (sys.stdout if mode == "jsonl"
-                                                         else sys.stderr)
+        self.stream = (
+            stream if stream is not None else (sys.stdout if mode == "jsonl" else sys.stderr)
+        )
         self.interval = interval
         self.interval_log = interval_log
         self.tty = mode == "live" and hasattr(self.stream, "isatty") and self.stream.isatty()
@@ -58,8 +60,10 @@ class SweepProgress:
         self.iterations = iterations
         self.t0 = time.time()
         self.done_at_start = self.snapshot()["iterations_done"]
-        self._emit({"event": "start", "runs": len(self.keys), "folder": str(self.out)},
-                   f"gpquad sweep: {len(self.keys)} runs x {iterations} iterations in {self.out}")
+        self._emit(
+            {"event": "start", "runs": len(self.keys), "folder": str(self.out)},
+            f"gpquad sweep: {len(self.keys)} runs x {iterations} iterations in {self.out}",
+        )
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
 
@@ -70,18 +74,35 @@ class SweepProgress:
         if summary.get("skipped"):
             text = None
         else:
-            text = (f"done {summary['target']} rep {summary['repetition']}: validation error "
-                    f"{summary['validation_error']:.4g} (train {summary['train_error']:.4g})")
-        self._emit({"event": "run_done", **{k: summary[k] for k in (
-            "target", "repetition", "train_error", "validation_error", "skipped")}}, text)
+            text = (
+                f"done {summary['target']} rep {summary['repetition']}: validation error "
+                f"{summary['validation_error']:.4g} (train {summary['train_error']:.4g})"
+            )
+        self._emit(
+            {
+                "event": "run_done",
+                **{
+                    k: summary[k]
+                    for k in ("target", "repetition", "train_error", "validation_error", "skipped")
+                },
+            },
+            text,
+        )
 
     def finished(self, summaries, model_path) -> None:
         snap = self.snapshot()
-        self._emit({"event": "sweep_done", "runs": len(summaries), "wall_s": time.time() - self.t0,
-                    "best_validation_error": snap["best_validation"],
-                    "model": str(model_path) if model_path else None},
-                   f"sweep finished: {len(summaries)} runs in {_fmt_time(time.time() - self.t0)}"
-                   + (f"; best full model {model_path}" if model_path else ""), force=True)
+        self._emit(
+            {
+                "event": "sweep_done",
+                "runs": len(summaries),
+                "wall_s": time.time() - self.t0,
+                "best_validation_error": snap["best_validation"],
+                "model": str(model_path) if model_path else None,
+            },
+            f"sweep finished: {len(summaries)} runs in {_fmt_time(time.time() - self.t0)}"
+            + (f"; best full model {model_path}" if model_path else ""),
+            force=True,
+        )
 
     def stop(self) -> None:
         self._stop.set()
@@ -118,15 +139,24 @@ class SweepProgress:
             except (ValueError, OSError):
                 continue
             iters += int(status.get("iteration", 0))
-            if status.get("state") == "running" and status.get("time", 0) >= self.t0 - 1 \
-                    and now - status.get("time", 0) < 7 * 24 * 3600:
+            if (
+                status.get("state") == "running"
+                and status.get("time", 0) >= self.t0 - 1
+                and now - status.get("time", 0) < 7 * 24 * 3600
+            ):
                 running += 1
                 err = float(status.get("best_suite_error", float("inf")))
                 if err < best_run.get(key.target, float("inf")):
                     best_run[key.target] = err
-        return {"done": done, "running": running, "total": len(self.keys),
-                "iterations_done": iters, "iterations_total": len(self.keys) * self.iterations,
-                "best_validation": best_val, "best_running": best_run}
+        return {
+            "done": done,
+            "running": running,
+            "total": len(self.keys),
+            "iterations_done": iters,
+            "iterations_total": len(self.keys) * self.iterations,
+            "best_validation": best_val,
+            "best_running": best_run,
+        }
 
     def eta(self, snap: dict) -> float | None:
         gained = snap["iterations_done"] - self.done_at_start
@@ -142,10 +172,12 @@ class SweepProgress:
                 v = snap["best_validation"].get(t)
                 r = snap["best_running"].get(t)
                 parts.append(f"{t} {v:.3g}" if v is not None else f"{t} (suite {r:.3g})")
-        return (f"[{snap['done']}/{snap['total']} done, {snap['running']} running, "
-                f"{snap['iterations_done']}/{snap['iterations_total']} iterations, "
-                f"elapsed {_fmt_time(time.time() - self.t0)}, ETA {_fmt_time(self.eta(snap))}] "
-                f"best validation error: " + (", ".join(parts) if parts else "-"))
+        return (
+            f"[{snap['done']}/{snap['total']} done, {snap['running']} running, "
+            f"{snap['iterations_done']}/{snap['iterations_total']} iterations, "
+            f"elapsed {_fmt_time(time.time() - self.t0)}, ETA {_fmt_time(self.eta(snap))}] "
+            f"best validation error: " + (", ".join(parts) if parts else "-")
+        )
 
     def _loop(self) -> None:
         while not self._stop.wait(self.interval):

@@ -33,8 +33,16 @@ def default_run_dir(cfg: Config) -> Path:
 
 
 #: Files and folders of a run folder that gpquad writes (none may be a link).
-RUN_FILES = ("config.json", "run.json", "model.json", "history.csv", "equations.tex",
-             "equations.md", "equations_raw_inputs.tex", "checkpoints")
+RUN_FILES = (
+    "config.json",
+    "run.json",
+    "model.json",
+    "history.csv",
+    "equations.tex",
+    "equations.md",
+    "equations_raw_inputs.tex",
+    "checkpoints",
+)
 #: Run folders whose lock this process holds (released when the process ends).
 _HELD_LOCKS: dict[Path, object] = {}
 
@@ -45,19 +53,31 @@ def claim_run_folder(run_dir: Path, cfg: Config) -> bool:
     gpquad run (a user's files, a sweep folder), a run of another config, a folder another
     gpquad command is writing (lock held), a run file that is a link."""
     if run_dir.exists() and not run_dir.is_dir():
-        raise GpquadError("not a folder; give a folder for the run", source=str(run_dir),
-                          field="--out")
+        raise GpquadError(
+            "not a folder; give a folder for the run", source=str(run_dir), field="--out"
+        )
     if (run_dir / "sweep.json").exists():
-        raise GpquadError("a sweep folder (`gpquad sweep` resumes it), not a run folder; give "
-                          "`gpquad run` another --out", source=str(run_dir), field="--out")
+        raise GpquadError(
+            "a sweep folder (`gpquad sweep` resumes it), not a run folder; give "
+            "`gpquad run` another --out",
+            source=str(run_dir),
+            field="--out",
+        )
     entries = {p.name for p in run_dir.iterdir()} if run_dir.is_dir() else set()
     if entries - {".lock"} and "config.json" not in entries:
-        raise GpquadError("the folder holds files that are not a gpquad run (no config.json); "
-                          "give an empty or new --out", source=str(run_dir), field="--out")
+        raise GpquadError(
+            "the folder holds files that are not a gpquad run (no config.json); "
+            "give an empty or new --out",
+            source=str(run_dir),
+            field="--out",
+        )
     links = [name for name in RUN_FILES if (run_dir / name).is_symlink()]
     if links:
-        raise GpquadError(f"{links[0]} is a link; gpquad writes no file through a link: give "
-                          "another --out", source=str(run_dir), field="--out")
+        raise GpquadError(
+            f"{links[0]} is a link; gpquad writes no file through a link: give another --out",
+            source=str(run_dir),
+            field="--out",
+        )
     run_dir.mkdir(parents=True, exist_ok=True)
     _lock(run_dir)
     return _same_config(run_dir, cfg)
@@ -74,15 +94,19 @@ def _lock(run_dir: Path) -> None:
     try:
         fd = os.open(run_dir / ".lock", os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as exc:
-        raise GpquadError(f"cannot lock the folder ({exc.strerror})", source=str(run_dir),
-                          field="--out") from None
+        raise GpquadError(
+            f"cannot lock the folder ({exc.strerror})", source=str(run_dir), field="--out"
+        ) from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise GpquadError("another gpquad command is writing this run folder; wait for it to "
-                          "finish or give another --out", source=str(run_dir),
-                          field="--out") from None
+        raise GpquadError(
+            "another gpquad command is writing this run folder; wait for it to "
+            "finish or give another --out",
+            source=str(run_dir),
+            field="--out",
+        ) from None
     _HELD_LOCKS[key] = fd
 
 
@@ -94,11 +118,19 @@ def _same_config(run_dir: Path, cfg: Config) -> bool:
     path = run_dir / "config.json"
     if not path.exists():
         return False
-    saved = read_json(path, "run folder", "the folder's config.json is damaged: give another "
-                      "--out, or delete the folder to start again")
+    saved = read_json(
+        path,
+        "run folder",
+        "the folder's config.json is damaged: give another "
+        "--out, or delete the folder to start again",
+    )
     if saved != json.loads(json.dumps(folder_config_dict(cfg))):
-        raise GpquadError("the folder holds a run of a different config; give another --out "
-                          "(or the same config to resume)", source=str(run_dir), field="--out")
+        raise GpquadError(
+            "the folder holds a run of a different config; give another --out "
+            "(or the same config to resume)",
+            source=str(run_dir),
+            field="--out",
+        )
     return True
 
 
@@ -110,8 +142,9 @@ def write_model(run_dir: Path, model: DiscoveredModel) -> None:
         atomic_write_text(run_dir / "equations_raw_inputs.tex", model.latex(raw=True))
 
 
-def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
-                   dataset=None) -> DiscoveredModel:
+def run_experiment(
+    cfg: Config, run_dir=None, progress: bool | None = None, dataset=None
+) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
     Bad data or config fails here, before any long work. Ctrl-C writes the equations
@@ -128,38 +161,57 @@ def run_experiment(cfg: Config, run_dir=None, progress: bool | None = None,
         dataset = load_dataset(cfg)
     load_seconds = time.perf_counter() - t_load
     resuming = claim_run_folder(run_dir, cfg)
-    info = {"schema": RUN_SCHEMA, "seed": cfg.seed, "config": cfg.to_dict(),
-            "dataset": dataset.summary(),
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **provenance()}
+    info = {
+        "schema": RUN_SCHEMA,
+        "seed": cfg.seed,
+        "config": cfg.to_dict(),
+        "dataset": dataset.summary(),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        **provenance(),
+    }
     if not resuming:
         write_json(run_dir / "config.json", folder_config_dict(cfg))
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
     warn_unmeasured(dataset, ev.targets)
-    report.say(f"gpquad: {dataset.summary()['train_samples']} training samples at "
-               f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}")
+    report.say(
+        f"gpquad: {dataset.summary()['train_samples']} training samples at "
+        f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
+    )
     try:
         equations, timings = search_equations(dataset, cfg, report, run_dir, resuming)
     except KeyboardInterrupt as exc:
         model = new_model(getattr(exc, "equations", {}), dataset, cfg)
         write_model(run_dir, dataclasses.replace(model, interrupted=True))
-        print(f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
-              "command with the same --out resumes", file=sys.stderr)
+        print(
+            f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
+            "command with the same --out resumes",
+            file=sys.stderr,
+        )
         raise
     finish_seconds: dict[str, float] = {}
     model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds)
     write_model(run_dir, model)
     wall = time.time() - started
-    info.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), wall_time_s=wall,
-                load_time_s=load_seconds, target_time_s=timings, finish_time_s=finish_seconds)
+    info.update(
+        finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        wall_time_s=wall,
+        load_time_s=load_seconds,
+        target_time_s=timings,
+        finish_time_s=finish_seconds,
+    )
     write_json(run_dir / "run.json", info)
     report.say(time_profile(wall, load_seconds, timings, finish_seconds))
     return model
 
 
-def time_profile(wall: float, load: float, searches: dict[str, float],
-                 finishing: dict[str, float]) -> str:
+def time_profile(
+    wall: float, load: float, searches: dict[str, float], finishing: dict[str, float]
+) -> str:
     """One line: where a run's wall time went (run.json keeps the numbers)."""
-    parts = [f"loading {load:.1f}"] + [f"{t} {s:.1f}" for t, s in searches.items()] + \
-        [f"{name} {s:.1f}" for name, s in finishing.items()]
+    parts = (
+        [f"loading {load:.1f}"]
+        + [f"{t} {s:.1f}" for t, s in searches.items()]
+        + [f"{name} {s:.1f}" for name, s in finishing.items()]
+    )
     return f"time: {wall:.1f} s in all; " + ", ".join(parts) + " (s)"

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.evolve.coevolution import Coevolution, RunState
+from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.state import RunState
 from gpquad.engine.threads import one_blas_thread
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
@@ -49,9 +50,12 @@ class Progress:
         if not self.enabled:
             return
         best = float(np.min(state.model_errors))
-        print(f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best suite error "
-              f"{best:.5g}  elapsed {elapsed:6.1f} s  left {self.time_left(elapsed)}",
-              file=self.stream, flush=True)
+        print(
+            f"  {target:6s} iteration {state.iteration:3d}/{iterations}  best suite error "
+            f"{best:.5g}  elapsed {elapsed:6.1f} s  left {self.time_left(elapsed)}",
+            file=self.stream,
+            flush=True,
+        )
 
     def say(self, text: str) -> None:
         if self.enabled:
@@ -59,10 +63,16 @@ class Progress:
 
 
 @one_blas_thread
-def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter | None = None,
-             progress: Progress | None = None, state: RunState | None = None,
-             checkpoint_path: Path | None = None, history_start: int | None = None
-             ) -> tuple[Equation, RunState]:
+def identify(
+    dataset: Dataset,
+    target: str,
+    cfg: Config,
+    history: HistoryWriter | None = None,
+    progress: Progress | None = None,
+    state: RunState | None = None,
+    checkpoint_path: Path | None = None,
+    history_start: int | None = None,
+) -> tuple[Equation, RunState]:
     """Run the coevolution for one target; returns its best equation and final state.
 
     With checkpoint_path, the state is saved atomically after every iteration together
@@ -80,8 +90,9 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
         state = co.init_state(target_seed(cfg.seed, target))
         if history is not None and history_start is not None:
             history.truncate(history_start)
-    report = None if progress is None else (
-        lambda st: progress.iteration(target, st, ev.iterations))
+    report = (
+        None if progress is None else (lambda st: progress.iteration(target, st, ev.iterations))
+    )
     try:
         evolve(co, state, ev.iterations, history, checkpoint_path, on_iteration=report)
     except KeyboardInterrupt as exc:
@@ -91,8 +102,9 @@ def identify(dataset: Dataset, target: str, cfg: Config, history: HistoryWriter 
     return final_equation(co, state, dataset, target), state
 
 
-def _resumed_state(co: Coevolution, path: Path, history: HistoryWriter | None,
-                   history_start: int | None) -> RunState | None:
+def _resumed_state(
+    co: Coevolution, path: Path, history: HistoryWriter | None, history_start: int | None
+) -> RunState | None:
     """The state of a checkpoint that fits this run, with the history cut back to the length
     it recorded (checked first); None, with one warning line, when the checkpoint is
     damaged, foreign or an older pickled one (never unpickled)."""

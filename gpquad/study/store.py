@@ -33,18 +33,32 @@ def git_revision() -> str:
     """The source checkout's commit (with '+dirty' when it has changes), or 'unknown'."""
     here = Path(__file__).resolve().parent
     try:
-        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
-                             text=True, timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=here, capture_output=True, text=True, timeout=10).stdout.strip()
+        rev = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
         return rev + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 
 
 def provenance() -> dict:
-    return {"versions": package_versions(), "git_revision": git_revision(),
-            "platform": platform.platform()}
+    return {
+        "versions": package_versions(),
+        "git_revision": git_revision(),
+        "platform": platform.platform(),
+    }
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:
@@ -78,16 +92,20 @@ def read_json(path, what: str = "file", fix: str = "") -> dict:
 
     path = Path(path)
     if not path.is_file():
-        raise GpquadError(f"no {path.name} here: not a {what}" + (f"; {fix}" if fix else ""),
-                          source=str(path.parent))
+        raise GpquadError(
+            f"no {path.name} here: not a {what}" + (f"; {fix}" if fix else ""),
+            source=str(path.parent),
+        )
     try:
         obj = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise GpquadError(f"damaged JSON ({exc}); " + (fix or "restore or delete the file"),
-                          source=str(path)) from None
+        raise GpquadError(
+            f"damaged JSON ({exc}); " + (fix or "restore or delete the file"), source=str(path)
+        ) from None
     if not isinstance(obj, dict):
-        raise GpquadError("damaged JSON (not an object); " + (fix or "restore or delete it"),
-                          source=str(path))
+        raise GpquadError(
+            "damaged JSON (not an object); " + (fix or "restore or delete it"), source=str(path)
+        )
     return obj
 
 
@@ -103,12 +121,17 @@ def checked_name(name, field: str = "name") -> str:
 
     from gpquad.errors import GpquadError
 
-    if not isinstance(name, str) or len(name) > MAX_NAME_CHARACTERS \
-            or not re.fullmatch(r"[A-Za-z0-9_+=,@-][A-Za-z0-9._+=,@-]*", name):
-        raise GpquadError(f"{str(name)[:40]!r} is not a run name: use up to "
-                          f"{MAX_NAME_CHARACTERS} letters, digits, '_', '-' or '.', not "
-                          "starting with '.' (the name becomes a folder name, not a path)",
-                          field=field)
+    if (
+        not isinstance(name, str)
+        or len(name) > MAX_NAME_CHARACTERS
+        or not re.fullmatch(r"[A-Za-z0-9_+=,@-][A-Za-z0-9._+=,@-]*", name)
+    ):
+        raise GpquadError(
+            f"{str(name)[:40]!r} is not a run name: use up to "
+            f"{MAX_NAME_CHARACTERS} letters, digits, '_', '-' or '.', not "
+            "starting with '.' (the name becomes a folder name, not a path)",
+            field=field,
+        )
     return name
 
 
@@ -129,8 +152,11 @@ def open_for_append(path: Path):
     except FileNotFoundError:
         mode = None
     if mode is not None and not stat.S_ISREG(mode):
-        raise GpquadError("not a regular file (a link, folder or pipe); gpquad writes no file "
-                          "through a link: delete it or give another folder", source=str(path))
+        raise GpquadError(
+            "not a regular file (a link, folder or pipe); gpquad writes no file "
+            "through a link: delete it or give another folder",
+            source=str(path),
+        )
     try:
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as exc:
@@ -141,8 +167,14 @@ def open_for_append(path: Path):
 class HistoryWriter:
     """Appends per-generation rows to a CSV as they come (bounded memory)."""
 
-    FIELDS = ("target", "iteration", "generation", "best_suite_error", "median_suite_error",
-              "best_size")
+    FIELDS = (
+        "target",
+        "iteration",
+        "generation",
+        "best_suite_error",
+        "median_suite_error",
+        "best_size",
+    )
 
     def __init__(self, path):
         self.path = Path(path)

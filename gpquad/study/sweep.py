@@ -117,42 +117,83 @@ def _execute_locked(cfg: Config, dataset: Dataset, key: RunKey, folder: Path) ->
         with open(hist, "r+b") as fh:  # drop rows written after the checkpoint
             fh.truncate(history_bytes)
     started = time.time()
-    _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
-            iterations=ev.iterations, best_suite_error=float(np.min(state.model_errors)),
-            started=started, state="running")
+    _status(
+        status,
+        target=key.target,
+        repetition=key.repetition,
+        iteration=state.iteration,
+        iterations=ev.iterations,
+        best_suite_error=float(np.min(state.model_errors)),
+        started=started,
+        state="running",
+    )
+
     def after_iteration(st):
-        _status(status, target=key.target, repetition=key.repetition,
-                iteration=st.iteration, iterations=ev.iterations,
-                best_suite_error=float(np.min(st.model_errors)), started=started, state="running")
+        _status(
+            status,
+            target=key.target,
+            repetition=key.repetition,
+            iteration=st.iteration,
+            iterations=ev.iterations,
+            best_suite_error=float(np.min(st.model_errors)),
+            started=started,
+            state="running",
+        )
         if os.getppid() != parent:  # loky worker whose sweep was killed: stop here
-            raise OrphanedWorker(f"{key.name}: sweep process gone; stopped at iteration "
-                                 f"{st.iteration} (checkpointed)")
+            raise OrphanedWorker(
+                f"{key.name}: sweep process gone; stopped at iteration "
+                f"{st.iteration} (checkpointed)"
+            )
 
     writer = HistoryWriter(hist)
     try:
-        evolve(co, state, ev.iterations, writer, ckpt,
-               {"fingerprint": fp, "target": key.target, "repetition": key.repetition},
-               after_iteration)
+        evolve(
+            co,
+            state,
+            ev.iterations,
+            writer,
+            ckpt,
+            {"fingerprint": fp, "target": key.target, "repetition": key.repetition},
+            after_iteration,
+        )
     finally:
         writer.close()
     eq = final_equation(co, state, dataset, key.target)
     train, val = eq.error, eq.validation_error
-    result = {"target": key.target, "repetition": key.repetition,
-              "seed": {"master": cfg.seed, "spawn_key": list(
-                  run_seed(cfg.seed, key.target, key.repetition).spawn_key)},
-              "iterations": state.iteration, "train_error": train, "validation_error": val,
-              "equation": eq.to_dict()}
+    result = {
+        "target": key.target,
+        "repetition": key.repetition,
+        "seed": {
+            "master": cfg.seed,
+            "spawn_key": list(run_seed(cfg.seed, key.target, key.repetition).spawn_key),
+        },
+        "iterations": state.iteration,
+        "train_error": train,
+        "validation_error": val,
+        "equation": eq.to_dict(),
+    }
     write_json(result_path, result)
-    _status(status, target=key.target, repetition=key.repetition, iteration=state.iteration,
-            iterations=ev.iterations, best_suite_error=float(np.min(state.model_errors)),
-            started=started, state="done", wall_s=time.time() - started)
+    _status(
+        status,
+        target=key.target,
+        repetition=key.repetition,
+        iteration=state.iteration,
+        iterations=ev.iterations,
+        best_suite_error=float(np.min(state.model_errors)),
+        started=started,
+        state="done",
+        wall_s=time.time() - started,
+    )
     return {**_summary(result), "skipped": False, "warnings": warnings}
 
 
 def _summary(result: dict) -> dict:
-    return {"target": result["target"], "repetition": int(result["repetition"]),
-            "train_error": float(result["train_error"]),
-            "validation_error": float(result["validation_error"])}
+    return {
+        "target": result["target"],
+        "repetition": int(result["repetition"]),
+        "train_error": float(result["train_error"]),
+        "validation_error": float(result["validation_error"]),
+    }
 
 
 # ------------------------------------------------------------------------ the sweep
@@ -167,19 +208,31 @@ def prepare(cfg: Config, out: Path, runs: int) -> dict:
         except ValueError:
             old = {}
         if old.get("fingerprint") not in (None, fp):
-            raise GpquadError("this folder holds a sweep of a different config (seed, data, "
-                              "simulator or evolution settings differ); give another --out",
-                              source=str(out), field="--out")
+            raise GpquadError(
+                "this folder holds a sweep of a different config (seed, data, "
+                "simulator or evolution settings differ); give another --out",
+                source=str(out),
+                field="--out",
+            )
     elif out.exists() and any(out.iterdir()):
-        raise GpquadError("folder exists and is not a sweep folder; give another --out",
-                          source=str(out), field="--out")
+        raise GpquadError(
+            "folder exists and is not a sweep folder; give another --out",
+            source=str(out),
+            field="--out",
+        )
     out.mkdir(parents=True, exist_ok=True)
-    info = {"fingerprint": fp, "seed": cfg.seed, "name": cfg.name, "runs": runs,
-            "targets": list(cfg.evolution.targets), "iterations": cfg.evolution.iterations,
-            "base_dir": cfg.base_dir,
-            "seeding": "run (target, k): SeedSequence(seed).spawn(7)[target_index]"
-                       ".spawn(k + 1)[k]; full model k: child 6, spawn(k + 1)[k]",
-            **provenance()}
+    info = {
+        "fingerprint": fp,
+        "seed": cfg.seed,
+        "name": cfg.name,
+        "runs": runs,
+        "targets": list(cfg.evolution.targets),
+        "iterations": cfg.evolution.iterations,
+        "base_dir": cfg.base_dir,
+        "seeding": "run (target, k): SeedSequence(seed).spawn(7)[target_index]"
+        ".spawn(k + 1)[k]; full model k: child 6, spawn(k + 1)[k]",
+        **provenance(),
+    }
     write_json(info_path, info)
     write_json(out / "config.json", folder_config_dict(cfg))
     return info
@@ -219,14 +272,21 @@ def _parallel(jobs: int, backend: str, address: str | None):
             try:
                 client = Client(address, timeout=f"{SCHEDULER_TIMEOUT_S}s")
             except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise GpquadError(f"no Dask scheduler answers at {address} within "
-                                  f"{SCHEDULER_TIMEOUT_S} s ({type(exc).__name__}); start one "
-                                  "(`dask scheduler`) or give its address", field="--address"
-                                  ) from None
+                raise GpquadError(
+                    f"no Dask scheduler answers at {address} within "
+                    f"{SCHEDULER_TIMEOUT_S} s ({type(exc).__name__}); start one "
+                    "(`dask scheduler`) or give its address",
+                    field="--address",
+                ) from None
         else:
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None,
-                                   silence_logs=40)
+            cluster = LocalCluster(
+                n_workers=jobs,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                silence_logs=40,
+            )
             client = Client(cluster)
         try:
             with parallel_config(backend="dask"):
@@ -239,9 +299,17 @@ def _parallel(jobs: int, backend: str, address: str | None):
     return ctx()
 
 
-def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
-              backend: str = "loky", address: str | None = None, progress=None,
-              assemble: bool = True) -> dict:
+def run_sweep(
+    cfg: Config,
+    out,
+    *,
+    runs: int | None = None,
+    jobs: int = 1,
+    backend: str = "loky",
+    address: str | None = None,
+    progress=None,
+    assemble: bool = True,
+) -> dict:
     """Run every missing cell of the grid, then assemble the full models.
 
     Returns {"runs": [summaries], "warnings": [...], "model": path or None}.
@@ -292,8 +360,12 @@ def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
         model_path = assemble_sweep(out, cfg, dataset, n_runs)
     info_path = out / "sweep.json"
     info = json.loads(info_path.read_text())
-    info.update(last_wall_time_s=time.time() - t0, jobs=jobs, backend=backend,
-                finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    info.update(
+        last_wall_time_s=time.time() - t0,
+        jobs=jobs,
+        backend=backend,
+        finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    )
     write_json(info_path, info)
     if progress is not None:
         progress.finished(summaries, model_path)
@@ -303,4 +375,3 @@ def run_sweep(cfg: Config, out, *, runs: int | None = None, jobs: int = 1,
 def default_out(cfg: Config) -> Path:
     """A stable folder name, so that the same command resumes the same sweep."""
     return Path(cfg.output.dir) / f"{checked_name(cfg.name)}-sweep-seed{cfg.seed}"
-

@@ -8,9 +8,6 @@ suite, and one bloat simplification of every model.
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from gpquad.data.dataset import Dataset
@@ -25,6 +22,14 @@ from gpquad.engine.evolve.local_search import (
     prune,
 )
 from gpquad.engine.evolve.selection import mse_of, prune_by_bic, select_by_bic
+from gpquad.engine.evolve.state import (
+    SEED_HORIZONS,
+    SEED_WINDOWS,
+    SHORT_WINDOW_STEPS,
+    RunState,
+    disagreement,
+    variation_params,
+)
 from gpquad.engine.evolve.term_search import best_index, improve_terms
 from gpquad.engine.evolve.windows import WindowSpace, spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
@@ -33,7 +38,6 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import (
-    VariationParams,
     constant_mutation,
     fold_constants,
     mutate,
@@ -41,62 +45,7 @@ from gpquad.engine.tree.variation import (
     replace_with_constant,
 )
 from gpquad.engine.variables import N_STATE
-from gpquad.errors import GpquadError
 from gpquad.study.config import EvolutionConfig
-
-
-@dataclass
-class RunState:
-    """Everything needed to continue a run: climbers, tests, suite and the RNG state."""
-
-    target: str
-    iteration: int
-    models: list[Tree]
-    model_errors: np.ndarray
-    tests: np.ndarray  # virtual positions of the test hill climbers
-    suite: np.ndarray  # data start indices
-    suite_age: np.ndarray  # insertion order; the smallest is the oldest
-    inserted: int
-    rng_state: dict
-    history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
-
-#: Steps of data each short-horizon fit flies: windows are spread over the training data up
-#: to this many steps in all.
-SHORT_WINDOW_STEPS = 4000
-#: Training windows (spread over the data) on which the linear seed is fitted.
-SEED_WINDOWS = 24
-#: Growing horizon (steps) of the linear seed's fit and of the gain refits.
-SEED_HORIZONS = (2, 10)
-
-
-def variation_params(cfg: EvolutionConfig, n_inputs: int, variables=None) -> VariationParams:
-    """n_inputs: every tap of every input (gpquad.engine.taps). The constants' settings must
-    be finite (a GpquadError naming the field otherwise)."""
-    for name in ("const_low", "const_high", "const_variance"):
-        value = getattr(cfg.gp, name)
-        if not np.isfinite(value) or (name == "const_variance" and value < 0):
-            raise GpquadError(f"{value} is not a finite number" + (" >= 0" if name ==
-                                                                  "const_variance" else ""),
-                              field=f"evolution.gp.{name}")
-    return VariationParams(
-        n_variables=N_STATE + n_inputs, n_inputs=n_inputs, variables=variables,
-        taps=cfg.input_taps,
-        max_depth=cfg.max_depth, max_degree=cfg.max_degree,
-        p_leaf=cfg.gp.p_leaf, p_constant_leaf=cfg.gp.p_constant_leaf,
-        const_low=cfg.gp.const_low, const_high=cfg.gp.const_high,
-        const_sigma=float(np.sqrt(cfg.gp.const_variance)),
-        p_const_perturb=cfg.gp.p_const_perturb, p_delay=cfg.gp.p_delay, max_delay=cfg.max_delay)
-
-
-def disagreement(errors: np.ndarray) -> np.ndarray:
-    """Fitness of each test (column): variance of the models' errors (rows).
-
-    A diverged model (inf) counts as twice the worst finite error in the matrix, so
-    that a window on which some models blow up is a strongly discriminating test.
-    """
-    finite = np.isfinite(errors)
-    cap = 2.0 * errors[finite].max() if finite.any() else 1.0
-    return np.where(finite, errors, cap).var(axis=0)
 
 
 class Coevolution:
@@ -109,14 +58,23 @@ class Coevolution:
         self.dataset = dataset = with_taps(dataset, cfg.input_taps)
         self.target = target
         self.cfg = cfg
-        self.params = variation_params(cfg, len(dataset.input_names),
-                                       measured_variables(dataset, cfg.exclude_leaves,
-                                                          cfg.keep_tracked))
+        self.params = variation_params(
+            cfg,
+            len(dataset.input_names),
+            measured_variables(dataset, cfg.exclude_leaves, cfg.keep_tracked),
+        )
         #: samples in a test window, and how far a test mutation moves it (half a window)
         self.window_steps = cfg.window_steps(dataset.dt)
         self.test_offset_max = self.window_steps // 2
-        self.evaluator = Evaluator(dataset, target, self.window_steps, cfg.metric, cfg.max_depth,
-                                   integrator=cfg.integrator, substeps=cfg.substeps)
+        self.evaluator = Evaluator(
+            dataset,
+            target,
+            self.window_steps,
+            cfg.metric,
+            cfg.max_depth,
+            integrator=cfg.integrator,
+            substeps=cfg.substeps,
+        )
         self.space = WindowSpace(dataset.train, self.window_steps, cfg.max_delay)
         # the growing horizon of the linear seed and of the gain refits
         self.regain_windows = self.windows_for(SEED_HORIZONS)
@@ -133,14 +91,24 @@ class Coevolution:
         tests = self.space.random(rng, cfg.n_tests)
         suite = self.space.starts(self.space.random(rng, cfg.suite_size))
         errors = self.evaluator.mean_errors(models, suite)
-        return RunState(target=self.target, iteration=0, models=models, model_errors=errors,
-                        tests=tests, suite=suite, suite_age=np.arange(cfg.suite_size),
-                        inserted=cfg.suite_size, rng_state=rng.bit_generator.state)
+        return RunState(
+            target=self.target,
+            iteration=0,
+            models=models,
+            model_errors=errors,
+            tests=tests,
+            suite=suite,
+            suite_age=np.arange(cfg.suite_size),
+            inserted=cfg.suite_size,
+            rng_state=rng.bit_generator.state,
+        )
 
     def windows_for(self, horizons) -> list[tuple[np.ndarray, int]]:
         """Short windows spread over the training data for each horizon (steps)."""
-        return [(spread(tile(self.dataset.train, h, self.cfg.max_delay)[0],
-                        SHORT_WINDOW_STEPS // h), h) for h in horizons]
+        return [
+            (spread(tile(self.dataset.train, h, self.cfg.max_delay)[0], SHORT_WINDOW_STEPS // h), h)
+            for h in horizons
+        ]
 
     def linear_seed(self) -> Tree | None:
         """The linear output-error climber (gpquad.engine.evolve.linear_seed), fitted with a
@@ -150,14 +118,19 @@ class Coevolution:
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         if fit is None or len(starts) == 0:
             return None
-        variables = (self.params.variables if self.params.variables is not None
-                     else range(self.params.n_variables))
+        variables = (
+            self.params.variables
+            if self.params.variables is not None
+            else range(self.params.n_variables)
+        )
         variables = list(variables)
         scales = variable_scales(self.dataset.arrays, variables, self.dataset.train)
-        delays = initial_delays(len(self.dataset.input_names) // cfg.input_taps, cfg.input_taps,
-                                cfg.max_delay)
-        return linear_seed(variables, delays, scales, fit, spread(starts, SEED_WINDOWS), steps,
-                           cfg.max_depth)
+        delays = initial_delays(
+            len(self.dataset.input_names) // cfg.input_taps, cfg.input_taps, cfg.max_delay
+        )
+        return linear_seed(
+            variables, delays, scales, fit, spread(starts, SEED_WINDOWS), steps, cfg.max_depth
+        )
 
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:
@@ -171,12 +144,16 @@ class Coevolution:
                 state.models[i] = mutants[i]
                 state.model_errors[i] = errors[i]
             best = int(np.argmin(state.model_errors))
-            state.history.append({
-                "target": self.target, "iteration": state.iteration, "generation": gen,
-                "best_suite_error": float(state.model_errors[best]),
-                "median_suite_error": float(np.median(state.model_errors)),
-                "best_size": state.models[best].size,
-            })
+            state.history.append(
+                {
+                    "target": self.target,
+                    "iteration": state.iteration,
+                    "generation": gen,
+                    "best_suite_error": float(state.model_errors[best]),
+                    "median_suite_error": float(np.median(state.model_errors)),
+                    "best_size": state.models[best].size,
+                }
+            )
 
     def test_phase(self, state: RunState, rng: np.random.Generator) -> None:
         """Test hill climbers maximise disagreement; the best joins the suite."""
@@ -204,8 +181,9 @@ class Coevolution:
         arrays = self.dataset.arrays
         sub = np.ascontiguousarray(tree.codes[start:end])
         vals = np.ascontiguousarray(tree.values[start:end])
-        out = eval_on_samples(sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs,
-                              samples)
+        out = eval_on_samples(
+            sub, vals, len(sub), tree.delays, arrays.states, arrays.inputs, samples
+        )
         out = out[np.isfinite(out)]
         return float(out.mean()) if out.size else 0.0
 
@@ -231,8 +209,9 @@ class Coevolution:
         # simplify_tolerance 0 only a strictly better one is kept; a tolerance > 0 (not in the
         # paper) keeps one within that relative error.
         tol = self.cfg.simplify_tolerance
-        keep = errors < state.model_errors if tol == 0 else \
-            errors <= state.model_errors * (1.0 + tol)
+        keep = (
+            errors < state.model_errors if tol == 0 else errors <= state.model_errors * (1.0 + tol)
+        )
         for i in np.flatnonzero(keep):
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
@@ -250,8 +229,9 @@ class Coevolution:
             def error_of(t: Tree) -> float:
                 return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
 
-            return continued_constants(ev, tree, error, starts, n_steps, error_of, steps,
-                                       short_windows)
+            return continued_constants(
+                ev, tree, error, starts, n_steps, error_of, steps, short_windows
+            )
 
         return fit
 
@@ -264,10 +244,12 @@ class Coevolution:
         refit_fit = self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
         for i, model in enumerate(state.models):
             err = state.model_errors[i]
-            model, err = improve_constants(self.evaluator, model, err, state.suite,
-                                           self.cfg.nelder_mead_evals, fit)
-            model, err = improve_delays(self.evaluator, model, err, state.suite,
-                                        self.cfg.max_delay, refit, refit_fit)
+            model, err = improve_constants(
+                self.evaluator, model, err, state.suite, self.cfg.nelder_mead_evals, fit
+            )
+            model, err = improve_delays(
+                self.evaluator, model, err, state.suite, self.cfg.max_delay, refit, refit_fit
+            )
             state.models[i], state.model_errors[i] = model, err
         if self.cfg.term_search:
             self.term_phase(state)
@@ -277,22 +259,35 @@ class Coevolution:
         cfg = self.cfg
         fit = self.gradient_fitter(max(cfg.gradient_steps // 4, 1))
         if fit is None:
+
             def fit(tree, err, starts, n_steps):
-                return improve_constants(self.evaluator, tree, err, starts,
-                                         cfg.nelder_mead_evals // 5)
+                return improve_constants(
+                    self.evaluator, tree, err, starts, cfg.nelder_mead_evals // 5
+                )
+
         i = best_index(state.model_errors)
         state.models[i], state.model_errors[i] = improve_terms(
-            self.evaluator, state.models[i], float(state.model_errors[i]), state.suite, fit,
-            self.params.variables if self.params.variables is not None
-            else self.params.n_variables, cfg.max_depth, cfg.term_min_gain,
-            self.regain_fitter(max(cfg.gradient_steps // 4, 1)), self.extra_taps(),
-            self.params.allows)
+            self.evaluator,
+            state.models[i],
+            float(state.model_errors[i]),
+            state.suite,
+            fit,
+            self.params.variables if self.params.variables is not None else self.params.n_variables,
+            cfg.max_depth,
+            cfg.term_min_gain,
+            self.regain_fitter(max(cfg.gradient_steps // 4, 1)),
+            self.extra_taps(),
+            self.params.allows,
+        )
 
     def extra_taps(self) -> dict[int, int]:
         """Variable index of every input tap k >= 1 -> the variable of its input (tap 0)."""
         n_in = self.params.n_inputs // self.params.taps
-        return {N_STATE + k * n_in + j: N_STATE + j
-                for k in range(1, self.params.taps) for j in range(n_in)}
+        return {
+            N_STATE + k * n_in + j: N_STATE + j
+            for k in range(1, self.params.taps)
+            for j in range(n_in)
+        }
 
     def regain_fitter(self, steps: int, ev: Evaluator | None = None):
         """The LM fit with a growing horizon (SEED_HORIZONS),
@@ -342,10 +337,16 @@ class Coevolution:
             mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
             trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
             scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
-            model, error = prune(self.evaluator, model, starts, steps,
-                                 self.cfg.prune_tolerance * scale, self.cfg.nelder_mead_evals,
-                                 lambda t, a, b: self.subtree_mean(t, a, b, samples),
-                                 self.gradient_fitter(self.cfg.gradient_steps))
+            model, error = prune(
+                self.evaluator,
+                model,
+                starts,
+                steps,
+                self.cfg.prune_tolerance * scale,
+                self.cfg.nelder_mead_evals,
+                lambda t, a, b: self.subtree_mean(t, a, b, samples),
+                self.gradient_fitter(self.cfg.gradient_steps),
+            )
         validation = self.tiled_errors([model], self.dataset.validation)[0]
         return model, error, float(validation)
 
@@ -354,18 +355,34 @@ class Coevolution:
         the training and validation windows among it and the front's climbers
         (gpquad.engine.evolve.selection)."""
         cfg = self.cfg
-        ev_mse = Evaluator(self.dataset, self.target, self.window_steps, "mse", cfg.max_depth,
-                           integrator=cfg.integrator, substeps=cfg.substeps)
+        ev_mse = Evaluator(
+            self.dataset,
+            self.target,
+            self.window_steps,
+            "mse",
+            cfg.max_depth,
+            integrator=cfg.integrator,
+            substeps=cfg.substeps,
+        )
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
         fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
         if fit is None:
+
             def fit(tree, err, starts, n_steps):
-                return fit_constants(tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps),
-                                     cfg.nelder_mead_evals)
-        pruned = prune_by_bic(ev_mse, model, starts, steps,
-                              lambda t, a, b: self.subtree_mean(t, a, b, samples), fit,
-                              self.regain_fitter(cfg.gradient_steps, ev_mse))
+                return fit_constants(
+                    tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps), cfg.nelder_mead_evals
+                )
+
+        pruned = prune_by_bic(
+            ev_mse,
+            model,
+            starts,
+            steps,
+            lambda t, a, b: self.subtree_mean(t, a, b, samples),
+            fit,
+            self.regain_fitter(cfg.gradient_steps, ev_mse),
+        )
         candidates = [pruned] + [t for t, _ in self.front(state, train)]
         # BIC over every window, training and validation: a criterion made for the data the
         # constants were fitted on, and the validation windows alone are often one or two
@@ -380,19 +397,13 @@ class Coevolution:
         """The climbers on the size/error Pareto front (training data), smallest first:
         each is more accurate than every smaller one (alternatives to the best equation)."""
         train = self.training_errors(state) if train is None else train
-        order = sorted(range(len(state.models)),
-                       key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)))
+        order = sorted(
+            range(len(state.models)),
+            key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)),
+        )
         front, best = [], np.inf
         for i in order:
             if train[i] < best:
                 front.append((state.models[i], float(train[i])))
                 best = train[i]
         return front
-
-
-def clone_state(state: RunState) -> RunState:
-    """A deep copy (trees are immutable)."""
-    return dataclasses.replace(
-        state, models=list(state.models), model_errors=state.model_errors.copy(),
-        tests=state.tests.copy(), suite=state.suite.copy(), suite_age=state.suite_age.copy(),
-        rng_state=dict(state.rng_state), history=list(state.history))

@@ -45,9 +45,19 @@ class Evaluator:
     "euler", one eq. 2 step per sample, or "rk4" with `substeps` steps per sample).
     """
 
-    def __init__(self, dataset: Dataset, target: str, n_steps: int, metric: str = "mae",
-                 max_depth: int = 5, attitude: float = 0.0, angle_tangents: bool = False,
-                 lag: float = 0.0, integrator: str = "euler", substeps: int = 1):
+    def __init__(
+        self,
+        dataset: Dataset,
+        target: str,
+        n_steps: int,
+        metric: str = "mae",
+        max_depth: int = 5,
+        attitude: float = 0.0,
+        angle_tangents: bool = False,
+        lag: float = 0.0,
+        integrator: str = "euler",
+        substeps: int = 1,
+    ):
         self.arrays = dataset.arrays
         self.integrator = integrator
         self.scheme = scheme_code(integrator)
@@ -91,10 +101,23 @@ class Evaluator:
             bounds = np.full(len(trees), np.inf)
         out = np.empty((len(trees), len(starts)))
         codes, values, sizes, delays = self.pack(trees)
-        population_window_errors(codes, values, sizes, delays, self.target, self.arrays, starts,
-                                 n_steps, self.squared, self.att_weight, self.alpha,
-                                 np.asarray(bounds, dtype=float), out, self.scheme,
-                                 self.substeps)
+        population_window_errors(
+            codes,
+            values,
+            sizes,
+            delays,
+            self.target,
+            self.arrays,
+            starts,
+            n_steps,
+            self.squared,
+            self.att_weight,
+            self.alpha,
+            np.asarray(bounds, dtype=float),
+            out,
+            self.scheme,
+            self.substeps,
+        )
         self.evaluations += len(trees) * len(starts)
         return out
 

@@ -31,8 +31,9 @@ IDENTIFIABLE_RTOL = 1e-9
 GRAM_FULL_RANK = 1e-10
 
 
-def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
-                           ) -> tuple[np.ndarray, np.ndarray, int]:
+def residuals_and_jacobian(
+    ev: Evaluator, tree: Tree, starts, n_steps: int
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Residuals (W * n_steps * rows,), Jacobian (same rows, n_constants), diverged windows;
     rows = 2 when the evaluator scores the attitude too (gpquad.engine.kernels.sensitivity)."""
     starts = np.ascontiguousarray(starts, dtype=np.int64)
@@ -41,9 +42,23 @@ def residuals_and_jacobian(ev: Evaluator, tree: Tree, starts, n_steps: int
     rows = len(starts) * n_steps * residual_rows(ev.target, ev.att_weight)
     res = np.empty(rows)
     jac = np.empty((rows, n_c))
-    diverged = window_residuals(tree.codes, tree.values, tree.size, tree.delays, ev.target,
-                                ev.arrays, starts, int(n_steps), ev.att_weight,
-                                ev.angle_tangents, ev.alpha, res, jac, ev.scheme, ev.substeps)
+    diverged = window_residuals(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        ev.target,
+        ev.arrays,
+        starts,
+        int(n_steps),
+        ev.att_weight,
+        ev.angle_tangents,
+        ev.alpha,
+        res,
+        jac,
+        ev.scheme,
+        ev.substeps,
+    )
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
 
@@ -77,8 +92,9 @@ def identifiable(jac: np.ndarray, rtol: float = IDENTIFIABLE_RTOL) -> np.ndarray
     return np.sort(live[pivots[:rank]])
 
 
-def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_steps: int,
-                           error_of, max_steps: int) -> tuple[Tree, float]:
+def gauss_newton_constants(
+    ev: Evaluator, model: Tree, error: float, starts, n_steps: int, error_of, max_steps: int
+) -> tuple[Tree, float]:
     """LM fit of all constants of `model` on the windows `starts` (n_steps each).
 
     Keeps the result only if error_of(fitted) < error. max_steps bounds the number of
@@ -103,8 +119,7 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
 
     x0 = model.values[slots].copy()
     res0, jac0, _ = evaluate(x0)
-    if not np.all(np.isfinite(res0)) or res0.size < slots.size or \
-            not np.all(np.isfinite(jac0)):
+    if not np.all(np.isfinite(res0)) or res0.size < slots.size or not np.all(np.isfinite(jac0)):
         return model, error
     free = identifiable(jac0)
     if free.size == 0:
@@ -116,8 +131,12 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
         return x
 
     try:
-        x_fit = levenberg_marquardt(lambda x: evaluate(full(x))[0], x0[free],
-                                    lambda x: evaluate(full(x))[1][:, free], max_steps)
+        x_fit = levenberg_marquardt(
+            lambda x: evaluate(full(x))[0],
+            x0[free],
+            lambda x: evaluate(full(x))[1][:, free],
+            max_steps,
+        )
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - non-finite steps
         return model, error
     if not np.all(np.isfinite(x_fit)) or np.array_equal(x_fit, x0[free]):
@@ -129,8 +148,16 @@ def gauss_newton_constants(ev: Evaluator, model: Tree, error: float, starts, n_s
     return model, error
 
 
-def continued_constants(ev: Evaluator, model: Tree, error: float, starts, n_steps: int,
-                        error_of, max_steps: int, short_windows) -> tuple[Tree, float]:
+def continued_constants(
+    ev: Evaluator,
+    model: Tree,
+    error: float,
+    starts,
+    n_steps: int,
+    error_of,
+    max_steps: int,
+    short_windows,
+) -> tuple[Tree, float]:
     """LM fit with a growing horizon: the direct fit on (starts, n_steps), and a fit that
     starts on each (short_starts, short_steps) of `short_windows` in turn (each from the
     last result) before the full windows; the better of the two (by error_of), if better
@@ -140,21 +167,24 @@ def continued_constants(ev: Evaluator, model: Tree, error: float, starts, n_step
     linear in its constants; the long-window error of a stiff closed loop has many, and a
     fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
     """
-    best, best_error = gauss_newton_constants(ev, model, error, starts, n_steps, error_of,
-                                              max_steps)
+    best, best_error = gauss_newton_constants(
+        ev, model, error, starts, n_steps, error_of, max_steps
+    )
     if not short_windows:
         return best, best_error
     tree = model
     for short_starts, short_steps in short_windows:
-        tree, _ = gauss_newton_constants(ev, tree, np.inf, short_starts, short_steps,
-                                         lambda t: 0.0, max_steps)
+        tree, _ = gauss_newton_constants(
+            ev, tree, np.inf, short_starts, short_steps, lambda t: 0.0, max_steps
+        )
     if tree is model:
         return best, best_error
     tree_error = float(error_of(tree))
     if not np.isfinite(tree_error):
         return best, best_error
-    tree, tree_error = gauss_newton_constants(ev, tree, tree_error, starts, n_steps, error_of,
-                                              max_steps)
+    tree, tree_error = gauss_newton_constants(
+        ev, tree, tree_error, starts, n_steps, error_of, max_steps
+    )
     if tree_error < best_error:
         return tree, tree_error
     return best, best_error

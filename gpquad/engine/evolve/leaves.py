@@ -29,8 +29,11 @@ TRACK_CORRELATION = 0.6
 
 def tracked_states(dataset, names) -> dict[str, str]:
     """State name -> the input that tracks it, for the states among `names`."""
-    rows = np.concatenate([np.arange(a, b) for a, b in dataset.train]) if dataset.train \
+    rows = (
+        np.concatenate([np.arange(a, b) for a, b in dataset.train])
+        if dataset.train
         else np.zeros(0, dtype=np.int64)
+    )
     out = {}
     if len(rows) < 3:
         return out
@@ -52,23 +55,27 @@ def tracked_states(dataset, names) -> dict[str, str]:
     return out
 
 
-def measured_variables(dataset, exclude=(), keep_tracked: bool = False
-                       ) -> tuple[int, ...] | None:
+def measured_variables(dataset, exclude=(), keep_tracked: bool = False) -> tuple[int, ...] | None:
     """Leaf variables a model may read: every input and every state the data measures, less
     the names in `exclude` (those an input tracks stay, with keep_tracked); None: all. A log
     without, say, horizontal velocity keeps u and v out of its equations."""
     names = list(STATE_NAMES) + list(dataset.input_names)
     if keep_tracked:
         exclude = [n for n in exclude if n not in tracked_states(dataset, exclude)]
-    left_out = [i for i, name in enumerate(names)
-                if base_input(name) in exclude or (name in ("u", "v", "w", "p", "q", "r")
-                                       and dataset.unmeasured(name))]
+    left_out = [
+        i
+        for i, name in enumerate(names)
+        if base_input(name) in exclude
+        or (name in ("u", "v", "w", "p", "q", "r") and dataset.unmeasured(name))
+    ]
     if not left_out:
         return None
     if len(left_out) == len(names):
         from gpquad.errors import GpquadError
 
-        raise GpquadError(f"every variable {names} is excluded or unmeasured: an equation "
-                          "needs at least one to read; shorten exclude_leaves",
-                          field="evolution.exclude_leaves")
+        raise GpquadError(
+            f"every variable {names} is excluded or unmeasured: an equation "
+            "needs at least one to read; shorten exclude_leaves",
+            field="evolution.exclude_leaves",
+        )
     return tuple(i for i in range(len(names)) if i not in left_out)

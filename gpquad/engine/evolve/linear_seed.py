@@ -22,8 +22,10 @@ from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
 
 def linear_tree(variables, coefficients, constant: float, delays) -> Tree:
     """constant + sum coefficients[k] * x_variables[k] as a shallow sum (shallow_sum)."""
-    terms = [[(MUL, 0.0), (CONST, float(c)), (VAR_BASE + int(v), 0.0)]
-             for v, c in zip(variables, coefficients, strict=True)]
+    terms = [
+        [(MUL, 0.0), (CONST, float(c)), (VAR_BASE + int(v), 0.0)]
+        for v, c in zip(variables, coefficients, strict=True)
+    ]
     prefix = shallow_sum(terms + [[(CONST, float(constant))]])
     return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
 
@@ -32,10 +34,16 @@ def coefficients_of(tree: Tree, variables) -> tuple[np.ndarray, float]:
     """(c_i in the order of `variables`, constant) of a tree made by linear_tree (its
     shallow sum holds the terms in another order)."""
     codes, values = tree.codes, tree.values
-    gains = {int(codes[k + 2]) - VAR_BASE: float(values[k + 1]) for k in range(len(codes) - 2)
-             if codes[k] == MUL and codes[k + 1] == CONST and codes[k + 2] >= VAR_BASE}
-    constant = sum(float(values[k]) for k in range(len(codes))
-                   if codes[k] == CONST and (k == 0 or codes[k - 1] != MUL))
+    gains = {
+        int(codes[k + 2]) - VAR_BASE: float(values[k + 1])
+        for k in range(len(codes) - 2)
+        if codes[k] == MUL and codes[k + 1] == CONST and codes[k + 2] >= VAR_BASE
+    }
+    constant = sum(
+        float(values[k])
+        for k in range(len(codes))
+        if codes[k] == CONST and (k == 0 or codes[k - 1] != MUL)
+    )
     return np.array([gains.get(int(v), 0.0) for v in variables]), constant
 
 
@@ -51,8 +59,16 @@ def variable_scales(arrays, variables, ranges) -> np.ndarray:
 MAX_TERMS = 7
 
 
-def linear_seed(variables, delays: np.ndarray, scales: np.ndarray, fit, starts, n_steps: int,
-                max_depth: int, max_terms: int = MAX_TERMS) -> Tree | None:
+def linear_seed(
+    variables,
+    delays: np.ndarray,
+    scales: np.ndarray,
+    fit,
+    starts,
+    n_steps: int,
+    max_depth: int,
+    max_terms: int = MAX_TERMS,
+) -> Tree | None:
     """The fitted linear climber, or None when no fit is finite.
 
     delays: the input delays of the seed (zeros; tap k of an input at k, gpquad.engine.taps).
@@ -61,15 +77,18 @@ def linear_seed(variables, delays: np.ndarray, scales: np.ndarray, fit, starts, 
     """
     variables = list(variables)
     delays = np.asarray(delays, dtype=np.int64)
-    full, error = fit(linear_tree(variables, np.zeros(len(variables)), 0.0, delays), np.inf,
-                      starts, n_steps)
+    full, error = fit(
+        linear_tree(variables, np.zeros(len(variables)), 0.0, delays), np.inf, starts, n_steps
+    )
     if not np.isfinite(error):
         return None
     coefs, constant = coefficients_of(full, variables)
     order = np.argsort(-np.abs(coefs) * scales, kind="stable")
     keep = min(len(variables), max_terms)
-    while keep > 1 and tree_depth(linear_tree(variables[:keep], coefs[:keep], 0.0,
-                                              delays).codes) > max_depth:
+    while (
+        keep > 1
+        and tree_depth(linear_tree(variables[:keep], coefs[:keep], 0.0, delays).codes) > max_depth
+    ):
         keep -= 1
     if keep == len(variables):
         return full

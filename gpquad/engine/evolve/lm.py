@@ -57,8 +57,7 @@ def _damping_for_radius(r, qtr, radius: float, mu: float, h: np.ndarray) -> floa
     step = _norm(h) if z2 >= 0.0 else np.inf
     if step <= 1.1 * radius:
         return 0.0
-    lower = (step - radius) / radius * step * step / z2 if z2 > 0.0 and np.isfinite(step) \
-        else 0.0
+    lower = (step - radius) / radius * step * step / z2 if z2 > 0.0 and np.isfinite(step) else 0.0
     upper = kernels.gradient_norm(r, qtr) / radius
     if upper <= 0.0:
         upper = np.finfo(float).tiny / min(radius, 0.1)
@@ -79,8 +78,9 @@ def _damping_for_radius(r, qtr, radius: float, mu: float, h: np.ndarray) -> floa
     return mu
 
 
-def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = FTOL,
-                        xtol: float = XTOL) -> np.ndarray:
+def levenberg_marquardt(
+    fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = FTOL, xtol: float = XTOL
+) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals),
     at most max_nfev evaluations of fun after the one at x0; jac is asked only at x0 and at
     accepted points, after fun there (a caller that computes both at once pays nothing).
@@ -141,8 +141,9 @@ def levenberg_marquardt(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = F
             if not np.isfinite(kernels.sum_squares(j.ravel())):
                 break
             kernels.triangularize(j, scale, f, r, qtr)
-        if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or \
-                radius <= xtol * _norm(x * scale):
+        if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or radius <= xtol * _norm(
+            x * scale
+        ):
             break
     return x
 
@@ -154,9 +155,16 @@ def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.nda
     lowers the sum by less than the fraction ftol. Returns x, whose sum is never above
     x0's (a step is taken only when it lowers the sum)."""
     x0 = np.asarray(x0, dtype=float)
-    fit = least_squares(fun, x0, jac=jac, method="trf", tr_solver="exact",
-                        x_scale=1.0 / column_norms(jac(x0)), ftol=ftol,
-                        max_nfev=int(max_nfev))
+    fit = least_squares(
+        fun,
+        x0,
+        jac=jac,
+        method="trf",
+        tr_solver="exact",
+        x_scale=1.0 / column_norms(jac(x0)),
+        ftol=ftol,
+        max_nfev=int(max_nfev),
+    )
     return np.asarray(fit.x, dtype=float)
 
 

@@ -16,8 +16,9 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 
 
-def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: int,
-                   refit_evals: int = 0, fit=None) -> tuple[Tree, float]:
+def improve_delays(
+    ev: Evaluator, model: Tree, error: float, suite, max_delay: int, refit_evals: int = 0, fit=None
+) -> tuple[Tree, float]:
     """Try every other delay of every used input, one at a time; keep the best if better.
 
     A wrong delay is usually compensated by wrong constants, so with refit_evals > 0
@@ -36,8 +37,9 @@ def improve_delays(ev: Evaluator, model: Tree, error: float, suite, max_delay: i
     errors = ev.mean_errors(candidates, suite)
     if refit_evals > 0 or fit is not None:
         for k, candidate in enumerate(candidates):
-            candidates[k], errors[k] = improve_constants(ev, candidate, errors[k], suite,
-                                                         refit_evals, fit)
+            candidates[k], errors[k] = improve_constants(
+                ev, candidate, errors[k], suite, refit_evals, fit
+            )
     best = int(np.argmin(errors))
     if errors[best] < error:
         return candidates[best], float(errors[best])
@@ -59,15 +61,20 @@ def fit_constants(model: Tree, error: float, error_of, max_evals: int) -> tuple[
         err = error_of(with_values(x))
         return float(err) if np.isfinite(err) else 1e300
 
-    res = minimize(objective, model.values[slots], method="Nelder-Mead",
-                   options={"maxfev": max_evals, "xatol": 1e-10, "fatol": 1e-14})
+    res = minimize(
+        objective,
+        model.values[slots],
+        method="Nelder-Mead",
+        options={"maxfev": max_evals, "xatol": 1e-10, "fatol": 1e-14},
+    )
     if res.fun < error:
         return with_values(res.x), float(res.fun)
     return model, error
 
 
-def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals: int,
-                      fit=None) -> tuple[Tree, float]:
+def improve_constants(
+    ev: Evaluator, model: Tree, error: float, suite, max_evals: int, fit=None
+) -> tuple[Tree, float]:
     """Nelder-Mead (or `fit`, see improve_delays) on the constants against the mean error
     on the suite windows."""
     if fit is not None:
@@ -75,8 +82,16 @@ def improve_constants(ev: Evaluator, model: Tree, error: float, suite, max_evals
     return fit_constants(model, error, lambda t: ev.mean_errors([t], suite)[0], max_evals)
 
 
-def prune(ev: Evaluator, model: Tree, starts, n_steps: int, allowance: float, evals: int,
-          constant_of, fit=None) -> tuple[Tree, float]:
+def prune(
+    ev: Evaluator,
+    model: Tree,
+    starts,
+    n_steps: int,
+    allowance: float,
+    evals: int,
+    constant_of,
+    fit=None,
+) -> tuple[Tree, float]:
     """Remove bloat from a final model: replace subtrees by constants while the error stays
     below the starting error plus `allowance` (same units as the error).
 

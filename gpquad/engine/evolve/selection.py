@@ -42,8 +42,9 @@ def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
     return float(ev_mse.window_errors([tree], starts, n_steps=n_steps).mean())
 
 
-def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit,
-                 regain_fit=None) -> Tree:
+def prune_by_bic(
+    ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit, regain_fit=None
+) -> Tree:
     """Replace subtrees by constants (largest first, constants re-fitted by
     fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow."""
     n = len(starts) * n_steps
@@ -54,16 +55,18 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     # substitute term gets its coefficient, and the substitute's can fall to zero and go.
     per_term = with_term_coefficients(model)
     if model.size < per_term.size <= ev_mse.capacity:  # within the depth limit's node count
-        per_term, per_err = (regain_fit or fit)(per_term, mse_of(ev_mse, per_term, starts,
-                                                                 n_steps), starts, n_steps)
+        per_term, per_err = (regain_fit or fit)(
+            per_term, mse_of(ev_mse, per_term, starts, n_steps), starts, n_steps
+        )
         if bic(per_err, n, per_term.size) < score:
             model, score = per_term, bic(per_err, n, per_term.size)
     changed = True
     while changed and model.size > 1:
         changed = False
         for candidate in subtrees_as_constants(model, constant_of):
-            candidate, cand_err = fit(candidate, mse_of(ev_mse, candidate, starts, n_steps),
-                                      starts, n_steps)
+            candidate, cand_err = fit(
+                candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps
+            )
             cand_score = bic(cand_err, n, candidate.size)
             if cand_score <= score:
                 model, score, changed = candidate, cand_score, True
@@ -71,8 +74,9 @@ def prune_by_bic(ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_
     return model
 
 
-def select_by_bic(ev_mse: Evaluator, candidates: list[Tree], starts, n_steps: int
-                  ) -> tuple[Tree, list[float]]:
+def select_by_bic(
+    ev_mse: Evaluator, candidates: list[Tree], starts, n_steps: int
+) -> tuple[Tree, list[float]]:
     """The candidate with the lowest BIC on the windows (first one on ties), and all BICs."""
     n = len(starts) * n_steps
     scores = [bic(mse_of(ev_mse, t, starts, n_steps), n, t.size) for t in candidates]

@@ -26,8 +26,9 @@ def additive_terms(codes, values, start: int = 0, sign: float = 1.0) -> list:
     if code in (ADD, SUB):
         left_end = subtree_end(codes, start + 1)
         right_sign = sign if code == ADD else -sign
-        return (additive_terms(codes, values, start + 1, sign)
-                + additive_terms(codes, values, left_end, right_sign))
+        return additive_terms(codes, values, start + 1, sign) + additive_terms(
+            codes, values, left_end, right_sign
+        )
     end = subtree_end(codes, start)
     return [(sign, list(codes[start:end]), list(values[start:end]))]
 
@@ -66,8 +67,10 @@ def with_term_coefficients(model: Tree) -> Tree:
 def signed_terms(model: Tree) -> list[tuple]:
     """The top-level terms as sorted (sign, codes, values) tuples: two trees that only order
     their terms differently have the same."""
-    return sorted((sign, tuple(codes), tuple(values))
-                  for sign, codes, values in additive_terms(model.codes, model.values))
+    return sorted(
+        (sign, tuple(codes), tuple(values))
+        for sign, codes, values in additive_terms(model.codes, model.values)
+    )
 
 
 def gained_terms(model: Tree) -> list[list[tuple[int, float]]]:
@@ -98,8 +101,9 @@ def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
     return out
 
 
-def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
-                    taps: dict[int, int] | None = None) -> list[Tree]:
+def term_candidates(
+    model: Tree, variables, max_depth: int, contributions=None, taps: dict[int, int] | None = None
+) -> list[Tree]:
     """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
     (an int n: the first n) and pair, within max_depth. A model too deep
     to take a new term makes room: with `contributions` (one per additive term of
@@ -117,21 +121,33 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
     def term(*names):
         if len(names) == 1:
             return [(MUL, 0.0), (CONST, 0.0), (VAR_BASE + names[0], 0.0)]
-        return [(MUL, 0.0), (CONST, 0.0), (MUL, 0.0), (VAR_BASE + names[0], 0.0),
-                (VAR_BASE + names[1], 0.0)]
+        return [
+            (MUL, 0.0),
+            (CONST, 0.0),
+            (MUL, 0.0),
+            (VAR_BASE + names[0], 0.0),
+            (VAR_BASE + names[1], 0.0),
+        ]
 
     additions = [[term(i)] for i in variables]
     additions += [[term(i, j)] for k, i in enumerate(plain) for j in plain[k:]]
     # Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error only
     # with both of its terms, so one-term insertion alone never finds it.
-    additions += [[term(i), term(j)] for k, i in enumerate(plain) for j in plain[k + 1:]]
-    additions += [[term(i), term(j)] for k, i in enumerate(variables) for j in variables[k + 1:]
-                  if j in taps and taps[j] == taps.get(i, i)]
+    additions += [[term(i), term(j)] for k, i in enumerate(plain) for j in plain[k + 1 :]]
+    additions += [
+        [term(i), term(j)]
+        for k, i in enumerate(variables)
+        for j in variables[k + 1 :]
+        if j in taps and taps[j] == taps.get(i, i)
+    ]
     out = []
     base = model_terms(model)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
-    order = (np.argsort(contributions, kind="stable") if contributions is not None
-             else np.zeros(0, dtype=np.int64))
+    order = (
+        np.argsort(contributions, kind="stable")
+        if contributions is not None
+        else np.zeros(0, dtype=np.int64)
+    )
     for new in additions:
         prefix = shallow_sum(base + new)
         dropped = 0
@@ -147,9 +163,19 @@ def term_candidates(model: Tree, variables, max_depth: int, contributions=None,
     return out
 
 
-def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variables: int,
-                  max_depth: int, min_gain: float, regain_fit=None,
-                  taps: dict[int, int] | None = None, allows=None) -> tuple[Tree, float]:
+def improve_terms(
+    ev: Evaluator,
+    model: Tree,
+    error: float,
+    suite,
+    fit,
+    n_variables: int,
+    max_depth: int,
+    min_gain: float,
+    regain_fit=None,
+    taps: dict[int, int] | None = None,
+    allows=None,
+) -> tuple[Tree, float]:
     """Best of the regain candidates and the single-term insertions (constants fitted by
     fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
@@ -157,10 +183,13 @@ def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variab
     sits in another basin of the long-window error, which a growing horizon leaves.
     allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
-    candidates = regain + [t for t in term_candidates(model, n_variables, max_depth,
-                                                      term_contributions(ev, model, suite),
-                                                      taps)
-                           if allows is None or allows(t.codes)]
+    candidates = regain + [
+        t
+        for t in term_candidates(
+            model, n_variables, max_depth, term_contributions(ev, model, suite), taps
+        )
+        if allows is None or allows(t.codes)
+    ]
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)
@@ -177,16 +206,17 @@ def improve_terms(ev: Evaluator, model: Tree, error: float, suite, fit, n_variab
 
 def term_contributions(ev: Evaluator, model: Tree, suite) -> np.ndarray:
     """RMS value of each additive term of model_terms(model) over the suite's samples."""
-    samples = np.ascontiguousarray((np.asarray(suite)[:, None]
-                                    + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64)
+    samples = np.ascontiguousarray(
+        (np.asarray(suite)[:, None] + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64
+    )
     arrays = ev.arrays
     out = []
     for term in model_terms(model):
         tree = Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
-        values = eval_on_samples(tree.codes, tree.values, tree.size, tree.delays,
-                                 arrays.states, arrays.inputs, samples)
-        out.append(float(np.sqrt(np.mean(values ** 2))) if np.all(np.isfinite(values))
-                   else np.inf)
+        values = eval_on_samples(
+            tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
+        )
+        out.append(float(np.sqrt(np.mean(values**2))) if np.all(np.isfinite(values)) else np.inf)
     return np.array(out)
 
 

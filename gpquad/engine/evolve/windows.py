@@ -25,10 +25,12 @@ class WindowSpace:
                 counts.append(count)
         if not counts:
             longest = max((b - a for a, b in ranges), default=0)
-            raise GpquadError(f"no training range fits a window of {n_steps} steps plus "
-                              f"{max_delay} delay samples (longest range: {longest} samples); "
-                              "lower evolution.window_s or give longer flights",
-                              field="evolution.window_s")
+            raise GpquadError(
+                f"no training range fits a window of {n_steps} steps plus "
+                f"{max_delay} delay samples (longest range: {longest} samples); "
+                "lower evolution.window_s or give longer flights",
+                field="evolution.window_s",
+            )
         self.lows = np.array(lows, dtype=np.int64)
         self.cum = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.size = int(self.cum[-1])

@@ -30,10 +30,9 @@ alpha = 1 is no lag and leaves every result bit-identical to the kernels without
 import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
-from gpquad.engine.kernels.fitness_rk4 import rk4_rollout, rk4_tree_window_errors
+from gpquad.engine.kernels.fitness_rk4 import rk4_tree_window_errors
 from gpquad.engine.kernels.quaternion import (
     euler_angle,
-    euler_from_quat,
     euler_phi,
     euler_psi,
     euler_theta,
@@ -49,13 +48,33 @@ from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import VAR_BASE
 
-__all__ = ["DIVERGED", "STATE_LIMIT", "wrap_angle", "tree_window_errors",
-           "population_window_errors", "rollout"]
+__all__ = [
+    "DIVERGED",
+    "STATE_LIMIT",
+    "wrap_angle",
+    "tree_window_errors",
+    "population_window_errors",
+]
 
 
 @njit
-def tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps, squared,
-                       att_weight, alpha, bound, out, scheme, substeps):
+def tree_window_errors(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bound,
+    out,
+    scheme,
+    substeps,
+):
     """Mean per-step error of one tree on each window; fills out (n_windows,).
 
     alpha: the equation's lag factor in (0, 1] (module notes; 1 = no lag).
@@ -69,15 +88,55 @@ def tree_window_errors(codes, values, size, delays, target, flight, starts, n_st
     Returns True when the evaluation stopped early.
     """
     if scheme == RK4:
-        return rk4_tree_window_errors(codes, values, size, delays, target, flight, starts,
-                                      n_steps, squared, att_weight, alpha, bound, out, substeps)
-    return euler_tree_window_errors(codes, values, size, delays, target, flight, starts,
-                                    n_steps, squared, att_weight, alpha, bound, out)
+        return rk4_tree_window_errors(
+            codes,
+            values,
+            size,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bound,
+            out,
+            substeps,
+        )
+    return euler_tree_window_errors(
+        codes,
+        values,
+        size,
+        delays,
+        target,
+        flight,
+        starts,
+        n_steps,
+        squared,
+        att_weight,
+        alpha,
+        bound,
+        out,
+    )
 
 
 @njit
-def euler_tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps,
-                             squared, att_weight, alpha, bound, out):
+def euler_tree_window_errors(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bound,
+    out,
+):
     """tree_window_errors flown by eq. 2, one step per sample (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
@@ -183,7 +242,8 @@ def euler_tree_window_errors(codes, values, size, delays, target, flight, starts
                 else:
                     a2 = pred[lane]
                 vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
-                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt)
+                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt
+                )
                 x = vel[target, lane]
             else:
                 if need_vel or need_att:
@@ -194,20 +254,44 @@ def euler_tree_window_errors(codes, values, size, delays, target, flight, starts
                         a4 = pred[lane]
                     else:
                         a5 = pred[lane]
-                    (quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
-                     vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
-                     rates[2, lane]) = euler_step(
-                        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane], vel[0, lane],
-                        vel[1, lane], vel[2, lane], rates[0, lane], rates[1, lane],
-                        rates[2, lane], acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt,
-                        need_vel, need_att)
+                    (
+                        quat[0, lane],
+                        quat[1, lane],
+                        quat[2, lane],
+                        quat[3, lane],
+                        vel[0, lane],
+                        vel[1, lane],
+                        vel[2, lane],
+                        rates[0, lane],
+                        rates[1, lane],
+                        rates[2, lane],
+                    ) = euler_step(
+                        quat[0, lane],
+                        quat[1, lane],
+                        quat[2, lane],
+                        quat[3, lane],
+                        vel[0, lane],
+                        vel[1, lane],
+                        vel[2, lane],
+                        rates[0, lane],
+                        rates[1, lane],
+                        rates[2, lane],
+                        acc[idx, 0],
+                        acc[idx, 1],
+                        acc[idx, 2],
+                        a3,
+                        a4,
+                        a5,
+                        dt,
+                        need_vel,
+                        need_att,
+                    )
                 else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
                     for i in range(3):
                         if i == target - 3:
                             rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
                         else:
-                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i],
-                                                             dt)
+                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i], dt)
                 x = rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
@@ -235,76 +319,39 @@ def euler_tree_window_errors(codes, values, size, delays, target, flight, starts
 
 
 @njit
-def population_window_errors(codes, values, sizes, delays, target, flight, starts, n_steps, squared,
-                             att_weight, alpha, bounds, out, scheme, substeps):
+def population_window_errors(
+    codes,
+    values,
+    sizes,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bounds,
+    out,
+    scheme,
+    substeps,
+):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
     for i in range(codes.shape[0]):
-        tree_window_errors(codes[i], values[i], sizes[i], delays[i], target, flight, starts,
-                           n_steps, squared, att_weight, alpha, bounds[i], out[i], scheme,
-                           substeps)
-
-
-@njit
-def rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise,
-            scheme, substeps):
-    """Fly a full model: integrate every state from each window start, all six accelerations.
-
-    codes (6, M), values (6, M), sizes (6,), delays (6, K n_inputs): one tree per target,
-    K taps per input (gpquad.engine.taps; leaf slot j reads input j % n_inputs);
-    modelled (6,) bool: use the tree for this target, else the data's acceleration;
-    alphas (6,): each equation's lag factor (module notes; 1 = no lag).
-    input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
-    scheme, substeps: the integrator (gpquad.engine.kernels.step).
-    Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
-    """
-    if scheme == RK4:
-        return rk4_rollout(codes, values, sizes, delays, modelled, alphas, flight, starts,
-                           n_steps, input_noise, substeps)
-    quat_d, states, acc, inputs, rot, dt = flight
-    n = starts.shape[0]
-    n_in = inputs.shape[1]
-    n_slots = delays.shape[1]
-    noisy = input_noise.shape[0] > 0
-    out = np.empty((n, n_steps + 1, 9))
-    features = np.empty((9 + n_slots, 1))
-    stack = np.empty((STACK_ROWS, 1))
-    pred = np.empty(1)
-    a = np.empty(6)
-    applied = np.empty(6)  # the lagged accelerations
-    for lane in range(n):
-        s = starts[lane]
-        for t in range(6):
-            applied[t] = acc[s - 1, t] if s > 0 else 0.0
-        q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
-        vel = states[s, 3:6].copy()
-        rates = states[s, 6:9].copy()
-        for k in range(n_steps + 1):
-            idx = s + k
-            phi, theta, psi = euler_from_quat(q0, q1, q2, q3)
-            out[lane, k, 0], out[lane, k, 1], out[lane, k, 2] = phi, theta, psi
-            for i in range(3):
-                out[lane, k, 3 + i] = vel[i]
-                out[lane, k, 6 + i] = rates[i]
-            if k == n_steps:
-                break
-            for i in range(9):
-                features[i, 0] = out[lane, k, i]
-            for t in range(6):
-                a[t] = acc[idx, t]
-                if modelled[t]:
-                    for j in range(n_slots):
-                        c = j % n_in
-                        u = inputs[idx - delays[t, j], c]
-                        if noisy and k - delays[t, j] >= 0:
-                            u += input_noise[lane, k - delays[t, j], c]
-                        features[9 + j, 0] = u
-                    eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
-                    a[t] = pred[0]
-                    if alphas[t] < 1.0:
-                        applied[t] += alphas[t] * (pred[0] - applied[t])
-                        a[t] = applied[t]
-            (q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1],
-             rates[2]) = euler_step(q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1],
-                                    rates[2], a[0], a[1], a[2], a[3], a[4], a[5], dt, True,
-                                    True)
-    return out
+        tree_window_errors(
+            codes[i],
+            values[i],
+            sizes[i],
+            delays[i],
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds[i],
+            out[i],
+            scheme,
+            substeps,
+        )

@@ -62,8 +62,22 @@ def stage_features(ys, lane, used, features):
 
 
 @njit
-def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, n_steps,
-                           squared, att_weight, alpha, bound, out, substeps):
+def rk4_tree_window_errors(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bound,
+    out,
+    substeps,
+):
     """gpquad.engine.kernels.fitness.tree_window_errors flown by RK4 (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
@@ -179,9 +193,10 @@ def rk4_tree_window_errors(codes, values, size, delays, target, flight, starts, 
 
 
 @njit
-def rk4_rollout(codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps,
-                input_noise, substeps):
-    """gpquad.engine.kernels.fitness.rollout flown by RK4 (module notes): states
+def rk4_rollout(
+    codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise, substeps
+):
+    """gpquad.engine.kernels.rollout.rollout flown by RK4 (module notes): states
     (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]

@@ -33,10 +33,29 @@ def integrate_step(quat, vel, rates, pos, acc, dt, mat):
     acc (6,) = [a_x, a_y, a_z, p_dot, q_dot, r_dot]; mat is a (3, 3) work buffer.
     """
     euler_position_step(quat, vel, pos, dt, mat)
-    (quat[0], quat[1], quat[2], quat[3], vel[0], vel[1], vel[2], rates[0], rates[1],
-     rates[2]) = euler_step(quat[0], quat[1], quat[2], quat[3], vel[0], vel[1], vel[2],
-                            rates[0], rates[1], rates[2], acc[0], acc[1], acc[2], acc[3],
-                            acc[4], acc[5], dt, True, True)
+    (quat[0], quat[1], quat[2], quat[3], vel[0], vel[1], vel[2], rates[0], rates[1], rates[2]) = (
+        euler_step(
+            quat[0],
+            quat[1],
+            quat[2],
+            quat[3],
+            vel[0],
+            vel[1],
+            vel[2],
+            rates[0],
+            rates[1],
+            rates[2],
+            acc[0],
+            acc[1],
+            acc[2],
+            acc[3],
+            acc[4],
+            acc[5],
+            dt,
+            True,
+            True,
+        )
+    )
 
 
 @njit
@@ -76,8 +95,9 @@ def body_accelerations(vel, rates, dt):
         d0, d1, d2, d3 = rate_increment(rates[t, 0], rates[t, 1], rates[t, 2], dt)
         rotation_matrix(d0, d1, d2, d3, mat)
         for i in range(3):
-            rotated = (mat[i, 0] * vel[t + 1, 0] + mat[i, 1] * vel[t + 1, 1]
-                       + mat[i, 2] * vel[t + 1, 2])
+            rotated = (
+                mat[i, 0] * vel[t + 1, 0] + mat[i, 1] * vel[t + 1, 1] + mat[i, 2] * vel[t + 1, 2]
+            )
             acc[t, i] = (rotated - vel[t, i]) / dt
             acc[t, 3 + i] = (rates[t + 1, i] - rates[t, i]) / dt
     return acc
@@ -90,8 +110,14 @@ def rates_from_quaternions(quat, dt):
     out = np.empty((n - 1, 3))
     for t in range(n - 1):
         d0, d1, d2, d3 = quat_mul(
-            quat[t, 0], -quat[t, 1], -quat[t, 2], -quat[t, 3],
-            quat[t + 1, 0], quat[t + 1, 1], quat[t + 1, 2], quat[t + 1, 3],
+            quat[t, 0],
+            -quat[t, 1],
+            -quat[t, 2],
+            -quat[t, 3],
+            quat[t + 1, 0],
+            quat[t + 1, 1],
+            quat[t + 1, 2],
+            quat[t + 1, 3],
         )
         out[t, 0], out[t, 1], out[t, 2] = rate_from_increment(d0, d1, d2, d3, dt)
     return out

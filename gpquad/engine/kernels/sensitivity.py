@@ -60,8 +60,13 @@ from gpquad.engine.kernels.tree_tangent import eval_with_tangent
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import CONST
 
-__all__ = ["DIVERGED_RESIDUAL", "eval_with_tangent", "euler_kinematics", "residual_rows",
-           "window_residuals"]
+__all__ = [
+    "DIVERGED_RESIDUAL",
+    "eval_with_tangent",
+    "euler_kinematics",
+    "residual_rows",
+    "window_residuals",
+]
 
 
 @njit
@@ -71,8 +76,23 @@ def residual_rows(target, att_weight):
 
 
 @njit
-def window_residuals(codes, values, size, delays, target, flight, starts, n_steps, att_weight,
-                     angle_tangents, alpha, res, jac, scheme, substeps):
+def window_residuals(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    att_weight,
+    angle_tangents,
+    alpha,
+    res,
+    jac,
+    scheme,
+    substeps,
+):
     """Residuals res (n_windows * n_steps * rows,) and Jacobian jac (same rows, n_c), rows =
     residual_rows(target, att_weight); angle_tangents: the Euler leaves read their
     sensitivities (module notes); alpha: the equation's lag factor (1 = no lag).
@@ -84,9 +104,22 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
     gpquad.engine.kernels.sensitivity_rk4).
     """
     if scheme == RK4:
-        return rk4_window_residuals(codes, values, size, delays, target, flight, starts,
-                                    n_steps, att_weight, angle_tangents, alpha, res, jac,
-                                    substeps)
+        return rk4_window_residuals(
+            codes,
+            values,
+            size,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            att_weight,
+            angle_tangents,
+            alpha,
+            res,
+            jac,
+            substeps,
+        )
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
@@ -158,8 +191,9 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                             tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
-            pred = eval_with_tangent(codes, values, size, slot_of, features, tangents, stack,
-                                     dstack, grad)
+            pred = eval_with_tangent(
+                codes, values, size, slot_of, features, tangents, stack, dstack, grad
+            )
             if lagged:
                 applied += alpha * (pred - applied)
                 pred = applied
@@ -174,8 +208,9 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                     a1 = pred
                 else:
                     a2 = pred
-                vel[0], vel[1], vel[2] = euler_velocity_step(rot, idx, vel[0], vel[1], vel[2],
-                                                             a0, a1, a2, dt)
+                vel[0], vel[1], vel[2] = euler_velocity_step(
+                    rot, idx, vel[0], vel[1], vel[2], a0, a1, a2, dt
+                )
                 euler_velocity_tangent(rot, idx, sens, target, grad, dt, tmp)
                 x = vel[target]
                 for c in range(n_c):
@@ -189,13 +224,44 @@ def window_residuals(codes, values, size, delays, target, flight, starts, n_step
                 else:
                     a5 = pred
                 q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1], rates[2] = euler_step(
-                    q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1], rates[2],
-                    acc[idx, 0], acc[idx, 1], acc[idx, 2], a3, a4, a5, dt, True, True)
+                    q0,
+                    q1,
+                    q2,
+                    q3,
+                    vel[0],
+                    vel[1],
+                    vel[2],
+                    rates[0],
+                    rates[1],
+                    rates[2],
+                    acc[idx, 0],
+                    acc[idx, 1],
+                    acc[idx, 2],
+                    a3,
+                    a4,
+                    a5,
+                    dt,
+                    True,
+                    True,
+                )
                 phi1 = euler_phi(q0, q1, q2, q3) if track_angles else 0.0
                 theta1 = euler_theta(q0, q1, q2, q3) if track_angles else 0.0
-                euler_rate_tangent(target - 3, features[0], features[1], phi1, theta1,
-                                   features[7], features[8], sens[0], asens, grad, dt,
-                                   track_angles, kin, jang)
+                euler_rate_tangent(
+                    target - 3,
+                    features[0],
+                    features[1],
+                    phi1,
+                    theta1,
+                    features[7],
+                    features[8],
+                    sens[0],
+                    asens,
+                    grad,
+                    dt,
+                    track_angles,
+                    kin,
+                    jang,
+                )
                 for c in range(n_c):
                     jac[row, c] = sens[0, c]
                 x = rates[target - 3]

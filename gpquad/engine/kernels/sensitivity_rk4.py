@@ -52,8 +52,22 @@ TANGENT_ROWS = 8
 
 
 @njit
-def rk4_window_residuals(codes, values, size, delays, target, flight, starts, n_steps,
-                         att_weight, angle_tangents, alpha, res, jac, substeps):
+def rk4_window_residuals(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    att_weight,
+    angle_tangents,
+    alpha,
+    res,
+    jac,
+    substeps,
+):
     """gpquad.engine.kernels.sensitivity.window_residuals flown by RK4 (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
@@ -131,8 +145,9 @@ def rk4_window_residuals(codes, values, size, delays, target, flight, starts, n_
                             if angle_tangents:
                                 for i in range(3):
                                     tangents[i, c] = tan_s[TA + i, c]
-                    pred = eval_with_tangent(codes, values, size, slot_of, leaf, tangents, stack,
-                                             dstack, grad)
+                    pred = eval_with_tangent(
+                        codes, values, size, slot_of, leaf, tangents, stack, dstack, grad
+                    )
                     f = ys[LAG, 0] if lagged else pred
                     for i in range(6):
                         a[i] = acc[idx, i]
@@ -157,10 +172,10 @@ def rk4_window_residuals(codes, values, size, delays, target, flight, starts, n_
                             if track_angles:
                                 a0, a1 = tan_s[TA, c], tan_s[TA + 1, c]
                                 for i in range(3):
-                                    tan_slope[TA + i, c] = (jang[i, 0] * a0 + jang[i, 1] * a1
-                                                            + kin[i] * tan_s[TR, c])
-                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c,
-                                   TANGENT_ROWS)
+                                    tan_slope[TA + i, c] = (
+                                        jang[i, 0] * a0 + jang[i, 1] * a1 + kin[i] * tan_s[TR, c]
+                                    )
+                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c, TANGENT_ROWS)
                 finish_step(y, total, h, 0, n_y)
                 for c in range(n_c):
                     advance(tan, tan_total, h, c, TANGENT_ROWS)

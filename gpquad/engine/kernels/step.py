@@ -93,8 +93,7 @@ def lag_rate_kernel(alpha, dt):
 
 
 @njit(inline="always")  # a call per step costs more than the step
-def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, move_vel,
-               move_att):
+def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, move_vel, move_att):
     """One eq. 2 step of the attitude (4), body velocity (3) and rates (3); returns the ten.
 
     move_vel / move_att False: the velocity / attitude are returned unchanged (a kernel that
@@ -107,8 +106,18 @@ def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, 
         if move_att:
             n0, n1, n2, n3 = quat_mul(q0, q1, q2, q3, d0, d1, d2, d3)
             q0, q1, q2, q3 = renormalize(n0, n1, n2, n3)
-    return (q0, q1, q2, q3, v0, v1, v2, euler_rate_step(p, a3, dt), euler_rate_step(q, a4, dt),
-            euler_rate_step(r, a5, dt))
+    return (
+        q0,
+        q1,
+        q2,
+        q3,
+        v0,
+        v1,
+        v2,
+        euler_rate_step(p, a3, dt),
+        euler_rate_step(q, a4, dt),
+        euler_rate_step(r, a5, dt),
+    )
 
 
 @njit(inline="always")
@@ -131,9 +140,11 @@ def euler_velocity_step(rot, idx, v0, v1, v2, a0, a1, a2, dt):
     b0 = v0 + a0 * dt
     b1 = v1 + a1 * dt
     b2 = v2 + a2 * dt
-    return (rot[idx, 0] * b0 + rot[idx, 1] * b1 + rot[idx, 2] * b2,
-            rot[idx, 3] * b0 + rot[idx, 4] * b1 + rot[idx, 5] * b2,
-            rot[idx, 6] * b0 + rot[idx, 7] * b1 + rot[idx, 8] * b2)
+    return (
+        rot[idx, 0] * b0 + rot[idx, 1] * b1 + rot[idx, 2] * b2,
+        rot[idx, 3] * b0 + rot[idx, 4] * b1 + rot[idx, 5] * b2,
+        rot[idx, 6] * b0 + rot[idx, 7] * b1 + rot[idx, 8] * b2,
+    )
 
 
 @njit
@@ -148,13 +159,17 @@ def euler_velocity_tangent(rot, idx, sens, target, grad, dt, tmp):
         tmp[target, c] += grad[c] * dt
     for i in range(3):
         for c in range(n_c):
-            sens[i, c] = rot[idx, 3 * i] * tmp[0, c] + rot[idx, 3 * i + 1] * tmp[1, c] \
+            sens[i, c] = (
+                rot[idx, 3 * i] * tmp[0, c]
+                + rot[idx, 3 * i + 1] * tmp[1, c]
                 + rot[idx, 3 * i + 2] * tmp[2, c]
+            )
 
 
 @njit
-def euler_rate_tangent(axis, phi0, theta0, phi1, theta1, q_rate, r_rate, sens, asens, grad, dt,
-                       track_angles, kin, jang):
+def euler_rate_tangent(
+    axis, phi0, theta0, phi1, theta1, q_rate, r_rate, sens, asens, grad, dt, track_angles, kin, jang
+):
     """Tangent of an eq. 2 step for rate `axis`'s equation: the angles' sensitivities asens
     (3, n_c) by the Euler kinematics linearised at the step's mid-attitude (from angles
     phi0, theta0 before the step to phi1, theta1 after it, rates q_rate, r_rate), when
@@ -249,12 +264,21 @@ def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
     k[W + 1, lane] = a4
     k[W + 2, lane] = a5
     if with_pos:  # x_dot = R(q) V
-        k[X, lane] = ((1.0 - 2.0 * (q2 * q2 + q3 * q3)) * u + 2.0 * (q1 * q2 - q0 * q3) * v
-                      + 2.0 * (q1 * q3 + q0 * q2) * w)
-        k[X + 1, lane] = (2.0 * (q1 * q2 + q0 * q3) * u + (1.0 - 2.0 * (q1 * q1 + q3 * q3)) * v
-                          + 2.0 * (q2 * q3 - q0 * q1) * w)
-        k[X + 2, lane] = (2.0 * (q1 * q3 - q0 * q2) * u + 2.0 * (q2 * q3 + q0 * q1) * v
-                          + (1.0 - 2.0 * (q1 * q1 + q2 * q2)) * w)
+        k[X, lane] = (
+            (1.0 - 2.0 * (q2 * q2 + q3 * q3)) * u
+            + 2.0 * (q1 * q2 - q0 * q3) * v
+            + 2.0 * (q1 * q3 + q0 * q2) * w
+        )
+        k[X + 1, lane] = (
+            2.0 * (q1 * q2 + q0 * q3) * u
+            + (1.0 - 2.0 * (q1 * q1 + q3 * q3)) * v
+            + 2.0 * (q2 * q3 - q0 * q1) * w
+        )
+        k[X + 2, lane] = (
+            2.0 * (q1 * q3 - q0 * q2) * u
+            + 2.0 * (q2 * q3 + q0 * q1) * v
+            + (1.0 - 2.0 * (q1 * q1 + q2 * q2)) * w
+        )
 
 
 @njit(inline="always")
@@ -282,4 +306,5 @@ def finish_step(y, total, h, lane, n_rows, first=0):
     if first != Q:
         return
     y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane] = renormalize(
-        y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane])
+        y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
+    )

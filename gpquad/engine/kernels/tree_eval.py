@@ -49,8 +49,9 @@ def check_stack(codes, sizes) -> None:
     sizes = np.atleast_1d(np.asarray(sizes, dtype=np.int64))
     height = population_stack_height(codes, sizes)
     if height > STACK_ROWS:
-        raise ValueError(f"a tree needs an evaluation stack of {height} rows; the kernels "
-                         f"have {STACK_ROWS}")
+        raise ValueError(
+            f"a tree needs an evaluation stack of {height} rows; the kernels have {STACK_ROWS}"
+        )
 
 
 @njit

@@ -30,8 +30,10 @@ MAX_CHARACTERS = 20_000
 #: Deepest nesting of parentheses, signs and powers.
 MAX_NESTING = 100
 
-_TOKEN = re.compile(r"\s*(?:(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
-                    r"|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^()]))")
+_TOKEN = re.compile(
+    r"\s*(?:(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+    r"|(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<op>\*\*|[-+*/^()]))"
+)
 
 Leaf = Callable[[str, "int | None"], sp.Expr]
 
@@ -123,9 +125,11 @@ class _Parser:
             exponent = self.unary()
             self.nesting -= 1
             if not (exponent.is_Integer and abs(int(exponent)) <= MAX_POWER):
-                self.fail(f"powers take an integer exponent from -{MAX_POWER} to {MAX_POWER}, "
-                          f"not {exponent}")
-            return base ** exponent
+                self.fail(
+                    f"powers take an integer exponent from -{MAX_POWER} to {MAX_POWER}, "
+                    f"not {exponent}"
+                )
+            return base**exponent
         if self.at("^"):
             self.fail("write powers as x**2")
         return base
@@ -160,9 +164,11 @@ class _Parser:
         self.take("(")
         token = self.peek()
         if token != ("name", "t"):
-            self.fail(f"'{name}(...)': equations use + - * / and integer powers of states, "
-                      "inputs and numbers, no functions (a delayed input is written "
-                      "name(t-k))")
+            self.fail(
+                f"'{name}(...)': equations use + - * / and integer powers of states, "
+                "inputs and numbers, no functions (a delayed input is written "
+                "name(t-k))"
+            )
         self.take()
         if self.at(")"):
             self.take()
@@ -172,42 +178,66 @@ class _Parser:
         self.take()
         kind, k = self.take()
         if kind != "number" or not k.isdigit() or len(k) > 9:
-            self.fail(f"'{name}(t-{k})': the delay k of {name}(t-k) is a whole number of "
-                      "samples")
+            self.fail(f"'{name}(t-{k})': the delay k of {name}(t-k) is a whole number of samples")
         self.take(")")
         return int(k)
 
 
-def parse_arithmetic(text, leaf: Leaf, *, caret_power: bool = False, source: str | None = None,
-                     field: str | None = None) -> sp.Expr:
+def parse_arithmetic(
+    text,
+    leaf: Leaf,
+    *,
+    caret_power: bool = False,
+    source: str | None = None,
+    field: str | None = None,
+) -> sp.Expr:
     """The sympy expression of `text` (module grammar); names go through `leaf`.
     caret_power: also read a ^ b as a power. Errors are GpquadError naming source/field."""
+
     def fail(message: str):
         shown = text if len(text) <= 80 else text[:77] + "..."
         raise GpquadError(f"cannot parse '{shown}': {message}", source=source, field=field)
 
     if not isinstance(text, str):
-        raise GpquadError(f"expected an equation as text, not {type(text).__name__}",
-                          source=source, field=field)
+        raise GpquadError(
+            f"expected an equation as text, not {type(text).__name__}", source=source, field=field
+        )
     if len(text) > MAX_CHARACTERS:
-        raise GpquadError(f"an equation of {len(text)} characters is longer than the "
-                          f"{MAX_CHARACTERS} read", source=source, field=field)
+        raise GpquadError(
+            f"an equation of {len(text)} characters is longer than the {MAX_CHARACTERS} read",
+            source=source,
+            field=field,
+        )
     return _Parser(text, leaf, caret_power, fail).parse()
 
 
-def parse_in_symbols(text, symbols: dict[str, sp.Symbol] | None, *, caret_power: bool = False,
-                     source: str | None = None, field: str | None = None) -> sp.Expr:
+def parse_in_symbols(
+    text,
+    symbols: dict[str, sp.Symbol] | None,
+    *,
+    caret_power: bool = False,
+    source: str | None = None,
+    field: str | None = None,
+) -> sp.Expr:
     """`text` in the given symbols only (no delays written name(t-k)); symbols=None: every
     name is a real Symbol of that name."""
+
     def leaf(name: str, k):
         if k is not None:
-            raise GpquadError(f"'{name}(t-{k})' in '{text}': delays are given beside the "
-                              "expression here, not in it", source=source, field=field)
+            raise GpquadError(
+                f"'{name}(t-{k})' in '{text}': delays are given beside the "
+                "expression here, not in it",
+                source=source,
+                field=field,
+            )
         if symbols is None:
             return sp.Symbol(name, real=True)
         if name not in symbols:
-            raise GpquadError(f"unknown name '{name}' in '{text}'; the names are "
-                              f"{sorted(symbols)}", source=source, field=field)
+            raise GpquadError(
+                f"unknown name '{name}' in '{text}'; the names are {sorted(symbols)}",
+                source=source,
+                field=field,
+            )
         return symbols[name]
 
     return parse_arithmetic(text, leaf, caret_power=caret_power, source=source, field=field)

@@ -37,8 +37,11 @@ class Tree:
 
     @classmethod
     def from_lists(cls, codes, values, delays) -> "Tree":
-        return cls(np.asarray(codes, dtype=np.int64), np.asarray(values, dtype=np.float64),
-                   np.asarray(delays, dtype=np.int64))
+        return cls(
+            np.asarray(codes, dtype=np.int64),
+            np.asarray(values, dtype=np.float64),
+            np.asarray(delays, dtype=np.int64),
+        )
 
     def padded(self, capacity: int):
         """(codes, values) padded to `capacity` for the kernels' 2-D population arrays."""
@@ -126,8 +129,9 @@ def is_valid(codes) -> bool:
     return need == 0
 
 
-def shallow_sum(terms: list[list[tuple[int, float]]], operator: int = ADD
-                ) -> list[tuple[int, float]]:
+def shallow_sum(
+    terms: list[list[tuple[int, float]]], operator: int = ADD
+) -> list[tuple[int, float]]:
     """Prefix (code, value) list of the sum of `terms` as the tree of ADD nodes of least
     depth: the two shallowest subtrees are joined first (ties: the earlier first), so that a
     product term (3 levels) sits higher than a constant (1 level). Under max_depth 5 that holds

@@ -91,18 +91,21 @@ def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple
     def leaf(name: str, k: int | None) -> sp.Symbol:
         if name not in input_names:
             if k is not None:
-                raise GpquadError(f"'{name}(t-{k})': only inputs {list(input_names)} take a "
-                                  "delay", source=source)
+                raise GpquadError(
+                    f"'{name}(t-{k})': only inputs {list(input_names)} take a delay", source=source
+                )
             if name not in syms:
-                raise GpquadError(f"unknown names ['{name}'] in '{text}'; variables are "
-                                  f"{list(terminal_names(input_names))}", source=source)
+                raise GpquadError(
+                    f"unknown names ['{name}'] in '{text}'; variables are "
+                    f"{list(terminal_names(input_names))}",
+                    source=source,
+                )
             return syms[name]
         k = k or 0
         for tap in range(MAX_TAPS):
             if delays.setdefault(tap_name(name, tap), k) == k:
                 return syms[tap_name(name, tap)]
-        raise GpquadError(f"input {name} appears with more than {MAX_TAPS} delays",
-                          source=source)
+        raise GpquadError(f"input {name} appears with more than {MAX_TAPS} delays", source=source)
 
     return parse_arithmetic(text, leaf, source=source), delays
 
@@ -130,8 +133,7 @@ def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
 
     def emit(e):
         if len(codes) > MAX_ENCODED_NODES:
-            raise GpquadError(f"the equation expands to more than {MAX_ENCODED_NODES} tree "
-                              "nodes")
+            raise GpquadError(f"the equation expands to more than {MAX_ENCODED_NODES} tree nodes")
         if e.is_Number:
             if not np.isfinite(float(e)):
                 raise GpquadError(f"'{e}' is not a finite number")

@@ -85,5 +85,4 @@ def product(variables: tuple[int, ...]) -> list[tuple[int, float]]:
 
 def monomial_terms(poly: Polynomial) -> list[list[tuple[int, float]]]:
     """Each monomial as a prefix term c * x * y ... (a constant alone for the monomial ())."""
-    return [[(MUL, 0.0), (CONST, c)] + product(m) if m else [(CONST, c)]
-            for m, c in poly.items()]
+    return [[(MUL, 0.0), (CONST, c)] + product(m) if m else [(CONST, c)] for m, c in poly.items()]

@@ -29,7 +29,7 @@ class VariationParams:
     p_constant_leaf: float = 0.25
     const_low: float = -5.0
     const_high: float = 5.0
-    const_sigma: float = 0.1 ** 0.5  # variance 0.1
+    const_sigma: float = 0.1**0.5  # variance 0.1
     p_const_perturb: float = 0.5
     p_delay: float = 0.1
     max_delay: int = 5
@@ -99,11 +99,13 @@ def macro_mutation(rng, codes, values, params: VariationParams):
     if depth < params.max_depth and rng.random() >= params.p_leaf:
         new_op = rng.below(N_OPERATORS)
         if was_op:
-            return codes[:i] + [new_op] + codes[i + 1:], values[:i] + [0.0] + values[i + 1:]
+            return codes[:i] + [new_op] + codes[i + 1 :], values[:i] + [0.0] + values[i + 1 :]
         left_c, left_v = random_subtree(rng, params, params.max_depth - depth - 1)
         right_c, right_v = random_subtree(rng, params, params.max_depth - depth - 1)
-        return (codes[:i] + [new_op] + left_c + right_c + codes[end:],
-                values[:i] + [0.0] + left_v + right_v + values[end:])
+        return (
+            codes[:i] + [new_op] + left_c + right_c + codes[end:],
+            values[:i] + [0.0] + left_v + right_v + values[end:],
+        )
     c, v = random_leaf(rng, params)
     return codes[:i] + [c] + codes[end:], values[:i] + [v] + values[end:]
 
@@ -170,8 +172,9 @@ def replace_with_constant(rng, tree: Tree, constant_of) -> Tree:
     i = as_stream(rng).below(len(codes))
     end = subtree_end(codes, i)
     value = float(constant_of(i, end))
-    return Tree.from_lists(codes[:i] + [CONST] + codes[end:], values[:i] + [value] + values[end:],
-                           tree.delays)
+    return Tree.from_lists(
+        codes[:i] + [CONST] + codes[end:], values[:i] + [value] + values[end:], tree.delays
+    )
 
 
 def _apply(code: int, a: float, b: float) -> float:
@@ -199,16 +202,23 @@ def fold_constants(tree: Tree) -> Tree:
                 v = _apply(codes[i], values[i + 1], values[i + 2])
                 if not np.isfinite(v):
                     continue
-                codes[i:i + 3] = [CONST]
-                values[i:i + 3] = [v]
+                codes[i : i + 3] = [CONST]
+                values[i : i + 3] = [v]
                 changed = True
                 break
     return Tree.from_lists(codes, values, tree.delays)
 
 
 __all__ = [
-    "VariationParams", "random_tree", "random_subtree", "mutate", "constant_mutation",
-    "macro_mutation", "micro_mutation", "replace_with_constant", "fold_constants",
+    "VariationParams",
+    "random_tree",
+    "random_subtree",
+    "mutate",
+    "constant_mutation",
+    "macro_mutation",
+    "micro_mutation",
+    "replace_with_constant",
+    "fold_constants",
 ]
 
 
@@ -217,10 +227,16 @@ def subtrees_as_constants(model: Tree, constant_of):
     largest subtree first (the candidates of every pruning pass), each constant-folded."""
     codes = model.codes.tolist()
     values = model.values.tolist()
-    spans = sorted(((subtree_end(codes, i) - i, i) for i in range(1, len(codes))
-                    if codes[i] != CONST), reverse=True)
+    spans = sorted(
+        ((subtree_end(codes, i) - i, i) for i in range(1, len(codes)) if codes[i] != CONST),
+        reverse=True,
+    )
     for _, i in spans:
         end = subtree_end(codes, i)
-        yield fold_constants(Tree.from_lists(codes[:i] + [CONST] + codes[end:],
-                                             values[:i] + [constant_of(model, i, end)]
-                                             + values[end:], model.delays))
+        yield fold_constants(
+            Tree.from_lists(
+                codes[:i] + [CONST] + codes[end:],
+                values[:i] + [constant_of(model, i, end)] + values[end:],
+                model.delays,
+            )
+        )

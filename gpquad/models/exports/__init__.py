@@ -17,10 +17,17 @@ from gpquad.errors import GpquadError
 #: Public names -> the module that defines them (imported on first use, so that the command
 #: line's parser reads FORMATS without importing sympy or casadi).
 _LAZY = {
-    "export_text": "text_forms", "export_latex": "text_forms", "export_markdown": "text_forms",
-    "export_json": "text_forms", "export_sympy": "symbolic", "sympy_equations": "symbolic",
-    "SympyModel": "symbolic", "export_python": "python_module", "export_c": "c_source",
-    "export_casadi": "casadi_function", "casadi_functions": "casadi_function",
+    "export_text": "text_forms",
+    "export_latex": "text_forms",
+    "export_markdown": "text_forms",
+    "export_json": "text_forms",
+    "export_sympy": "symbolic",
+    "sympy_equations": "symbolic",
+    "SympyModel": "symbolic",
+    "export_python": "python_module",
+    "export_c": "c_source",
+    "export_casadi": "casadi_function",
+    "casadi_functions": "casadi_function",
 }
 
 
@@ -47,26 +54,66 @@ class Format:
         return __getattr__(self.function_name)
 
 
-FORMATS: dict[str, Format] = {f.name: f for f in (
-    Format("text", "export_text", ".txt", "one equation per line after a dt line, e.g. "
-           "'p_dot + 0.035 d(p_dot)/dt = -4.1*p + 10.3*u_R(t-1)'", raw_option=True),
-    Format("latex", "export_latex", ".tex", r"an align environment, e.g. '\dot{p} &= - 4.1 p + "
-           r"10.3 u_{R-1}', and a sentence stating dt", raw_option=True),
-    Format("markdown", "export_markdown", ".md", "a table of the equations and their errors, "
-           "after a dt line"),
-    Format("sympy", "export_sympy", ".py", "a python script building sympy equations: "
-           "symbols 'u_R(t-1)' per delay, lags as Eq(tau*Derivative(p_dot(t), t) + p_dot(t), "
-           "rhs), DT, TRIM", raw_option=True),
-    Format("json", "export_json", ".json", "model.json (full constants, delays, lags, dt)"),
-    Format("python", "export_python", ".py", "a self-contained numpy module: DT, INPUT_NAMES, "
-           "TRIM, accel(state, input_history), fly(inputs, x0) -> states"),
-    Format("c", "export_c", ".c", "a C99 source and header (libm only): "
-           "int gpquad_fly(const double *inputs, int n_rows, const double x0[9], "
-           "double *states) and gpquad_accel(...)"),
-    Format("casadi", "export_casadi", ".casadi", "a casadi.Function accel(x[9], "
-           "H[history+1 x inputs], prev[6]) for MPC (needs casadi): with --out saved "
-           "(casadi.Function.load), else printed serialised (casadi.Function.deserialize)"),
-)}
+FORMATS: dict[str, Format] = {
+    f.name: f
+    for f in (
+        Format(
+            "text",
+            "export_text",
+            ".txt",
+            "one equation per line after a dt line, e.g. "
+            "'p_dot + 0.035 d(p_dot)/dt = -4.1*p + 10.3*u_R(t-1)'",
+            raw_option=True,
+        ),
+        Format(
+            "latex",
+            "export_latex",
+            ".tex",
+            r"an align environment, e.g. '\dot{p} &= - 4.1 p + "
+            r"10.3 u_{R-1}', and a sentence stating dt",
+            raw_option=True,
+        ),
+        Format(
+            "markdown",
+            "export_markdown",
+            ".md",
+            "a table of the equations and their errors, after a dt line",
+        ),
+        Format(
+            "sympy",
+            "export_sympy",
+            ".py",
+            "a python script building sympy equations: "
+            "symbols 'u_R(t-1)' per delay, lags as Eq(tau*Derivative(p_dot(t), t) + p_dot(t), "
+            "rhs), DT, TRIM",
+            raw_option=True,
+        ),
+        Format("json", "export_json", ".json", "model.json (full constants, delays, lags, dt)"),
+        Format(
+            "python",
+            "export_python",
+            ".py",
+            "a self-contained numpy module: DT, INPUT_NAMES, "
+            "TRIM, accel(state, input_history), fly(inputs, x0) -> states",
+        ),
+        Format(
+            "c",
+            "export_c",
+            ".c",
+            "a C99 source and header (libm only): "
+            "int gpquad_fly(const double *inputs, int n_rows, const double x0[9], "
+            "double *states) and gpquad_accel(...)",
+        ),
+        Format(
+            "casadi",
+            "export_casadi",
+            ".casadi",
+            "a casadi.Function accel(x[9], "
+            "H[history+1 x inputs], prev[6]) for MPC (needs casadi): with --out saved "
+            "(casadi.Function.load), else printed serialised (casadi.Function.deserialize)",
+        ),
+    )
+}
 
 
 def export(model, fmt: str, **options) -> str | dict[str, str]:
@@ -74,12 +121,16 @@ def export(model, fmt: str, **options) -> str | dict[str, str]:
     options go to the format's function (raw=True for text/latex/sympy; name=, prefix=
     for c)."""
     if fmt not in FORMATS:
-        raise GpquadError(f"unknown export format '{fmt}'; choose one of {sorted(FORMATS)}",
-                          field="format")
+        raise GpquadError(
+            f"unknown export format '{fmt}'; choose one of {sorted(FORMATS)}", field="format"
+        )
     if options.get("raw") and not FORMATS[fmt].raw_option:
-        raise GpquadError(f"raw inputs (--raw-inputs) apply to the formats "
-                          f"{[f.name for f in FORMATS.values() if f.raw_option]}; the code "
-                          "exports always take raw inputs", field="--raw-inputs")
+        raise GpquadError(
+            f"raw inputs (--raw-inputs) apply to the formats "
+            f"{[f.name for f in FORMATS.values() if f.raw_option]}; the code "
+            "exports always take raw inputs",
+            field="--raw-inputs",
+        )
     return FORMATS[fmt].function(model, **options)
 
 
@@ -93,8 +144,11 @@ def write_export(model, fmt: str, out, raw: bool = False) -> list[Path]:
         name = out.stem if out.suffix in (".c", ".h") else out.name
         options["name"] = name
         if not name.replace("-", "_").isidentifier():
-            raise GpquadError(f"'{out.name}' cannot name a C source and header; give a path "
-                              "such as model.c (writes model.c and model.h)", field="--out")
+            raise GpquadError(
+                f"'{out.name}' cannot name a C source and header; give a path "
+                "such as model.c (writes model.c and model.h)",
+                field="--out",
+            )
     out.parent.mkdir(parents=True, exist_ok=True)
     if fmt == "casadi":
         export(model, fmt, **options)  # the checks (and casadi's presence)
@@ -107,6 +161,20 @@ def write_export(model, fmt: str, out, raw: bool = False) -> list[Path]:
     return [out.with_name(name) for name in files]
 
 
-__all__ = ["FORMATS", "Format", "SympyModel", "casadi_functions", "export", "export_c",
-           "export_casadi", "export_json", "export_latex", "export_markdown", "export_python",
-           "export_sympy", "export_text", "sympy_equations", "write_export"]
+__all__ = [
+    "FORMATS",
+    "Format",
+    "SympyModel",
+    "casadi_functions",
+    "export",
+    "export_c",
+    "export_casadi",
+    "export_json",
+    "export_latex",
+    "export_markdown",
+    "export_python",
+    "export_sympy",
+    "export_text",
+    "sympy_equations",
+    "write_export",
+]

@@ -21,8 +21,11 @@ def _casadi():
     try:
         import casadi
     except ImportError:
-        raise GpquadError("the casadi export needs the casadi package: pip install "
-                          "'gpquad[casadi]' (or pip install casadi)", field="--format") from None
+        raise GpquadError(
+            "the casadi export needs the casadi package: pip install "
+            "'gpquad[casadi]' (or pip install casadi)",
+            field="--format",
+        ) from None
     return casadi
 
 
@@ -43,13 +46,22 @@ def casadi_functions(model) -> dict:
             return x[leaf_.index]
         return trimmed[leaf_.delay, leaf_.index]
 
-    ops = {ADD: lambda a, b: a + b, SUB: lambda a, b: a - b, MUL: lambda a, b: a * b,
-           DIV: lambda a, b: ca.if_else(ca.fabs(b) < DIV_EPS, 1.0, a / b)}
-    rhs = [fold(t.tree, spec.n_inputs, leaf, ca.SX, lambda c, a, b: ops[c](a, b))
-           for t in spec.targets]
+    ops = {
+        ADD: lambda a, b: a + b,
+        SUB: lambda a, b: a - b,
+        MUL: lambda a, b: a * b,
+        DIV: lambda a, b: ca.if_else(ca.fabs(b) < DIV_EPS, 1.0, a / b),
+    }
+    rhs = [
+        fold(t.tree, spec.n_inputs, leaf, ca.SX, lambda c, a, b: ops[c](a, b)) for t in spec.targets
+    ]
     f = ca.vertcat(*rhs)
-    applied = ca.vertcat(*[prev[i] + t.alpha * (rhs[i] - prev[i]) if t.alpha < 1.0
-                           else rhs[i] for i, t in enumerate(spec.targets)])
+    applied = ca.vertcat(
+        *[
+            prev[i] + t.alpha * (rhs[i] - prev[i]) if t.alpha < 1.0 else rhs[i]
+            for i, t in enumerate(spec.targets)
+        ]
+    )
     commanded = ca.Function("commanded", [x, hist], [f], ["x", "H"], ["f"])
     accel = ca.Function("accel", [x, hist, prev], [applied], ["x", "H", "prev"], ["a"])
     return {"commanded": commanded, "accel": accel}

@@ -40,8 +40,13 @@ class Leaf:
     delay: int = 0
 
 
-def fold(tree: Tree, n_inputs: int, leaf: Callable[[Leaf], object],
-         const: Callable[[float], object], binary: Callable[[int, object, object], object]):
+def fold(
+    tree: Tree,
+    n_inputs: int,
+    leaf: Callable[[Leaf], object],
+    const: Callable[[float], object],
+    binary: Callable[[int, object, object], object],
+):
     """The tree's value built bottom-up: leaf(Leaf) and const(value) for the leaves,
     binary(code, left, right) for each operator node (code ADD, SUB, MUL or DIV), visiting
     the nodes right to left as the kernels do. Input leaf slot j reads input column
@@ -82,14 +87,18 @@ def leaves(tree: Tree, n_inputs: int) -> list[Leaf]:
 def float_literal(value: float) -> str:
     """The shortest literal that reads back as exactly `value` (python and C99 alike)."""
     if not math.isfinite(value):
-        raise GpquadError(f"a constant of the model is {value}; an export needs finite "
-                          "constants (refit or re-run the model)", field="prefix")
+        raise GpquadError(
+            f"a constant of the model is {value}; an export needs finite "
+            "constants (refit or re-run the model)",
+            field="prefix",
+        )
     text = repr(float(value))
     return f"({text})" if text.startswith("-") else text
 
 
-def source_expression(tree: Tree, n_inputs: int, leaf: Callable[[Leaf], str],
-                      pdiv: str = "_pdiv") -> str:
+def source_expression(
+    tree: Tree, n_inputs: int, leaf: Callable[[Leaf], str], pdiv: str = "_pdiv"
+) -> str:
     """Infix source text of the tree (python or C): each operator node one parenthesised
     operation, division a call pdiv(left, right) of the protected division."""
 
@@ -152,8 +161,16 @@ def model_spec(model) -> ModelSpec:
                     delays[name].append(leaf_.delay)
                 history = max(history, leaf_.delay)
         text = eq.text() if eq is not None else f"{target} = 0 (no equation)"
-        targets.append(TargetSpec(target, tree, tau, lag_alpha(tau, model.dt), text,
-                                  {n: sorted(d) for n, d in delays.items()}))
+        targets.append(
+            TargetSpec(
+                target,
+                tree,
+                tau,
+                lag_alpha(tau, model.dt),
+                text,
+                {n: sorted(d) for n, d in delays.items()},
+            )
+        )
     trim = tuple(float(model.trim.get(n, 0.0)) for n in model.input_names)
     return ModelSpec(float(model.dt), tuple(model.input_names), trim, tuple(targets), history)
 
@@ -181,9 +198,13 @@ def describe(spec: ModelSpec) -> list[str]:
     for t in spec.targets:
         state = TARGET_STATE[t.target]
         read = ", ".join(f"{n} at {d}" for n, d in t.delays.items()) or "none"
-        lag = (f"first-order lag tau = {short_number(t.tau)} s: tau d({t.target})/dt + "
-               f"{t.target} = rhs, discretely a_k = a_(k-1) + alpha (rhs_k - a_(k-1)), "
-               f"alpha = {short_number(t.alpha)}, a_(-1) = 0" if t.tau > 0 else "no lag")
+        lag = (
+            f"first-order lag tau = {short_number(t.tau)} s: tau d({t.target})/dt + "
+            f"{t.target} = rhs, discretely a_k = a_(k-1) + alpha (rhs_k - a_(k-1)), "
+            f"alpha = {short_number(t.alpha)}, a_(-1) = 0"
+            if t.tau > 0
+            else "no lag"
+        )
         lines.append(f"{t.target} (d{state}/dt): inputs read (delays) {read}; {lag}")
         lines.append(f"    {t.text}")
     lines.append(f"protected division: |denominator| < {DIV_EPS:g} gives 1")

@@ -17,20 +17,18 @@ def _trim_note(model, raw: bool) -> str:
     if not trim:
         return ""
     values = ", ".join(f"{n} {short_number(v)}" for n, v in trim.items())
-    return (f"; inputs raw (trim {values})" if raw else
-            f"; inputs minus their trim ({values})")
+    return f"; inputs raw (trim {values})" if raw else f"; inputs minus their trim ({values})"
 
 
 def dt_line(model, form: str = "text", raw: bool = False) -> str:
-    """"dt = 0.04 s; delays in samples (u_R(t-2) is u_R 2 samples back)", with the trim;
+    """ "dt = 0.04 s; delays in samples (u_R(t-2) is u_R 2 samples back)", with the trim;
     form "text", "latex" or "markdown" (math in $...$)."""
     name = model.input_names[0] if model.input_names else "u"
     if form == "text":
         dt, example = f"dt = {short_number(model.dt)} s", f"{name}(t-2)"
     else:
-        dt, example = fr"$\Delta t = {short_number(model.dt)}$ s", f"${input_latex(name, 2)}$"
-    return (f"{dt}; delays in samples ({example} is {name} 2 samples back)"
-            f"{_trim_note(model, raw)}")
+        dt, example = rf"$\Delta t = {short_number(model.dt)}$ s", f"${input_latex(name, 2)}$"
+    return f"{dt}; delays in samples ({example} is {name} 2 samples back){_trim_note(model, raw)}"
 
 
 def export_text(model, raw: bool = False) -> str:
