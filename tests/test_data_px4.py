@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from gpquad.data.integration_check import integration_check
-from gpquad.data.io import READERS, load_flights
+from gpquad.data.io import READERS
 from gpquad.data.px4 import read_px4_csv, read_px4_folder_log
 from gpquad.data.ulog import read_ulog, read_ulog_log
 from gpquad.engine.kernels.integrator import body_accelerations, integrate
@@ -278,7 +278,7 @@ def test_corrupt_and_missing_files(tmp_path):
     with pytest.raises(GpquadError) as err:
         read_px4_csv(folder, DATA)
     assert str(target.name) in _one_line(err)
-    with pytest.raises(GpquadError, match="not a folder"):
+    with pytest.raises(GpquadError, match="no such file or folder"):
         read_px4_csv(tmp_path / "nowhere", DATA)
     bad = tmp_path / "bad.ulg"
     bad.write_bytes(b"definitely not a ulog" * 20)
@@ -311,11 +311,11 @@ def test_truncated_csv_row_is_a_gap_or_dropped(tmp_path):
 
 
 def test_unknown_format_is_an_error():
-    cfg = config_from_dict({"data": {"files": ["x.log"], "format": "nonsense"}})
+    """Refused when the config is read, before any data: one line naming the file and field."""
     with pytest.raises(GpquadError) as err:
-        load_flights(cfg)
+        config_from_dict({"data": {"files": ["x.log"], "format": "nonsense"}}, "exp.toml")
     msg = _one_line(err)
-    assert "unknown format 'nonsense'" in msg and "x.log" in msg and "'data.format'" in msg
+    assert "unknown format 'nonsense'" in msg and "exp.toml" in msg and "'data.format'" in msg
     for name in ("px4-csv", "ulog", "betaflight", "table"):
         assert name in READERS
 

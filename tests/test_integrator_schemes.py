@@ -467,13 +467,18 @@ def test_run_fitted_by_rk4_scores_with_its_own_scheme_and_by_rk4(tmp_path, capsy
         "iterations": 1,
         "model_generations": 5,
         "test_generations": 2,
-        "window_steps": 100,
-        "test_offset_max": 20,
+        "window_s": 4.0,
         "integrator": "rk4",
         "substeps": 2,
     }
     cfg = config_from_dict(
-        {"seed": 1, "data": {"files": [str(log)]}, "evolution": evo, "output": {"progress": False}}
+        {
+            "seed": 1,
+            "preset": "paper",
+            "data": {"files": [str(log)]},
+            "evolution": evo,
+            "output": {"progress": False},
+        }
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -489,7 +494,7 @@ def test_run_fitted_by_rk4_scores_with_its_own_scheme_and_by_rk4(tmp_path, capsy
     assert res["rk4"]["rse"]["p"] == pytest.approx(res["rse"]["p"], rel=0.05, abs=1e-4)
     assert main(argv + ["--integrator", "rk4"]) == 0
     out = capsys.readouterr().out
-    assert "rk4 x2 (own)" in out and "rk4 x8" in out
+    assert "\nmodel " in out and "\nrk4 x8 " in out and "rk4 x8: the printed equations" in out
     assert main(argv + ["--json"]) == 0
     assert json.loads(capsys.readouterr().out)["rk4"] is None
     with pytest.raises(SystemExit) as info:  # argparse's own exit for a bad choice

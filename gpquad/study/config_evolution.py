@@ -94,7 +94,7 @@ def validate_evolution(cfg: Config, source: str) -> None:
     _choice(ev.integrator, SCHEMES, source, "evolution.integrator")
     if not 1 <= ev.substeps <= (1 if ev.integrator == "euler" else 64):
         raise GpquadError(
-            "must be 1 for euler and 1..64 for rk4", source=source, field="evolution.substeps"
+            "must be 1 for euler, 1 to 64 for rk4", source=source, field="evolution.substeps"
         )
     for i, step in enumerate(ev.finish):
         _choice(step, FINISH_STEPS, source, f"evolution.finish[{i}]")
