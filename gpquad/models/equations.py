@@ -337,8 +337,8 @@ class DiscoveredModel:
             np.ascontiguousarray(starts, dtype=np.int64),
             int(n_steps),
             noise,
-            SCHEMES[self.integrator],
-            int(self.substeps),
+            SCHEMES[str(self.integrator)],
+            int(self.substeps or 1),
         )
 
 

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import Any
 
 import numpy as np
 
@@ -189,7 +190,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
         else np.zeros(0)
     )
     history = model_history(model)
-    report = {
+    report: dict[str, Any] = {
         "accepted": False,
         "horizon_s": float(horizons_s[-1]),
         "states": [SCORED_STATES[i] for i in states],

@@ -117,7 +117,7 @@ def checked_tree(target: str, record: dict, input_names) -> Tree:
         or not isinstance(prefix.get("values"), list)
     ):
         fail("the equation needs its prefix tree {codes: [...], values: [...]}", f"{field}.prefix")
-    codes, values = prefix["codes"], prefix["values"]
+    codes, values = prefix["codes"], prefix["values"]  # type: ignore[index]
     taps = 1 + max((tap_index(n) for n in delays), default=0)
     leaves = len(terminal_names(tap_names(input_names, taps)))
     if not codes or len(codes) > MAX_MODEL_NODES:

@@ -49,6 +49,7 @@ from gpquad.engine.taps import base_input, tap_name, with_taps
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.export import from_sympy, round_constants, to_sympy
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
+from gpquad.models.equation import Equation
 from gpquad.models.joint_fit import JOINT_HORIZONS_S, judged_windows
 from gpquad.models.stability import FullModelFlights
 from gpquad.models.symmetry import wrong_parity
@@ -331,7 +332,7 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     if chosen is path[0]:
         return equation, report
 
-    def as_equation(step: Step) -> object:
+    def as_equation(step: Step) -> Equation:
         return dataclasses.replace(
             equation,
             tree=problem.tree(step.expr),

@@ -30,6 +30,7 @@ No random draw: the result is a function of model and data.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -92,7 +93,7 @@ def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirr
         return (n_div, n_mirror, float(windows.sum())), windows
 
     best = fly(model)[0]
-    report = {
+    report: dict[str, Any] = {
         "horizon_s": float(seconds),
         "judged_on": judged_on,
         "windows": int(len(starts)),
@@ -138,8 +139,10 @@ def stability_summary(report: dict) -> str:
         m_before, m_after = report["mirrored_diverged_before"], report["mirrored_diverged_after"]
         mirror = f"; mirrored ({', '.join(report['mirrored'])} flipped): {m_before} diverged"
         if m_before:
-            swapped = [s["target"] for s in report["swaps"] if s.get("why") == "mirror diverged"]
-            mirror += f", {m_after} after swapping {', '.join(swapped) or 'none'}"
+            mirror_swaps = [
+                s["target"] for s in report["swaps"] if s.get("why") == "mirror diverged"
+            ]
+            mirror += f", {m_after} after swapping {', '.join(mirror_swaps) or 'none'}"
     if not before:
         line = f"full model: no diverged window in {n} {report['horizon_s']:g} s flights"
         return line + mirror

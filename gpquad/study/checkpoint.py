@@ -162,7 +162,7 @@ def state_from_dict(fields: dict) -> RunState:
         models=models,
         inserted=fields["inserted"],
         rng_state=_rng_state(fields["rng_state"]),
-        **arrays,
+        **arrays,  # type: ignore[arg-type]
     )
 
 
@@ -193,7 +193,10 @@ def decode(blob: bytes) -> tuple[RunState, dict]:
         raise CorruptCheckpoint(f"unreadable content ({type(exc).__name__})") from None
     if not isinstance(obj, dict) or not isinstance(obj.get("meta"), dict):
         raise CorruptCheckpoint("unreadable content (no state and meta)")
-    return state_from_dict(obj.get("state")), obj["meta"]
+    state = obj.get("state")
+    if not isinstance(state, dict):
+        raise CorruptCheckpoint("unreadable content (no state and meta)")
+    return state_from_dict(state), obj["meta"]
 
 
 def save(path, state: RunState, meta: dict) -> Path:

@@ -35,12 +35,15 @@ def field_comments(cls) -> dict[str, str]:
     for item in node.body:
         if not isinstance(item, ast.AnnAssign):
             continue
+        if not isinstance(item.target, ast.Name):
+            continue
         name = item.target.id
-        line = lines[item.end_lineno - 1]
+        line = lines[(item.end_lineno or item.lineno) - 1]
         if "#" in line.split("=", 1)[-1]:
             out[name] = line.split("#", 1)[1].strip()
             continue
-        above, k = [], item.lineno - 2
+        above: list[str] = []
+        k = item.lineno - 2
         while k >= 0 and lines[k].strip().startswith("#"):
             above.insert(0, lines[k].strip().lstrip("#").strip())
             k -= 1

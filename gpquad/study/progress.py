@@ -49,7 +49,7 @@ class SweepProgress:
         self.interval_log = interval_log
         self.tty = mode == "live" and hasattr(self.stream, "isatty") and self.stream.isatty()
         self._stop = threading.Event()
-        self._thread = None
+        self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
         self._last_log = 0.0
 

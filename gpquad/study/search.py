@@ -97,7 +97,10 @@ def identify(
         evolve(co, state, ev.iterations, history, checkpoint_path, on_iteration=report)
     except KeyboardInterrupt as exc:
         tree, train, val = co.best(state)
-        exc.partial = (Equation(target, tree, dataset.input_names, train, val, dataset.trim), state)
+        exc.partial = (  # type: ignore[attr-defined]
+            Equation(target, tree, dataset.input_names, train, val, dataset.trim),
+            state,
+        )
         raise
     return final_equation(co, state, dataset, target), state
 
