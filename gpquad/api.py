@@ -175,7 +175,7 @@ def fit(
     jobs : int, optional
         Processes for the equations' searches (default: one per core, at most one per
         target); the equations are the same for any value. A fit into a `run_dir` searches
-        in this process (its history and checkpoints are written as it goes).
+        in this process unless `jobs` is given (then only whole equations are checkpointed).
     **overrides
         Config fields by name, in [evolution], [data] or [vehicle]: ``targets=["p_dot"]``,
         ``iterations=2``, ``input_taps=1``, ``trim="mean"``, ``inputs=[...]``.
@@ -199,7 +199,10 @@ def fit(
     flights, cfg, source = _flights_and_config(data, cfg)
     dataset = load_dataset(cfg) if flights is None else dataset_of(flights, cfg, source)
     if run_dir is not None:
-        found = run_experiment(cfg, run_dir, progress=progress, dataset=dataset)
+        n_jobs = 1 if jobs is None else jobs
+        if n_jobs < 1:
+            raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
+        found = run_experiment(cfg, run_dir, progress=progress, dataset=dataset, jobs=n_jobs)
     else:
         warn_unmeasured(dataset, cfg.evolution.targets)
         ev = cfg.evolution

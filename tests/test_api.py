@@ -254,3 +254,54 @@ def test_model_json_has_a_schema_and_old_files_load(model, tmp_path):
     with pytest.raises(gpquad.GpquadError, match="newer gpquad") as info:
         gpquad.load(tmp_path / "new")
     assert "\n" not in str(info.value)
+
+
+def test_run_with_two_processes_writes_the_same_folder(tmp_path):
+    """`gpquad run --jobs 2`: the same equations and history.csv bytes as one process, and
+    a second command on the finished folder resumes every target from its record."""
+    from gpquad.cli.commands import main
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        'seed = 2\npreset = "paper"\n[simulator]\nduration_s = 40.0\n[evolution]\n'
+        'targets = ["a_z", "p_dot", "q_dot"]\niterations = 1\nmodel_generations = 5\n'
+        "test_generations = 2\nwindow_s = 2.4\nsimplify_generations = 2\n"
+    )
+    for jobs, out in ((1, "one"), (2, "two")):
+        assert (
+            main(
+                [
+                    "run",
+                    str(cfg),
+                    "--out",
+                    str(tmp_path / out),
+                    "--quiet",
+                    "--no-figures",
+                    "--jobs",
+                    str(jobs),
+                ]
+            )
+            == 0
+        )
+    one, two = (json.loads((tmp_path / o / "model.json").read_text()) for o in ("one", "two"))
+    assert one["targets"] == two["targets"]
+    assert (tmp_path / "one" / "history.csv").read_bytes() == (
+        tmp_path / "two" / "history.csv"
+    ).read_bytes()
+    assert (
+        main(
+            [
+                "run",
+                str(cfg),
+                "--out",
+                str(tmp_path / "two"),
+                "--quiet",
+                "--no-figures",
+                "--jobs",
+                "2",
+            ]
+        )
+        == 0
+    )
+    assert json.loads((tmp_path / "two" / "model.json").read_text())["targets"] == one["targets"]
+    assert main(["run", str(cfg), "--out", str(tmp_path / "x"), "--jobs", "0"]) == 2

@@ -27,7 +27,9 @@ def _cmd_run(args) -> int:
     )
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     try:
-        model = run_experiment(cfg, run_dir, progress=not args.quiet)
+        if args.jobs < 1:
+            raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
+        model = run_experiment(cfg, run_dir, progress=not args.quiet, jobs=args.jobs)
     except KeyboardInterrupt:
         return 130
     print(
@@ -232,6 +234,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="master seed")
     run.add_argument("--out", help="run folder (default results/<name>-seed<S>-<time>)")
     run.add_argument("--quiet", action="store_true", help="no progress lines")
+    run.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="search the equations in this many processes (same results; default 1, which "
+        "also checkpoints every iteration)",
+    )
     run.add_argument(
         "--no-figures",
         action="store_true",

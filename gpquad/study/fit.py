@@ -77,16 +77,48 @@ def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
         return None
 
 
+class RowCollector:
+    """A history writer that keeps the rows in memory (a search in a worker process)."""
+
+    def __init__(self):
+        self.rows: list[dict] = []
+
+    def write(self, rows) -> None:
+        self.rows.extend(dict(r) for r in rows)
+
+    def size(self) -> int:
+        return 0
+
+    def truncate(self, size: int) -> None:
+        self.rows.clear()
+
+
+def _identify_with_rows(dataset: Dataset, target: str, cfg: Config):
+    t0 = time.perf_counter()
+    rows = RowCollector()
+    equation, _ = identify(dataset, target, cfg, rows)
+    return target, equation, rows.rows, time.perf_counter() - t0
+
+
 def search_equations(
     dataset: Dataset,
     cfg: Config,
     report: Progress,
     run_dir: Path | None = None,
     resuming: bool = False,
+    jobs: int = 1,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
-    KeyboardInterrupt the exception carries `partial` = the equations found so far."""
+    KeyboardInterrupt the exception carries `partial` = the equations found so far.
+
+    With jobs > 1 the targets left to search run in worker processes; each finished target
+    is recorded (its history rows appended, in target order, and its record written) as soon
+    as every target before it is, so history.csv and model.json are the same bytes as with
+    jobs = 1. A target interrupted in a worker restarts on resume (no per-iteration
+    checkpoint there)."""
+    if run_dir is not None and jobs > 1:
+        return _search_folder_in_parallel(dataset, cfg, report, run_dir, resuming, jobs)
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
@@ -140,6 +172,61 @@ def search_equations(
         if history is not None:
             history.close()
     return equations, timings
+
+
+def _search_folder_in_parallel(dataset, cfg, report, run_dir: Path, resuming: bool, jobs: int):
+    """search_equations' parallel path (its notes)."""
+    from joblib import Parallel, delayed
+
+    ev = cfg.evolution
+    equations: dict[str, Equation] = {}
+    timings: dict[str, float] = {}
+    records = {t: run_dir / "checkpoints" / f"{t}.json" for t in ev.targets}
+    history = HistoryWriter(run_dir / "history.csv")
+    try:
+        history_end = len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
+        pending = []
+        for target in ev.targets:
+            record = (
+                _finished_record(records[target], dataset)
+                if resuming and records[target].exists() and not pending
+                else None
+            )
+            if record is not None:  # finished before the interruption, all before it too
+                equations[target], history_end = record
+                report.done += ev.iterations
+                report.say(f"  {target}: finished earlier (resumed from {records[target]})")
+            else:
+                pending.append(target)
+        history.truncate(history_end)
+        report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
+        ready: dict[str, tuple] = {}
+        order = list(pending)
+        with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as run:
+            for target, equation, rows, seconds in run(
+                delayed(_identify_with_rows)(dataset, t, cfg) for t in pending
+            ):
+                ready[target] = (equation, rows, seconds)
+                while order and order[0] in ready:
+                    name = order.pop(0)
+                    equation, rows, seconds = ready.pop(name)
+                    history.write(rows)
+                    write_json(
+                        records[name],
+                        {"equation": equation.to_dict(), "history_bytes": history.size()},
+                    )
+                    equations[name], timings[name] = equation, seconds
+                    report.done += ev.iterations
+                    report.say(
+                        f"  -> {equation.text()}  (validation error "
+                        f"{equation.validation_error:.4g}; {seconds:.1f} s)"
+                    )
+    except KeyboardInterrupt as exc:
+        exc.equations = equations  # type: ignore[attr-defined]
+        raise
+    finally:
+        history.close()
+    return {t: equations[t] for t in ev.targets}, timings
 
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:

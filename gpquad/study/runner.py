@@ -143,7 +143,7 @@ def write_model(run_dir: Path, model: DiscoveredModel) -> None:
 
 
 def run_experiment(
-    cfg: Config, run_dir=None, progress: bool | None = None, dataset=None
+    cfg: Config, run_dir=None, progress: bool | None = None, dataset=None, jobs: int = 1
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -179,7 +179,7 @@ def run_experiment(
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
     try:
-        equations, timings = search_equations(dataset, cfg, report, run_dir, resuming)
+        equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
     except KeyboardInterrupt as exc:
         model = new_model(getattr(exc, "equations", {}), dataset, cfg)
         write_model(run_dir, dataclasses.replace(model, interrupted=True))
