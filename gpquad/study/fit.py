@@ -185,7 +185,7 @@ def _search_folder_in_parallel(dataset, cfg, report, run_dir: Path, resuming: bo
     history = HistoryWriter(run_dir / "history.csv")
     try:
         history_end = len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
-        pending = []
+        pending: list[str] = []
         for target in ev.targets:
             record = (
                 _finished_record(records[target], dataset)
