@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from gpquad.data.flight import Flight, flight_from_frame
+from gpquad.data.flight import Flight, flights_of
 from gpquad.errors import GpquadError
 from gpquad.model import Model
 from gpquad.study.config import (
@@ -117,7 +117,6 @@ def _flights_and_config(data, cfg: Config):
         paths = [str(Path(d).resolve()) for d in items]
         fmt = cfg.data.format if cfg.data.format != "generic" else guess_format(Path(paths[0]))
         return None, _with_overrides(cfg, None, {"files": paths, "format": fmt}), paths[0]
-    flights: list[Flight] = []
     inputs = cfg.data.inputs
     if isinstance(inputs, str):
         raise GpquadError(
@@ -125,20 +124,7 @@ def _flights_and_config(data, cfg: Config):
             "list of input column names: inputs=[...]",
             field="inputs",
         )
-    for k, d in enumerate(items):
-        if isinstance(d, Flight):
-            flights.append(d)
-        elif isinstance(d, pd.DataFrame):
-            flights.append(
-                flight_from_frame(
-                    d, inputs, cfg.data.frame, cfg.data.columns, f"DataFrame {k}", f"flight{k}"
-                )
-            )
-        else:
-            raise GpquadError(
-                f"data[{k}] is a {type(d).__name__}; give DataFrames, Flights or log paths",
-                field="data",
-            )
+    flights = flights_of(items, inputs, cfg.data.frame, cfg.data.columns)
     return flights, cfg, "DataFrame"
 
 

@@ -14,13 +14,10 @@ import numpy as np
 import pandas as pd
 import sympy as sp
 
-from gpquad.data.flight import DT_TOLERANCE, Flight, flight_from_frame
+from gpquad.data.flight import DT_TOLERANCE, Flight, flights_of
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
-
-#: States scored by RSE: the ones the six equations integrate into.
-SCORED = ("u", "v", "w", "p", "q", "r")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,29 +129,16 @@ class Model:
         return model_view(dataset, self.trim) if trimmed else dataset
 
     def _flights(self, data) -> list[Flight]:
-        items = list(data) if isinstance(data, (list, tuple)) else [data]
-        flights = []
-        for k, d in enumerate(items):
-            if isinstance(d, Flight):
-                flights.append(d)
-            elif isinstance(d, pd.DataFrame):
-                flights.append(
-                    flight_from_frame(
-                        d, self.input_names, source=f"DataFrame {k}", name=f"flight{k}"
-                    )
-                )
-            elif isinstance(d, (str, Path)):
-                from gpquad.data.io import read_log_file
-                from gpquad.study.config import DataConfig
+        from gpquad.data.io import read_log_file
+        from gpquad.study.config import DataConfig
 
-                data = DataConfig() if self.config is None else self.config.data
-                data = dataclasses.replace(data, inputs=self.input_names, files=(str(d),))
-                flights.extend(read_log_file(d, data))
-            else:
-                raise GpquadError(
-                    f"data[{k}] is a {type(d).__name__}; give DataFrames, Flights or log paths",
-                    field="data",
-                )
+        def read(path) -> list[Flight]:
+            data = DataConfig() if self.config is None else self.config.data
+            data = dataclasses.replace(data, inputs=self.input_names, files=(str(path),))
+            return read_log_file(path, data)
+
+        items = list(data) if isinstance(data, (list, tuple)) else [data]
+        flights = flights_of(items, self.input_names, read=read)
         for f in flights:
             if tuple(f.input_names) != self.input_names:
                 raise GpquadError(
@@ -177,39 +161,27 @@ class Model:
             rad/s^2). A lagged equation's value is its applied acceleration after one
             step of its lag from the data's acceleration.
         """
-        from gpquad.engine.kernels.tree_eval import eval_lanes
+        from gpquad.engine.kernels.tree_eval import eval_on_samples
         from gpquad.engine.lag import lag_alpha
         from gpquad.engine.taps import with_taps
 
         dataset = self._dataset(data)
-        rows = np.concatenate([np.arange(a + self._history(), b) for a, b in dataset.segments])
+        history = self._history()
+        rows = np.concatenate([np.arange(a + history, b) for a, b in dataset.segments])
         flight = np.concatenate(
-            [np.full(b - a - self._history(), k) for k, (a, b) in enumerate(dataset.segments)]
+            [np.full(b - a - history, k) for k, (a, b) in enumerate(dataset.segments)]
         )
-        out = {
-            "t": (rows - np.array([dataset.segments[k][0] for k in flight])) * dataset.dt,
-            "flight": flight,
-        }
+        starts = np.array([a for a, _ in dataset.segments])
+        out = {"t": (rows - starts[flight]) * dataset.dt, "flight": flight}
         arrays = dataset.arrays
         for t in self.targets:
-            e = self.discovered.equations[t]
-            taps = len(e.tree.delays) // len(self.input_names)
+            tree, lag = self.discovered.equations[t].tree, self.discovered.equations[t].lag
+            taps = len(tree.delays) // len(self.input_names)
             inputs = with_taps(dataset, taps).arrays.inputs
-            feats = np.empty((9 + len(e.tree.delays), len(rows)))
-            feats[:9] = arrays.states[rows].T
-            for j, d in enumerate(e.tree.delays):
-                feats[9 + j] = inputs[rows - int(d), j]
-            pred = np.empty(len(rows))
-            eval_lanes(
-                e.tree.codes,
-                e.tree.values,
-                e.tree.size,
-                np.ascontiguousarray(feats),
-                np.empty((64, len(rows))),
-                pred,
-                len(rows),
+            pred = eval_on_samples(
+                tree.codes, tree.values, tree.size, tree.delays, arrays.states, inputs, rows
             )
-            alpha = lag_alpha(e.lag, self.dt)
+            alpha = lag_alpha(lag, self.dt)
             if alpha < 1.0:
                 before = arrays.acc[rows - 1, target_index(t)]
                 pred = before + alpha * (pred - before)
@@ -273,36 +245,21 @@ class Model:
             Rows ``model``, ``zero`` (and ``set-point``); columns u, v, w, p, q, r,
             ``diverged``, ``windows`` and ``horizon_s``.
         """
-        from gpquad.models.scoring import DIVERGENCE_FACTOR, SCORED_INDEX, diverged, rse
+        from gpquad.models.reference_models import reference_models
+        from gpquad.models.scoring import flown_score, windows_bound
 
         dataset = self._dataset(data)
         raw = self._dataset(data, trimmed=False)
         starts, steps = self._windows(dataset, horizon_s)
-        truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
-        bound = np.full(
-            len(SCORED_INDEX), DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max()
-        )
-        from gpquad.models.reference_models import is_rate_level, setpoint_model, zero_model
+        bound = windows_bound(dataset, starts, steps)
 
-        references = [
-            ("model", self.discovered, dataset),
-            ("zero", zero_model(self.input_names, self.dt), raw),
-        ]
-        setpoint = setpoint_model(self.input_names, self.dt)
-        if setpoint is not None and is_rate_level(raw.flight_info):
-            references.append(("set-point", setpoint, raw))
-        rows = {}
-        for name, model, flown in references:
-            with np.errstate(all="ignore"):
-                pred = model.simulate(flown, starts, steps)
-            bad = diverged(pred, bound)
-            values = rse(pred[~bad], truth[~bad]) if (~bad).any() else np.full(len(SCORED), np.nan)
-            rows[name] = {
-                **dict(zip(SCORED, map(float, values), strict=True)),
-                "diverged": int(bad.sum()),
-                "windows": int(len(starts)),
-                "horizon_s": float(steps * dataset.dt),
-            }
+        flown = {"model": flown_score(self.discovered, dataset, starts, steps, bound)}
+        for name, reference in reference_models(self.input_names, self.dt, raw.flight_info).items():
+            flown[name] = flown_score(reference, raw, starts, steps, bound)
+        rows = {
+            name: {**row, "windows": int(len(starts)), "horizon_s": float(steps * dataset.dt)}
+            for name, row in flown.items()
+        }
         return pd.DataFrame.from_dict(rows, orient="index")
 
     def fly(self, inputs: pd.DataFrame, x0=None) -> pd.DataFrame:

@@ -160,6 +160,9 @@ def test_config_checks_the_mirrored_inputs():
     assert ok.vehicle.mirror_inputs == FLIP
     with pytest.raises(GpquadError, match=r"vehicle.mirror_inputs\[1\]"):
         config_from_dict({"vehicle": {"mirror_inputs": ["u_R", "u_Q"]}})
+    # names none of the inputs (motor-level inputs): the mirror is off, not an error
+    motors = config_from_dict({"data": {"inputs": ["m0", "m1", "m2", "m3"]}})
+    assert motors.vehicle.flipped(("m0", "m1", "m2", "m3")) == ()
     # an old config's key moves to [vehicle] with a note
     notes = []
     old = config_from_dict({"evolution": {"mirror_inputs": list(FLIP)}}, notes=notes)

@@ -26,10 +26,23 @@ def _cmd_run(args) -> int:
         out=None,
     )
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
+    figures: list[Path] = []
+
+    def draw(model, dataset) -> None:
+        from gpquad.report.builder import make_run_report
+
+        figures.extend(make_run_report(run_dir, formats=("png",), dataset=dataset))
+
+    if args.jobs < 1:
+        raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
     try:
-        if args.jobs < 1:
-            raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
-        model = run_experiment(cfg, run_dir, progress=not args.quiet, jobs=args.jobs)
+        model = run_experiment(
+            cfg,
+            run_dir,
+            progress=not args.quiet,
+            jobs=args.jobs,
+            after=None if args.no_figures else draw,
+        )
     except KeyboardInterrupt:
         return 130
     print(
@@ -41,10 +54,7 @@ def _cmd_run(args) -> int:
     if any(model.trim.values()):
         print("\nThe same in the log's raw inputs:")
         print(model.text(raw=True))
-    if not args.no_figures:
-        from gpquad.report.builder import make_run_report
-
-        figures = make_run_report(run_dir, formats=("png",))
+    if figures:
         print(f"\nFigures: {', '.join(str(f) for f in figures)}")
     print(f"\nRun folder: {run_dir}")
     return 0

@@ -266,6 +266,29 @@ def flight_from_frame(
     )
 
 
+def flights_of(
+    items, input_names, frame: str = "NED/FRD", columns: dict | None = None, read=None
+) -> list[Flight]:
+    """Flights from a list of Flights, DataFrames of the generic columns (module notes) and,
+    with `read(path) -> list[Flight]`, log paths; anything else is one line naming it."""
+    flights: list[Flight] = []
+    for k, item in enumerate(items):
+        if isinstance(item, Flight):
+            flights.append(item)
+        elif isinstance(item, pd.DataFrame):
+            flights.append(
+                flight_from_frame(item, input_names, frame, columns, f"DataFrame {k}", f"flight{k}")
+            )
+        elif read is not None and isinstance(item, (str, Path)):
+            flights.extend(read(item))
+        else:
+            raise GpquadError(
+                f"data[{k}] is a {type(item).__name__}; give DataFrames, Flights or log paths",
+                field="data",
+            )
+    return flights
+
+
 def write_flight_file(flight: Flight, path) -> Path:
     """Write a flight in the generic format (by suffix: .csv or .parquet)."""
     path = Path(path)

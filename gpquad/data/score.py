@@ -66,8 +66,6 @@ def score_log(
     from gpquad.data.integration_check import screen_segments
     from gpquad.data.io import READERS, guess_format
     from gpquad.models.scoring import (
-        DIVERGENCE_FACTOR,
-        SCORED_INDEX,
         SCORED_STATES,
         check_same_rate,
         diverged,
@@ -75,6 +73,7 @@ def score_log(
         model_view,
         rse,
         validation_windows,
+        windows_bound,
     )
     from gpquad.study.config import load_folder_config
 
@@ -132,8 +131,7 @@ def score_log(
     view = model_view(dataset, run.trim)
     pred = run.model.simulate(view, starts, steps)
     truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
-    # one bound for every state: DIVERGENCE_FACTOR x the scored windows' largest |state|
-    bound = np.full(len(SCORED_INDEX), DIVERGENCE_FACTOR * np.abs(truth[:, :, SCORED_INDEX]).max())
+    bound = windows_bound(dataset, starts, steps)
     n_diverged = int(diverged(pred, bound).sum())
     values = rse(pred, truth)
     flipped = cfg.vehicle.flipped(dataset.input_names)
@@ -188,26 +186,13 @@ def score_log(
 
 
 def reference_scores(model, dataset, starts, steps: int, bound) -> dict:
-    """{name: {state: RSE or NaN (not measured), "diverged": n}} of the zero model and, on
-    rate set-point inputs, the set-point model, flown over the same windows."""
-    from gpquad.models.reference_models import is_rate_level, setpoint_model, zero_model
-    from gpquad.models.scoring import SCORED_STATES, diverged, rse
+    """{name: {state: RSE or NaN (not measured), "diverged": n}} of the reference models
+    (gpquad.models.reference_models) flown over the same windows of the raw data."""
+    from gpquad.models.reference_models import reference_models
+    from gpquad.models.scoring import flown_score
 
-    models = {"zero": zero_model(model.input_names, model.dt)}
-    if is_rate_level(dataset.flight_info):
-        models["set-point"] = setpoint_model(model.input_names, model.dt)
-    truth = dataset.arrays.states[starts[:, None] + np.arange(steps + 1)[None, :]]
-    out = {}
-    for name, reference in models.items():
-        with np.errstate(all="ignore"):
-            pred = reference.simulate(dataset, starts, steps)
-        values = rse(pred, truth)
-        out[name] = {
-            s: float("nan") if dataset.unmeasured(s) else float(v)
-            for s, v in zip(SCORED_STATES, values, strict=True)
-        }
-        out[name]["diverged"] = int(diverged(pred, bound).sum())
-    return out
+    models = reference_models(model.input_names, model.dt, dataset.flight_info)
+    return {name: flown_score(m, dataset, starts, steps, bound) for name, m in models.items()}
 
 
 def mirrored_diverged(model, dataset, starts, steps: int, bound, flipped) -> int:

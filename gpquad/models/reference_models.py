@@ -48,3 +48,13 @@ def setpoint_model(input_names, dt: float) -> DiscoveredModel | None:
 def is_rate_level(flight_info: list[dict]) -> bool:
     """Whether the data's inputs are rate set-points (the log pipeline's input level)."""
     return {info.get("input_level") for info in flight_info} == {"rates"}
+
+
+def reference_models(input_names, dt: float, flight_info: list[dict]) -> dict:
+    """{name: model} to score beside a discovered one: "zero", and "set-point" where the
+    inputs are rate set-points named for it."""
+    out = {"zero": zero_model(input_names, dt)}
+    setpoint = setpoint_model(input_names, dt)
+    if setpoint is not None and is_rate_level(flight_info):
+        out["set-point"] = setpoint
+    return out

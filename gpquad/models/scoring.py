@@ -83,6 +83,31 @@ def diverged(pred: np.ndarray, bound: np.ndarray) -> np.ndarray:
     return bad.any(axis=(1, 2))
 
 
+def windows_bound(dataset: Dataset, starts, steps: int) -> np.ndarray:
+    """One divergence bound for every scored state: DIVERGENCE_FACTOR x the largest |state|
+    the windows of `dataset` record."""
+    idx = np.asarray(starts)[:, None] + np.arange(steps + 1)[None, :]
+    largest = np.abs(dataset.arrays.states[idx][:, :, SCORED_INDEX]).max()
+    return np.full(len(SCORED_INDEX), DIVERGENCE_FACTOR * largest)
+
+
+def flown_score(model, dataset: Dataset, starts, steps: int, bound: np.ndarray) -> dict:
+    """{state: RSE, "diverged": n} of `model` flown over the windows of `dataset` (its own
+    input view): the RSE over the windows that do not diverge (NaN when all do), NaN for a
+    state the data does not measure."""
+    truth = dataset.arrays.states[np.asarray(starts)[:, None] + np.arange(steps + 1)[None, :]]
+    with np.errstate(all="ignore"):
+        pred = model.simulate(dataset, starts, steps)
+    bad = diverged(pred, bound)
+    values = rse(pred[~bad], truth[~bad]) if (~bad).any() else np.full(len(SCORED_STATES), np.nan)
+    out: dict = {
+        s: float("nan") if dataset.unmeasured(s) else float(v)
+        for s, v in zip(SCORED_STATES, values, strict=True)
+    }
+    out["diverged"] = int(bad.sum())
+    return out
+
+
 def model_view(dataset: Dataset, trim: dict[str, float]) -> Dataset:
     """The dataset with its (raw) inputs shifted by a model's trim: inputs - trim."""
     if not any(trim.values()):

@@ -300,8 +300,11 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
     return written
 
 
-def make_run_report(folder, formats=("png", "pdf"), window_s: float = 7.0) -> list[Path]:
-    """Figures of one `gpquad run` folder, written into FOLDER/report/.
+def make_run_report(
+    folder, formats=("png", "pdf"), window_s: float = 7.0, dataset=None
+) -> list[Path]:
+    """Figures of one `gpquad run` folder, written into FOLDER/report/; `dataset`: the run's
+    data when the caller has it loaded (else it is loaded from the folder's config).
 
     prediction: the run's equations flown over the first validation window of `window_s`
     (states without an equation use the data's accelerations); convergence: best suite
@@ -326,7 +329,7 @@ def make_run_report(folder, formats=("png", "pdf"), window_s: float = 7.0) -> li
         cfg.evolution.metric,
         formats,
     )
-    dataset = load_dataset(cfg)
+    dataset = load_dataset(cfg) if dataset is None else dataset
     steps_wanted = max(1, int(round(window_s / dataset.dt)))
     starts, steps = tile(dataset.validation, steps_wanted, cfg.evolution.max_delay)
     if len(starts):

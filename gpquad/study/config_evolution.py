@@ -169,12 +169,16 @@ def _validate_gp(cfg: Config, source: str) -> None:
 
 
 def _validate_vehicle(cfg: Config, source: str) -> None:
+    """mirror_inputs that name some of the inputs must name only inputs (a typo); ones that
+    name none of them leave the mirror off for these inputs (VehicleConfig.flipped), as the
+    default roll and yaw names do for motor-level inputs."""
     vehicle = cfg.vehicle
     inputs = _input_names(cfg)
     if isinstance(cfg.data.inputs, str):  # a level: names are known once the log is read
         return
+    named = [n in inputs for n in vehicle.mirror_inputs]
     for i, name in enumerate(vehicle.mirror_inputs):
-        if name not in inputs and vehicle.mirror_inputs != ("u_R", "u_Y"):
+        if any(named) and name not in inputs:
             raise GpquadError(
                 f"unknown input '{name}'; list the inputs that change sign in a "
                 f"left-right mirror (roll and yaw commands) among "

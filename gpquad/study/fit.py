@@ -37,15 +37,8 @@ FINISH_WORDS = {
 
 def warn_unmeasured(dataset: Dataset, targets) -> None:
     """One line per target whose integrated state the data does not measure."""
-    for target in targets:
-        missing = dataset.unmeasured(TARGET_STATE[target])
-        if missing:
-            print(
-                f"gpquad: warning: {target} integrates {TARGET_STATE[target]}, which "
-                f"{', '.join(missing)} does not measure; its equation fits the log's "
-                "placeholder values",
-                file=sys.stderr,
-            )
+    for target, note in (unmeasured_notes(dataset, targets) or {}).items():
+        print(f"gpquad: warning: {target}: {note}", file=sys.stderr)
 
 
 def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
@@ -93,11 +86,17 @@ class RowCollector:
         self.rows.clear()
 
 
-def _identify_with_rows(dataset: Dataset, target: str, cfg: Config):
+def _identify_in_worker(dataset: Dataset, target: str, cfg: Config, keep_rows: bool):
+    """(target, equation, history rows or [], seconds) of one search in a worker process."""
     t0 = time.perf_counter()
-    rows = RowCollector()
+    rows = RowCollector() if keep_rows else None
     equation, _ = identify(dataset, target, cfg, rows)
-    return target, equation, rows.rows, time.perf_counter() - t0
+    return target, equation, rows.rows if rows else [], time.perf_counter() - t0
+
+
+def _history_start(run_dir: Path) -> int:
+    """Where the history of the first target begins: after the header line."""
+    return len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
 
 
 def search_equations(
@@ -110,57 +109,54 @@ def search_equations(
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
-    KeyboardInterrupt the exception carries `partial` = the equations found so far.
+    KeyboardInterrupt the exception carries `equations` = the equations found so far.
 
-    With jobs > 1 the targets left to search run in worker processes; each finished target
-    is recorded (its history rows appended, in target order, and its record written) as soon
-    as every target before it is, so history.csv and model.json are the same bytes as with
-    jobs = 1. A target interrupted in a worker restarts on resume (no per-iteration
+    With jobs > 1 the targets left to search run in worker processes (the same equations
+    for any jobs: each search is seeded by its target and runs BLAS on one thread). In a
+    run folder each finished target is recorded (its history rows appended in target order,
+    its record written) once every target before it is, so history.csv is the same bytes as
+    with jobs = 1; a target interrupted in a worker restarts on resume (no per-iteration
     checkpoint there)."""
-    if run_dir is not None and jobs > 1:
-        return _search_folder_in_parallel(dataset, cfg, report, run_dir, resuming, jobs)
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
+    parallel = jobs > 1 and len(ev.targets) > 1
     try:
-        # Where the history of finished targets ends (the header, before any target).
-        history_end = (
-            len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
-            if run_dir is not None
-            else 0
-        )
+        history_end = _history_start(run_dir) if run_dir is not None else 0
+        pending: list[str] = []
         for target in ev.targets:
             done = run_dir / "checkpoints" / f"{target}.json" if run_dir is not None else None
+            # in parallel, only a prefix of finished targets is resumed (history in order)
             record = (
                 _finished_record(done, dataset)
-                if done is not None and resuming and done.exists()
+                if done is not None and resuming and done.exists() and not (parallel and pending)
                 else None
             )
             if record is not None:  # finished before the interruption
                 equations[target], history_end = record
                 report.done += ev.iterations
                 report.say(f"  {target}: finished earlier (resumed from {done})")
-                continue
-            t0 = time.perf_counter()
-            equations[target], _ = identify(
-                dataset,
-                target,
-                cfg,
-                history,
-                report,
-                checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
-                history_start=history_end,
-            )
-            timings[target] = time.perf_counter() - t0
-            if done is not None and history is not None:
-                history_end = history.size()
-                write_json(
-                    done, {"equation": equations[target].to_dict(), "history_bytes": history_end}
+            elif parallel:
+                pending.append(target)
+            else:
+                t0 = time.perf_counter()
+                equations[target], _ = identify(
+                    dataset,
+                    target,
+                    cfg,
+                    history,
+                    report,
+                    checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
+                    history_start=history_end,
                 )
-            report.say(
-                f"  -> {equations[target].text()}  (validation error "
-                f"{equations[target].validation_error:.4g})"
+                timings[target] = time.perf_counter() - t0
+                history_end = _record(equations[target], done, history, [], report)
+        if pending:
+            if history is not None:
+                history.truncate(history_end)
+            _search_in_workers(
+                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
             )
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
@@ -171,62 +167,51 @@ def search_equations(
     finally:
         if history is not None:
             history.close()
-    return equations, timings
+    return {t: equations[t] for t in ev.targets if t in equations}, timings
 
 
-def _search_folder_in_parallel(dataset, cfg, report, run_dir: Path, resuming: bool, jobs: int):
-    """search_equations' parallel path (its notes)."""
+def _record(
+    equation: Equation,
+    done: Path | None,
+    history,
+    rows: list,
+    report: Progress,
+    seconds: float | None = None,
+) -> int:
+    """A finished target: its rows appended to the history, its record written (in a run
+    folder) and its line reported; returns where the history now ends."""
+    end = 0
+    if done is not None and history is not None:
+        history.write(rows)
+        end = history.size()
+        write_json(done, {"equation": equation.to_dict(), "history_bytes": end})
+    took = "" if seconds is None else f"; {seconds:.1f} s"
+    report.say(f"  -> {equation.text()}  (validation error {equation.validation_error:.4g}{took})")
+    return end
+
+
+def _search_in_workers(
+    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
+) -> None:
+    """The `pending` targets searched in `jobs` worker processes, each recorded in target
+    order as soon as every target before it is (search_equations' notes)."""
     from joblib import Parallel, delayed
 
-    ev = cfg.evolution
-    equations: dict[str, Equation] = {}
-    timings: dict[str, float] = {}
-    records = {t: run_dir / "checkpoints" / f"{t}.json" for t in ev.targets}
-    history = HistoryWriter(run_dir / "history.csv")
-    try:
-        history_end = len((run_dir / "history.csv").read_bytes().split(b"\n", 1)[0]) + 1
-        pending: list[str] = []
-        for target in ev.targets:
-            record = (
-                _finished_record(records[target], dataset)
-                if resuming and records[target].exists() and not pending
-                else None
-            )
-            if record is not None:  # finished before the interruption, all before it too
-                equations[target], history_end = record
-                report.done += ev.iterations
-                report.say(f"  {target}: finished earlier (resumed from {records[target]})")
-            else:
-                pending.append(target)
-        history.truncate(history_end)
-        report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
-        ready: dict[str, tuple] = {}
-        order = list(pending)
-        with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as run:
-            for target, equation, rows, seconds in run(
-                delayed(_identify_with_rows)(dataset, t, cfg) for t in pending
-            ):
-                ready[target] = (equation, rows, seconds)
-                while order and order[0] in ready:
-                    name = order.pop(0)
-                    equation, rows, seconds = ready.pop(name)
-                    history.write(rows)
-                    write_json(
-                        records[name],
-                        {"equation": equation.to_dict(), "history_bytes": history.size()},
-                    )
-                    equations[name], timings[name] = equation, seconds
-                    report.done += ev.iterations
-                    report.say(
-                        f"  -> {equation.text()}  (validation error "
-                        f"{equation.validation_error:.4g}; {seconds:.1f} s)"
-                    )
-    except KeyboardInterrupt as exc:
-        exc.equations = equations  # type: ignore[attr-defined]
-        raise
-    finally:
-        history.close()
-    return {t: equations[t] for t in ev.targets}, timings
+    report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
+    ready: dict[str, tuple] = {}
+    order = list(pending)
+    with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as run:
+        for target, equation, rows, seconds in run(
+            delayed(_identify_in_worker)(dataset, t, cfg, run_dir is not None) for t in pending
+        ):
+            ready[target] = (equation, rows, seconds)
+            while order and order[0] in ready:
+                name = order.pop(0)
+                equation, rows, seconds = ready.pop(name)
+                done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
+                _record(equation, done, history, rows, report, seconds)
+                equations[name], timings[name] = equation, seconds
+                report.done += cfg.evolution.iterations
 
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
@@ -237,37 +222,6 @@ def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
         if dataset.unmeasured(TARGET_STATE[t])
     }
     return notes or None
-
-
-def _identify_one(dataset: Dataset, target: str, cfg: Config) -> tuple[str, Equation, float]:
-    t0 = time.perf_counter()
-    equation, _ = identify(dataset, target, cfg)
-    return target, equation, time.perf_counter() - t0
-
-
-def search_in_parallel(
-    dataset: Dataset, cfg: Config, report: Progress, jobs: int
-) -> tuple[dict[str, Equation], dict[str, float]]:
-    """Every target's equation, the targets searched in `jobs` worker processes: each search
-    is seeded by its target alone and runs BLAS on one thread, so the equations are the
-    same bits for any `jobs` (no history or checkpoint is written)."""
-    from joblib import Parallel, delayed
-
-    ev = cfg.evolution
-    found: dict[str, Equation] = {}
-    timings: dict[str, float] = {}
-    report.say(f"gpquad: searching {len(ev.targets)} equations in {jobs} processes ...")
-    with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as parallel:
-        for target, equation, seconds in parallel(
-            delayed(_identify_one)(dataset, t, cfg) for t in ev.targets
-        ):
-            found[target], timings[target] = equation, seconds
-            report.done += ev.iterations
-            report.say(
-                f"  -> {equation.text()}  (validation error "
-                f"{equation.validation_error:.4g}; {seconds:.1f} s)"
-            )
-    return {t: found[t] for t in ev.targets}, timings
 
 
 def default_jobs(n_targets: int) -> int:
@@ -352,8 +306,5 @@ def fit_dataset(
     """Search every configured target and finish the model (module notes). Without a run
     folder the searches may run in `jobs` processes (the same equations for any value)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
-    if run_dir is None and jobs > 1 and len(cfg.evolution.targets) > 1:
-        equations, _ = search_in_parallel(dataset, cfg, report, jobs)
-    else:
-        equations, _ = search_equations(dataset, cfg, report, run_dir, resuming)
+    equations, _ = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
     return finish(new_model(equations, dataset, cfg), dataset, cfg, report)

@@ -143,13 +143,19 @@ def write_model(run_dir: Path, model: DiscoveredModel) -> None:
 
 
 def run_experiment(
-    cfg: Config, run_dir=None, progress: bool | None = None, dataset=None, jobs: int = 1
+    cfg: Config,
+    run_dir=None,
+    progress: bool | None = None,
+    dataset=None,
+    jobs: int = 1,
+    after=None,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
     Bad data or config fails here, before any long work. Ctrl-C writes the equations
     found so far (model.json has "interrupted": true) and re-raises. `dataset`: the data
-    already loaded (gpquad.fit), else the config's.
+    already loaded (gpquad.fit), else the config's. `after(model, dataset)` runs once the
+    model is written (the command line draws its figures there, on the loaded data).
     """
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg)
     show = cfg.output.progress if progress is None else progress
@@ -202,6 +208,8 @@ def run_experiment(
     )
     write_json(run_dir / "run.json", info)
     report.say(time_profile(wall, load_seconds, timings, finish_seconds))
+    if after is not None:
+        after(model, dataset)
     return model
 
 

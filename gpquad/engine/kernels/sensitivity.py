@@ -56,9 +56,12 @@ from gpquad.engine.kernels.step import (
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS
-from gpquad.engine.kernels.tree_tangent import eval_with_tangent
+from gpquad.engine.kernels.tree_tangent import (
+    constant_slots,
+    eval_with_tangent,
+    residual_rows,
+)
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import CONST
 
 __all__ = [
     "DIVERGED_RESIDUAL",
@@ -67,12 +70,6 @@ __all__ = [
     "residual_rows",
     "window_residuals",
 ]
-
-
-@njit
-def residual_rows(target, att_weight):
-    """Residual rows per window step: 2 with an angle row (see the module notes), else 1."""
-    return 2 if target >= 3 and att_weight > 0.0 else 1
 
 
 @njit
@@ -127,12 +124,7 @@ def window_residuals(
     n_rows = residual_rows(target, att_weight)
     # the angles' sensitivities are followed only where something reads them
     track_angles = (not linear) and (angle_tangents or n_rows == 2)
-    slot_of = np.full(size, -1, dtype=np.int64)
-    j = 0
-    for i in range(size):
-        if codes[i] == CONST:
-            slot_of[i] = j
-            j += 1
+    slot_of = constant_slots(codes, size)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
     stack = np.empty(STACK_ROWS)

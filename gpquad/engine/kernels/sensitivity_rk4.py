@@ -42,9 +42,12 @@ from gpquad.engine.kernels.step import (
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS
-from gpquad.engine.kernels.tree_tangent import eval_with_tangent
+from gpquad.engine.kernels.tree_tangent import (
+    constant_slots,
+    eval_with_tangent,
+    residual_rows,
+)
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import CONST
 
 #: Tangent rows: body velocity (linear targets), the target rate, the Euler angles, the lag.
 TV, TR, TA, TL = 0, 3, 4, 7
@@ -74,17 +77,12 @@ def rk4_window_residuals(
     n_c = jac.shape[1]
     linear = target < 3
     axis = target - 3
-    n_rows = 2 if (not linear) and att_weight > 0.0 else 1
+    n_rows = residual_rows(target, att_weight)
     track_angles = (not linear) and (angle_tangents or n_rows == 2)
     lagged = alpha < 1.0
     rate = lag_rate_kernel(alpha, dt)
     h = dt / substeps
-    slot_of = np.full(size, -1, dtype=np.int64)
-    j = 0
-    for i in range(size):
-        if codes[i] == CONST:
-            slot_of[i] = j
-            j += 1
+    slot_of = constant_slots(codes, size)
     n_y = BODY_ROWS + 1
     features = np.zeros((9 + n_in, 1))
     leaf = np.zeros(9 + n_in)

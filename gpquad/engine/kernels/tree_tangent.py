@@ -1,7 +1,29 @@
 """A prefix tree's value and its gradient with respect to its constants (forward mode)."""
 
+import numpy as np
+
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
+
+
+@njit
+def residual_rows(target, att_weight):
+    """Residual rows per window step: 2 with an angle row (an angular target whose angle is
+    weighted), else 1."""
+    return 2 if target >= 3 and att_weight > 0.0 else 1
+
+
+@njit
+def constant_slots(codes, size):
+    """(size,) column of each CONST node of a prefix tree in the constants' order, -1 for
+    the other nodes."""
+    slot_of = np.full(size, -1, dtype=np.int64)
+    j = 0
+    for i in range(size):
+        if codes[i] == CONST:
+            slot_of[i] = j
+            j += 1
+    return slot_of
 
 
 @njit
