@@ -45,3 +45,67 @@ def test_bad_simulator_settings_are_named():
         simulate(
             dataclasses.replace(SHORT, equations={"p_dot": "5*p + u_R"}, pilot_gains={}), INPUTS
         )
+
+
+def _roll_recurrence(flight, a: float, b: float, dt: float) -> np.ndarray:
+    """p at each sample of p_dot = -a p + b u_R(t-1) with u_R held over each sample:
+    the exact solution p' = e^(-a dt) p + b (1 - e^(-a dt)) / a u."""
+    u = flight.inputs[:, 1]
+    p = np.empty(len(u))
+    p[0] = flight.rates[0, 0]
+    decay = np.exp(-a * dt)
+    for k in range(len(u) - 1):
+        p[k + 1] = decay * p[k] + b * (1.0 - decay) / a * u[max(k - 1, 0)]
+    return p
+
+
+def test_truth_is_flown_as_the_ode_it_is_printed_as():
+    """The default simulator flies p_dot = 10.3 u_R(t-1) - 4.15 p by RK4: its roll rate is the
+    ODE's exact solution with the inputs held; eq. 2 (the paper's discrete truth) is not."""
+    dt = 1.0 / SHORT.rate_hz
+    flight = simulate(SHORT, INPUTS)
+    assert (SHORT.integrator, SHORT.substeps) == ("rk4", 8)
+    exact = _roll_recurrence(flight, 4.15, 10.3, dt)
+    scale = np.abs(exact).max()
+    assert np.abs(flight.rates[:, 0] - exact).max() < 1e-8 * scale
+    discrete = simulate(dataclasses.replace(SHORT, integrator="euler"), INPUTS)
+    exact = _roll_recurrence(discrete, 4.15, 10.3, dt)
+    assert np.abs(discrete.rates[:, 0] - exact).max() > 1e-3 * scale
+
+
+def test_euler_truth_is_eq2_step_by_step():
+    """integrator = "euler" flies the truth one eq. 2 step per sample, as the paper's model
+    is defined: the same flight as a plain loop over TruthModel and integrate_step."""
+    from gpquad.data.simulator import TruthModel, completed, pilot_sticks
+    from gpquad.engine.kernels.integrator import integrate_step
+    from gpquad.engine.kernels.quaternion import euler_from_quat
+
+    cfg = completed(dataclasses.replace(SHORT, duration_s=8.0, integrator="euler"))
+    flight = simulate(cfg, INPUTS)
+    dt, n = 1.0 / cfg.rate_hz, len(flight)
+    sticks = pilot_sticks(cfg, INPUTS, n, dt, np.random.default_rng(cfg.seed))
+    truth = TruthModel(cfg.equations, INPUTS)
+    gains = {("u_R", 0): -0.6, ("u_R", 4): 0.05, ("u_P", 1): 0.6, ("u_P", 3): 0.05}
+    gains[("u_Y", 2)] = 0.15
+    gain = np.zeros((4, 9))
+    for (name, k), g in gains.items():
+        gain[INPUTS.index(name), k] = g
+    trim = np.array([cfg.trim.get(n, 0.0) for n in INPUTS])
+    quat, vel, rates, pos = np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3), np.zeros(3)
+    inputs = np.zeros((n, 4))
+    for t in range(n):
+        np.testing.assert_allclose(flight.quat[t], quat, atol=1e-12)
+        np.testing.assert_allclose(flight.rates[t], rates, atol=1e-12)
+        state = np.concatenate([euler_from_quat(*quat), vel, rates])
+        inputs[t] = np.clip(trim + sticks[t] + gain @ state, -1.0, 1.0)
+        integrate_step(quat, vel, rates, pos, truth.accelerations(state, inputs, t), dt, np.eye(3))
+    np.testing.assert_allclose(flight.inputs, inputs, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "change, field",
+    [({"integrator": "rk5"}, "simulator.integrator"), ({"substeps": 0}, "simulator.substeps")],
+)
+def test_bad_truth_scheme_is_named(change, field):
+    with pytest.raises(GpquadError, match=field.replace(".", r"\.")):
+        simulate(dataclasses.replace(SHORT, **change), INPUTS)

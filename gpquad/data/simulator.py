@@ -1,4 +1,4 @@
-"""Reference simulator: fly a model with known equations through the engine's integrator.
+"""Reference simulator: fly a model with known equations, by RK4 in continuous time.
 
 The pilot is a smooth random stick signal (an Ornstein-Uhlenbeck process per
 input) around trim, plus a weak proportional feedback that keeps attitude and
@@ -12,11 +12,13 @@ import numpy as np
 import sympy as sp
 
 from gpquad.data.flight import Flight
-from gpquad.engine.kernels.integrator import integrate_step
-from gpquad.engine.kernels.quaternion import euler_from_quat, quat_mul
+from gpquad.engine.kernels.quaternion import quat_mul
+from gpquad.engine.kernels.step import SCHEMES
+from gpquad.engine.kernels.truth_flight import fly_truth
 from gpquad.engine.taps import tap_index, tap_names
-from gpquad.engine.tree.export import parse_equation, symbols_for
-from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, terminal_names
+from gpquad.engine.tree.encoding import stack_rows
+from gpquad.engine.tree.export import from_sympy, parse_equation, symbols_for
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index, terminal_names
 from gpquad.errors import GpquadError
 from gpquad.study.config import SimulatorConfig
 
@@ -87,6 +89,9 @@ def pilot_sticks(
 MAX_SAMPLES = 2_000_000
 #: Largest measurement noise SD per signal (rad, m/s, rad/s): above it the "measurement"
 #: is not of the flight.
+#: Most RK4 steps per sample the simulator takes.
+MAX_SUBSTEPS = 64
+
 MAX_NOISE = {"attitude": 0.5, "velocity": 10.0, "rates": 10.0}
 
 
@@ -134,6 +139,16 @@ def completed(cfg: SimulatorConfig) -> SimulatorConfig:
             f"{cfg.duration_s * cfg.rate_hz:.3g} samples, more than the "
             f"{MAX_SAMPLES:,} the simulator flies; shorten duration_s",
             field="simulator.duration_s",
+        )
+    if cfg.integrator not in SCHEMES:
+        raise GpquadError(
+            f"{cfg.integrator!r} is not a scheme; use one of {sorted(SCHEMES)}",
+            field="simulator.integrator",
+        )
+    if not isinstance(cfg.substeps, int) or not 1 <= cfg.substeps <= MAX_SUBSTEPS:
+        raise GpquadError(
+            f"{cfg.substeps!r} substeps: use a whole number from 1 to {MAX_SUBSTEPS}",
+            field="simulator.substeps",
         )
     finite(cfg.stick_time_constant_s, "stick_time_constant_s", 0.0, low_open=True)
     finite(cfg.input_limit, "input_limit", 0.0, low_open=True)
@@ -198,31 +213,35 @@ def simulate(cfg: SimulatorConfig, input_names) -> Flight:
             gain[j, names.index(state)] = g
     trim = np.array([cfg.trim.get(name, 0.0) for name in input_names])
 
-    quat = np.array([1.0, 0.0, 0.0, 0.0])
-    vel = np.zeros(3)
-    rates = np.zeros(3)
-    pos = np.zeros(3)
-    mat = np.empty((3, 3))
-    out_q = np.empty((n, 4))
-    out_v = np.empty((n, 3))
-    out_w = np.empty((n, 3))
-    out_x = np.empty((n, 3))
-    inputs = np.zeros((n, len(input_names)))
-    true_acc = np.zeros((n, 6))
-    for t in range(n):
-        out_q[t], out_v[t], out_w[t], out_x[t] = quat, vel, rates, pos
-        state = np.concatenate([euler_from_quat(*quat), vel, rates])
-        inputs[t] = np.clip(trim + sticks[t] + gain @ state, -cfg.input_limit, cfg.input_limit)
-        acc = model.accelerations(state, inputs, t)
-        if not np.all(np.isfinite(acc)) or np.abs(state).max() > 1e4:
-            raise GpquadError(
-                f"the truth model diverged at t = {t * dt:.2f} s; lower the stick "
-                "SD or change the pilot gains",
-                field="simulator.equations",
-            )
-        true_acc[t] = acc
-        if t < n - 1:
-            integrate_step(quat, vel, rates, pos, acc, dt, mat)
+    codes, values, sizes, delays = stack_rows(
+        {
+            target_index(t): from_sympy(e, model.delays[t], model.input_names)
+            for t, e in model.exprs.items()
+        },
+        6,
+    )
+    modelled = np.zeros(6, dtype=np.bool_)
+    modelled[[target_index(t) for t in model.exprs]] = True
+    out_q, out_v, out_w, out_x, inputs, true_acc, diverged = fly_truth(
+        codes,
+        values,
+        sizes,
+        delays,
+        modelled,
+        np.ascontiguousarray(sticks, dtype=float),
+        gain,
+        trim,
+        float(cfg.input_limit),
+        dt,
+        SCHEMES[cfg.integrator],
+        int(cfg.substeps),
+    )
+    if diverged >= 0:
+        raise GpquadError(
+            f"the truth model diverged at t = {diverged * dt:.2f} s; lower the stick "
+            "SD or change the pilot gains",
+            field="simulator.equations",
+        )
     check_motion(inputs, out_w, out_v, input_names)
     if any(cfg.measurement_noise.values()):
         out_q, out_v, out_w = add_measurement_noise(
