@@ -505,3 +505,50 @@ def test_run_fitted_by_rk4_scores_with_its_own_scheme_and_by_rk4(tmp_path, capsy
 
     with pytest.raises(GpquadError, match="--integrator"):
         score_log(tmp_path / "run", log, 2.0, integrator="euler")
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31), st.sampled_from([1, 2, 4]), st.sampled_from([0.01, 0.04]))
+def test_rk4_data_accelerations_carry_the_data_sample_to_sample(seed, substeps, dt):
+    """Held over a sample, rk4_body_accelerations take the data's velocity from each sample
+    to the next under RK4 with omega linear over the sample (plain-numpy RK4); eq. 2's
+    inverse does not (the bad case), and the angular ones are eq. 2's."""
+    from gpquad.engine.kernels.integrator import body_accelerations, rk4_body_accelerations
+
+    rng = np.random.default_rng(seed)
+    n = 6
+    vel = rng.normal(0.0, 3.0, (n, 3))
+    rates = rng.normal(0.0, 2.0, (n, 3))
+    got = rk4_body_accelerations(vel, rates, dt, substeps)
+    eq2 = body_accelerations(vel, rates, dt)
+    np.testing.assert_array_equal(got[:, 3:], eq2[:, 3:])
+    h = dt / substeps
+
+    def fly(v, a, k):
+        alpha = (rates[k + 1] - rates[k]) / dt
+
+        def slope(tau, v):
+            return a - np.cross(rates[k] + tau * alpha, v)
+
+        for m in range(substeps):
+            tau = m * h
+            k1 = slope(tau, v)
+            k2 = slope(tau + h / 2, v + h / 2 * k1)
+            k3 = slope(tau + h / 2, v + h / 2 * k2)
+            k4 = slope(tau + h, v + h * k3)
+            v = v + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return v
+
+    for k in range(n - 1):
+        np.testing.assert_allclose(fly(vel[k], got[k, :3], k), vel[k + 1], atol=1e-11)
+    misses = [np.abs(fly(vel[k], eq2[k, :3], k) - vel[k + 1]).max() for k in range(n - 1)]
+    assert max(misses) > 1e-9
+
+
+def test_rk4_evaluator_flies_the_rk4_data_accelerations(short_dataset):
+    """The RK4 evaluator reads the accelerations made for its substeps (the targets a tree
+    does not model follow the data), the eq. 2 one the dataset's own."""
+    ev = Evaluator(short_dataset, "a_x", 50, integrator="rk4", substeps=2)
+    assert ev.arrays is short_dataset.scheme_arrays("rk4", 2)
+    assert not np.array_equal(ev.arrays.acc[:, :3], short_dataset.arrays.acc[:, :3])
+    assert Evaluator(short_dataset, "a_x", 50).arrays is short_dataset.arrays

@@ -14,7 +14,7 @@ import numpy as np
 
 from gpquad.data.flight import Flight
 from gpquad.engine.kernels.flight_arrays import FlightArrays
-from gpquad.engine.kernels.integrator import body_accelerations
+from gpquad.engine.kernels.integrator import body_accelerations, rk4_body_accelerations
 from gpquad.engine.kernels.quaternion import body_rotations, euler_array
 from gpquad.errors import GpquadError
 
@@ -37,6 +37,8 @@ class Dataset:
     flight_info: list[dict] = field(default_factory=list)
     #: The integration check's table when one was run before identification.
     integration_check: dict | None = None
+    #: FlightArrays per RK4 substep count (scheme_arrays), made once.
+    _rk4_arrays: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def dt(self) -> float:
@@ -57,6 +59,27 @@ class Dataset:
             "flight_info": self.flight_info,
             "integration_check": self.integration_check,
         }
+
+    def scheme_arrays(self, integrator: str, substeps: int = 1) -> FlightArrays:
+        """The arrays a kernel flies by `integrator`: for "rk4" the accelerations are those
+        that carry the data from sample to sample under RK4 with `substeps` steps
+        (gpquad.engine.kernels.integrator.rk4_body_accelerations), so that the targets a
+        tree does not model follow the data as exactly as under eq. 2."""
+        if integrator == "euler":
+            return self.arrays
+        substeps = int(substeps)
+        if substeps not in self._rk4_arrays:
+            acc = np.zeros_like(self.arrays.acc)
+            for a, b in self.segments:
+                if b - a > 1:
+                    acc[a : b - 1] = rk4_body_accelerations(
+                        self.arrays.states[a:b, 3:6],
+                        self.arrays.states[a:b, 6:9],
+                        self.dt,
+                        substeps,
+                    )
+            self._rk4_arrays[substeps] = self.arrays._replace(acc=acc)
+        return self._rk4_arrays[substeps]
 
     def unmeasured(self, state: str) -> list[str]:
         """Flights whose log does not measure `state` (phi, theta, psi, u, v, w, p, q, r)."""

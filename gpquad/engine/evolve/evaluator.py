@@ -58,7 +58,7 @@ class Evaluator:
         integrator: str = "euler",
         substeps: int = 1,
     ):
-        self.arrays = dataset.arrays
+        self.arrays = dataset.scheme_arrays(integrator, substeps)
         self.integrator = integrator
         self.scheme = scheme_code(integrator)
         self.substeps = int(substeps)

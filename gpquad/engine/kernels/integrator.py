@@ -21,7 +21,7 @@ from gpquad.engine.kernels.quaternion import (
     rate_increment,
     rotation_matrix,
 )
-from gpquad.engine.kernels.step import euler_position_step, euler_step
+from gpquad.engine.kernels.step import N_STAGES, NODES, WEIGHTS, euler_position_step, euler_step
 from gpquad.engine.numba_config import njit
 
 
@@ -100,6 +100,67 @@ def body_accelerations(vel, rates, dt):
             )
             acc[t, i] = (rotated - vel[t, i]) / dt
             acc[t, 3 + i] = (rates[t + 1, i] - rates[t, i]) / dt
+    return acc
+
+
+@njit(cache=True)
+def rk4_body_accelerations(vel, rates, dt, substeps):
+    """The accelerations (N-1, 6) that, held over each sample, carry the data from sample t
+    to t+1 under RK4 with `substeps` steps (gpquad.engine.kernels.step), as eq. 2's
+    `body_accelerations` do under eq. 2.
+
+    alpha_t = (omega_{t+1} - omega_t) / dt (RK4 integrates a held angular acceleration
+    exactly). V_dot = a - omega(t) x V with omega linear over the sample is linear in V and a,
+    so RK4 maps V_{t+1} = Phi V_t + Gamma a; a_t = Gamma^-1 (V_{t+1} - Phi V_t), with Phi and
+    Gamma from the same RK4 stages on the 3 x 6 matrix [Phi | Gamma].
+    """
+    n = vel.shape[0]
+    acc = np.empty((n - 1, 6))
+    h = dt / substeps
+    y = np.empty((3, 6))
+    ys = np.empty((3, 6))
+    k = np.zeros((3, 6))
+    total = np.empty((3, 6))
+    for t in range(n - 1):
+        alpha = np.empty(3)
+        for i in range(3):
+            alpha[i] = (rates[t + 1, i] - rates[t, i]) / dt
+            acc[t, 3 + i] = alpha[i]
+        y[:, :] = 0.0
+        for i in range(3):
+            y[i, i] = 1.0
+        for m in range(substeps):
+            for stage in range(N_STAGES):
+                tau = (m + NODES[stage]) * h
+                p = rates[t, 0] + tau * alpha[0]
+                q = rates[t, 1] + tau * alpha[1]
+                r = rates[t, 2] + tau * alpha[2]
+                for j in range(6):
+                    for i in range(3):
+                        ys[i, j] = y[i, j] + NODES[stage] * h * k[i, j] if stage else y[i, j]
+                for j in range(6):  # d/dt = -omega x Y + [0 | I]
+                    k[0, j] = -(q * ys[2, j] - r * ys[1, j])
+                    k[1, j] = -(r * ys[0, j] - p * ys[2, j])
+                    k[2, j] = -(p * ys[1, j] - q * ys[0, j])
+                for i in range(3):
+                    k[i, 3 + i] += 1.0
+                for j in range(6):
+                    for i in range(3):
+                        if stage == 0:
+                            total[i, j] = WEIGHTS[stage] * k[i, j]
+                        else:
+                            total[i, j] += WEIGHTS[stage] * k[i, j]
+            for j in range(6):
+                for i in range(3):
+                    y[i, j] += h * total[i, j]
+        rhs = np.empty(3)
+        for i in range(3):
+            rhs[i] = vel[t + 1, i] - (
+                y[i, 0] * vel[t, 0] + y[i, 1] * vel[t, 1] + y[i, 2] * vel[t, 2]
+            )
+        a = np.linalg.solve(np.ascontiguousarray(y[:, 3:]), rhs)
+        for i in range(3):
+            acc[t, i] = a[i]
     return acc
 
 
