@@ -51,6 +51,24 @@ def test_fit_recovers_the_truth_and_describes_itself(model, flight):
     assert "u_R(t-1)" in forms.text and r"\dot" in forms.latex
 
 
+def test_printed_equation_is_the_ode_the_vehicle_flies(model, flight):
+    """The reference flight flies p_dot = -4.15 p + 10.3 u_R(t-1) as an ODE (RK4): the default
+    fit prints those coefficients, though its generations fly eq. 2; a fit by eq. 2 alone (the
+    paper's scheme) prints eq. 2's discrete equivalent, (exp(-4.15 dt) - 1) / dt = -3.82."""
+    import sympy as sp
+
+    p = sp.Symbol("p", real=True)
+    rhs = sp.expand(model.equations["p_dot"].sympy.rhs)
+    assert model.discovered.integrator == "rk4"
+    assert float(rhs.coeff(p)) == pytest.approx(-4.15, rel=1e-3)
+    euler = gpquad.fit(flight, seed=1, **{**FAST, "targets": ["p_dot"]}, integrator="euler")
+    assert euler.discovered.integrator == "euler"
+    discrete = (np.exp(-4.15 * 0.04) - 1.0) / 0.04
+    assert float(sp.expand(euler.equations["p_dot"].sympy.rhs).coeff(p)) == pytest.approx(
+        discrete, rel=2e-3
+    )
+
+
 def test_fit_is_the_run_path_bit_for_bit(flight, tmp_path, model):
     """gpquad.fit and `gpquad run` share one fit path: the same config and data give the
     same model.json bytes, and fit(run_dir=) writes the folder `gpquad run` writes."""

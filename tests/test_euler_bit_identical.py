@@ -10,13 +10,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+from eq2_flight import eq2_flight
 
 from gpquad.benchmark.rollout import fly as peer_fly
 from gpquad.control.config import PidConfig
 from gpquad.control.pid import fly, make_controller
 from gpquad.control.plant import design_point, truth_plant
 from gpquad.data.dataset import build_dataset
-from gpquad.data.simulator import simulate
 from gpquad.engine.kernels.fitness import tree_window_errors
 from gpquad.engine.kernels.integrator import integrate
 from gpquad.engine.kernels.rollout import rollout
@@ -33,12 +33,12 @@ RECORDED = Path(__file__).parent / "fixtures" / "euler_outputs.json"
 def euler_outputs() -> dict[str, np.ndarray]:
     """The recorded cases, in the order (and with the draws) they were recorded."""
     cfg = dataclasses.replace(
-        SimulatorConfig(),
+        SimulatorConfig(integrator="euler"),
         duration_s=40.0,
         seed=7,
         stick_sd={"u_P": 0.2, "u_R": 0.2, "u_Y": 0.2, "u_T": 0.05},
     )
-    arrays = build_dataset([simulate(cfg, INPUTS)], validation_fraction=0.2, trim="mean").arrays
+    arrays = build_dataset([eq2_flight(cfg, INPUTS)], validation_fraction=0.2, trim="mean").arrays
     rng = np.random.default_rng(11)
     params = VariationParams(n_variables=13, n_inputs=4, max_depth=4)
     starts = np.array([10, 250, 500, 700], dtype=np.int64)

@@ -394,7 +394,11 @@ def test_lag_rate_inverts_the_lag_factor():
     [
         ({"evolution": {"integrator": "rk5"}}, "evolution.integrator", "choose one of"),
         ({"evolution": {"integrator": "rk4", "substeps": 0}}, "evolution.substeps", "1 to 64"),
-        ({"evolution": {"substeps": 2}}, "evolution.substeps", "must be 1 for euler"),
+        (
+            {"evolution": {"integrator": "euler", "substeps": 2}},
+            "evolution.substeps",
+            "must be 1 for euler",
+        ),
     ],
 )
 def test_bad_scheme_is_one_line_naming_the_field(table, field, message):

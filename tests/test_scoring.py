@@ -66,7 +66,8 @@ def test_gp_run_with_true_equations_scores_zero(gp_run):
     dataset = run_dataset(gp_run)
     assert dataset.trim == {n: 0.0 for n in INPUTS}
     score = score_model(info.model, dataset, 50, info.trim, info.max_delay)
-    assert score.n_windows == 4 and max(score.rse.values()) < 1e-12
+    # the model flies RK4 x1 (the default), the simulator's truth RK4 x8
+    assert score.n_windows == 4 and max(score.rse.values()) < 1e-9
     # without the trim shift the model is wrong: the scorer must apply it
     wrong = score_model(info.model, dataset, 50, {}, info.max_delay)
     assert wrong.rse["w"] > 1e-3

@@ -75,31 +75,15 @@ def test_truth_is_flown_as_the_ode_it_is_printed_as():
 
 def test_euler_truth_is_eq2_step_by_step():
     """integrator = "euler" flies the truth one eq. 2 step per sample, as the paper's model
-    is defined: the same flight as a plain loop over TruthModel and integrate_step."""
-    from gpquad.data.simulator import TruthModel, completed, pilot_sticks
-    from gpquad.engine.kernels.integrator import integrate_step
-    from gpquad.engine.kernels.quaternion import euler_from_quat
+    is defined: the flight of the plain loop over TruthModel and integrate_step."""
+    from eq2_flight import eq2_flight
 
-    cfg = completed(dataclasses.replace(SHORT, duration_s=8.0, integrator="euler"))
-    flight = simulate(cfg, INPUTS)
-    dt, n = 1.0 / cfg.rate_hz, len(flight)
-    sticks = pilot_sticks(cfg, INPUTS, n, dt, np.random.default_rng(cfg.seed))
-    truth = TruthModel(cfg.equations, INPUTS)
-    gains = {("u_R", 0): -0.6, ("u_R", 4): 0.05, ("u_P", 1): 0.6, ("u_P", 3): 0.05}
-    gains[("u_Y", 2)] = 0.15
-    gain = np.zeros((4, 9))
-    for (name, k), g in gains.items():
-        gain[INPUTS.index(name), k] = g
-    trim = np.array([cfg.trim.get(n, 0.0) for n in INPUTS])
-    quat, vel, rates, pos = np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3), np.zeros(3)
-    inputs = np.zeros((n, 4))
-    for t in range(n):
-        np.testing.assert_allclose(flight.quat[t], quat, atol=1e-12)
-        np.testing.assert_allclose(flight.rates[t], rates, atol=1e-12)
-        state = np.concatenate([euler_from_quat(*quat), vel, rates])
-        inputs[t] = np.clip(trim + sticks[t] + gain @ state, -1.0, 1.0)
-        integrate_step(quat, vel, rates, pos, truth.accelerations(state, inputs, t), dt, np.eye(3))
-    np.testing.assert_allclose(flight.inputs, inputs, atol=1e-12)
+    cfg = dataclasses.replace(SHORT, duration_s=20.0, integrator="euler")
+    flight, ref = simulate(cfg, INPUTS), eq2_flight(cfg, INPUTS)
+    for name in ("quat", "vel", "rates", "pos", "inputs"):
+        np.testing.assert_allclose(getattr(flight, name), getattr(ref, name), atol=1e-12)
+    rk4 = simulate(dataclasses.replace(cfg, integrator="rk4"), INPUTS)
+    assert np.abs(rk4.rates - ref.rates).max() > 1e-3  # the comparison sees a scheme change
 
 
 @pytest.mark.parametrize(

@@ -59,10 +59,11 @@ def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: s
     tree, train, val = co.best(state, train_errors)
     front = co.front(state, train_errors)
     if co.cfg.selection != "bic":
-        better = [(t, e) for t, e in front if t.size <= tree.size and e < train]
+        errors = co.tiled_errors([t for t, _ in front], dataset.train, co.model_evaluator)
+        better = [(t, e) for (t, _), e in zip(front, errors) if t.size <= tree.size and e < train]
         if better:
             tree, train = min(better, key=lambda te: (te[1], te[0].size))
-            val = float(co.tiled_errors([tree], dataset.validation)[0])
+            val = float(co.tiled_errors([tree], dataset.validation, co.model_evaluator)[0])
     summaries = [
         Equation(target, t, dataset.input_names, err, float("nan"), dataset.trim).summary()
         for t, err in front

@@ -1,7 +1,8 @@
 """Named engine presets: TOML tables laid under a config's own (`preset = "paper"`).
 
 The defaults of gpquad.study.config are the recommended engine, so "recommended" is empty.
-"paper" is De Nardi and Holland's method as section 2.2 and 3.2 describe it
+"paper" is De Nardi and Holland's method as section 2.2 and 3.2 describe it (eq. 2, one
+explicit step per sample)
 (../shared/seeds/coevolutionary-gp-rotorcraft.txt): mutation-only hill climbers, one delay
 per input, 30 s windows, no local search and no finishing steps.
 """
@@ -33,7 +34,10 @@ PRESETS: dict[str, dict] = {
             "keep_tracked": False,
             "finish": [],
             "refine_terms": 0,
+            "integrator": "euler",
         },
+        # the paper's median model (Table 1) is a discrete-time model: eq. 2 defines it
+        "simulator": {"integrator": "euler"},
     },
 }
 

@@ -47,6 +47,10 @@ from gpquad.engine.tree.variation import (
 from gpquad.engine.variables import N_STATE
 from gpquad.study.config import EvolutionConfig
 
+#: The scheme the generations fly (gpquad.engine.kernels.step): eq. 2, the cheapest; a
+#: configured continuous-time `integrator` fits and chooses the reported equation.
+SEARCH_SCHEME = "euler"
+
 
 class Coevolution:
     """Coevolutionary identification of one target's equation."""
@@ -66,15 +70,20 @@ class Coevolution:
         #: samples in a test window, and how far a test mutation moves it (half a window)
         self.window_steps = cfg.window_steps(dataset.dt)
         self.test_offset_max = self.window_steps // 2
-        self.evaluator = Evaluator(
-            dataset,
-            target,
-            self.window_steps,
-            cfg.metric,
-            cfg.max_depth,
-            integrator=cfg.integrator,
-            substeps=cfg.substeps,
-        )
+        # The generations fly eq. 2, the cheap surrogate; the reported equation's constants
+        # are fitted and chosen through the configured scheme (model_evaluator, `best`).
+        self.evaluator = Evaluator(dataset, target, self.window_steps, cfg.metric, cfg.max_depth)
+        self.model_evaluator = self.evaluator
+        if cfg.integrator != SEARCH_SCHEME:
+            self.model_evaluator = Evaluator(
+                dataset,
+                target,
+                self.window_steps,
+                cfg.metric,
+                cfg.max_depth,
+                integrator=cfg.integrator,
+                substeps=cfg.substeps,
+            )
         self.space = WindowSpace(dataset.train, self.window_steps, cfg.max_delay)
         # the growing horizon of the linear seed and of the gain refits
         self.regain_windows = self.windows_for(SEED_HORIZONS)
@@ -308,12 +317,14 @@ class Coevolution:
         return state
 
     # ------------------------------------------------------------- selection
-    def tiled_errors(self, trees: list[Tree], ranges) -> np.ndarray:
-        """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none)."""
+    def tiled_errors(self, trees: list[Tree], ranges, ev: Evaluator | None = None) -> np.ndarray:
+        """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none),
+        flown by `ev` (default: the search's evaluator)."""
         starts, steps = tile(ranges, self.window_steps, self.cfg.max_delay)
         if len(starts) == 0:
             return np.full(len(trees), np.nan)
-        return self.evaluator.window_errors(trees, starts, n_steps=steps).mean(axis=1)
+        ev = self.evaluator if ev is None else ev
+        return ev.window_errors(trees, starts, n_steps=steps).mean(axis=1)
 
     def training_errors(self, state: RunState) -> np.ndarray:
         """Each climber's error over the whole training data (NaN: no window fits)."""
@@ -329,7 +340,6 @@ class Coevolution:
         model, error = state.models[i], float(train[i])
         if self.cfg.selection == "bic":
             model = self.select_by_bic(state, model, train)
-            error = float(self.tiled_errors([model], self.dataset.train)[0])
         elif self.cfg.prune_tolerance > 0:
             starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
             samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
@@ -347,43 +357,47 @@ class Coevolution:
                 lambda t, a, b: self.subtree_mean(t, a, b, samples),
                 self.gradient_fitter(self.cfg.gradient_steps),
             )
-        validation = self.tiled_errors([model], self.dataset.validation)[0]
+        ev = self.model_evaluator
+        if self.cfg.selection != "bic" and ev is not self.evaluator:
+            fit = self.gradient_fitter(self.cfg.gradient_steps, ev)
+            starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
+            if fit is not None and len(starts):
+                model = fit(
+                    model,
+                    float(self.tiled_errors([model], self.dataset.train, ev)[0]),
+                    starts,
+                    steps,
+                )[0]
+        error = float(self.tiled_errors([model], self.dataset.train, ev)[0])
+        validation = self.tiled_errors([model], self.dataset.validation, ev)[0]
         return model, error, float(validation)
 
     def select_by_bic(self, state: RunState, model: Tree, train) -> Tree:
         """Prune `model` while its training BIC does not grow, then pick the lowest BIC over
         the training and validation windows among it and the front's climbers
-        (gpquad.engine.evolve.selection)."""
+        (gpquad.engine.evolve.selection). The pruning flies the search's scheme; with another
+        configured `integrator` the candidates' constants are then fitted through it, and
+        the choice is made in it."""
         cfg = self.cfg
-        ev_mse = Evaluator(
-            self.dataset,
-            self.target,
-            self.window_steps,
-            "mse",
-            cfg.max_depth,
-            integrator=cfg.integrator,
-            substeps=cfg.substeps,
-        )
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
-        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
-        if fit is None:
-
-            def fit(tree, err, starts, n_steps):
-                return fit_constants(
-                    tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps), cfg.nelder_mead_evals
-                )
-
+        ev_search, fit_search = self._mse_fitter(SEARCH_SCHEME, 1)
         pruned = prune_by_bic(
-            ev_mse,
+            ev_search,
             model,
             starts,
             steps,
             lambda t, a, b: self.subtree_mean(t, a, b, samples),
-            fit,
-            self.regain_fitter(cfg.gradient_steps, ev_mse),
+            fit_search,
+            self.regain_fitter(cfg.gradient_steps, ev_search),
         )
         candidates = [pruned] + [t for t, _ in self.front(state, train)]
+        ev_mse = ev_search
+        if cfg.integrator != SEARCH_SCHEME:
+            ev_mse, fit = self._mse_fitter(cfg.integrator, cfg.substeps)
+            candidates = [
+                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0] for t in candidates
+            ]
         # BIC over every window, training and validation: a criterion made for the data the
         # constants were fitted on, and the validation windows alone are often one or two
         # (px4-s250: its 10 s of validation favoured r_dot = u_Y - r over 16.8 (u_Y - r),
@@ -392,6 +406,28 @@ class Coevolution:
         if len(val_starts) and val_steps == steps:
             starts = np.concatenate([starts, val_starts])
         return select_by_bic(ev_mse, candidates, starts, steps)[0]
+
+    def _mse_fitter(self, integrator: str, substeps: int):
+        """(mean-squared-error evaluator flying `integrator`, its constant fit)."""
+        cfg = self.cfg
+        ev_mse = Evaluator(
+            self.dataset,
+            self.target,
+            self.window_steps,
+            "mse",
+            cfg.max_depth,
+            integrator=integrator,
+            substeps=substeps,
+        )
+        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
+        if fit is None:
+
+            def fit(tree, err, starts, n_steps):
+                return fit_constants(
+                    tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps), cfg.nelder_mead_evals
+                )
+
+        return ev_mse, fit
 
     def front(self, state: RunState, train=None) -> list[tuple[Tree, float]]:
         """The climbers on the size/error Pareto front (training data), smallest first:

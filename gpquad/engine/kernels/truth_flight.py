@@ -99,9 +99,10 @@ def fly_truth(
             state[3 + i] = y[V + i, 0]
             state[6 + i] = y[W + i, 0]
         for j in range(n_in):
-            u = trim[j] + sticks[k, j]
+            feedback = 0.0
             for i in range(9):
-                u += gain[j, i] * state[i]
+                feedback += gain[j, i] * state[i]
+            u = trim[j] + sticks[k, j] + feedback
             inputs[k, j] = min(max(u, -limit), limit)
         for t in range(6):
             for j in range(n_slots):
