@@ -101,3 +101,24 @@ def test_plain_equations_keep_three_digits_and_model_json_keeps_the_digits(datas
         t: e.digits for t, e in done.equations.items()
     }
     assert again.text() == done.text() and again.text(raw=True) == done.text(raw=True)
+
+
+def test_terms_a_fit_drove_to_round_off_are_dropped_and_real_ones_kept(dataset):
+    """-4.15 p + 10.3 u_R(t-1) + 1e-6 q r - 2e-6 theta: the two round-off terms go (the tree
+    and the text lose them; the value moves by < TOLERANCE / 2 of its RMS); a coupling of
+    0.05 q r, above the tolerance, stays; the cancelling filter keeps every tap."""
+    from gpquad.models.precision import without_negligible_terms
+
+    rows = sample_rows(dataset.train, 5)
+    noisy = _equation("-4.15*p + 10.3*u_R(t-1) + 1e-6*q*r - 2e-6*theta", dataset)
+    clean = without_negligible_terms(noisy, dataset.arrays, rows)
+    assert {s.name for s in clean.sympy().free_symbols} == {"p", "u_R"}
+    before, after = _tree_values(noisy, dataset, rows), _tree_values(clean, dataset, rows)
+    rms = np.sqrt(np.mean(before**2))
+    assert 0 < np.abs(after - before).max() <= TOLERANCE / 2 * rms
+    real = _equation("-4.15*p + 10.3*u_R(t-1) + 0.05*q*r", dataset)
+    assert without_negligible_terms(real, dataset.arrays, rows) is real
+    lag_filter = _equation(FILTER, dataset)
+    assert without_negligible_terms(lag_filter, dataset.arrays, rows) is lag_filter
+    model = DiscoveredModel({"p_dot": noisy}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
+    assert "q" not in with_printed_digits(model, dataset).equations["p_dot"].text()

@@ -22,7 +22,7 @@ import numpy as np
 import sympy as sp
 
 from gpquad.engine.taps import base_input
-from gpquad.engine.tree.export import round_constants
+from gpquad.engine.tree.export import from_sympy, round_constants
 from gpquad.engine.variables import STATE_NAMES
 
 TOLERANCE = 1e-3
@@ -88,14 +88,45 @@ def printed_digits(equation, arrays, rows) -> int:
     return MAX_DIGITS
 
 
+def without_negligible_terms(equation, arrays, rows):
+    """`equation` without the additive terms (of its expanded form) that together move its
+    value by at most half of TOLERANCE x RMS on `rows`, smallest first: terms a fit drove
+    to round-off (a coupling the search needed under eq. 2 and a continuous-time refit set
+    to 1e-6) would otherwise be printed and exported. The same equation when none is."""
+    expr = sp.expand(equation.sympy())
+    terms = sp.Add.make_args(expr)
+    if len(terms) < 2:
+        return equation
+    columns = _columns(equation, arrays, rows, raw=False)
+    values = [_values(term, columns, len(rows)) for term in terms]
+    total = np.sum(values, axis=0)
+    finite = np.isfinite(total)
+    if not finite.any():
+        return equation
+    budget = 0.5 * TOLERANCE * float(np.sqrt(np.mean(total[finite] ** 2)))
+    sizes = [float(np.max(np.abs(v[finite]))) for v in values]
+    dropped, moved = set(), 0.0
+    for k in sorted(range(len(terms)), key=lambda k: sizes[k]):
+        if moved + sizes[k] > budget or len(dropped) == len(terms) - 1:
+            break
+        dropped.add(k)
+        moved += sizes[k]
+    if not dropped:
+        return equation
+    kept = sp.Add(*[t for k, t in enumerate(terms) if k not in dropped])
+    tree = from_sympy(kept, equation.delays, equation.input_names)
+    return dataclasses.replace(equation, tree=tree)
+
+
 def with_printed_digits(model, dataset):
-    """The model with each equation's `digits` set from the dataset's training samples."""
+    """The model without negligible terms (without_negligible_terms) and with each
+    equation's `digits` set from the dataset's training samples."""
     max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
     rows = sample_rows(dataset.train or dataset.validation, max_delay)
     if len(rows) == 0:
         return model
-    equations = {
-        t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
-        for t, e in model.equations.items()
-    }
+    equations = {}
+    for t, e in model.equations.items():
+        e = without_negligible_terms(e, dataset.arrays, rows)
+        equations[t] = dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
     return dataclasses.replace(model, equations=equations)
