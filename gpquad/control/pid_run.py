@@ -91,7 +91,9 @@ def run_pid(
     if not run_cfg.data.files:
         from gpquad.data.simulator import completed
 
-        truth = truth_plant(completed(run_cfg.simulator).equations, run_cfg.data.inputs, model.dt)
+        sim = completed(run_cfg.simulator)
+        truth = truth_plant(sim.equations, run_cfg.data.inputs, model.dt)
+        truth.integrator, truth.substeps = sim.integrator, sim.substeps  # as the simulator flew it
     say(
         f"gpquad control pid: model {run_dir} ({len(model.input_names)} inputs, "
         f"{p.input_level}-level), channels {design.to_dict(model.input_names)['channels']}; "
