@@ -159,6 +159,8 @@ def export_c(model, name: str = "gpquad_model", prefix: str = "gpquad") -> dict[
             f"static void {prefix}_equations(const double x[9], const double *h, double out[6])",
             "{",
             "    /* x: state; h: trimmed inputs, h[d * N_INPUTS + i] = input i, d samples back */",
+            "    (void)x; /* a model may read no state or no input */",
+            "    (void)h;",
             *equations,
             "}",
             runtime,
