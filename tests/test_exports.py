@@ -22,6 +22,7 @@ from export_models import (
     load_python,
     median_model,
     python_and_c,
+    rk4_model,
 )
 
 from gpquad.cli.commands import main
@@ -245,6 +246,9 @@ def test_printed_forms_state_dt_without_float_noise(fmt):
         assert ("dt = 0.04 s" if fmt == "text" else r"$\Delta t = 0.04$ s") in out
         assert "delays in samples" in out
         assert not _NOISE.search(out), _NOISE.search(out)
+    assert "one explicit step per sample (eq. 2)" in export(hand_model(), fmt)
+    rk4 = export(rk4_model(), fmt)
+    assert "continuous time, inputs held over each sample (fitted by RK4, 4 step(s)" in rk4
     assert "0.3*u_Y" not in export(hand_model(), "text")  # 0.1 + 0.2 folded into -2.34
     assert "inputs minus their trim (u_P 0.25, u_R -0.05, u_Y 0.1, u_T 0.5)" in export(
         hand_model(), "text"
