@@ -329,9 +329,10 @@ class Model:
         ----------
         fmt : str
             "text", "latex", "markdown", "json" (model.json), "sympy" (a script of sympy
-            equations), "python" (a numpy module with ``accel`` and ``fly``), "c" (a C99
-            source and header with ``gpquad_fly`` and ``gpquad_accel``) or "casadi" (a
-            casadi Function, needs the ``casadi`` extra).
+            equations), "python" (a numpy module: ``fly`` flies the model as gpquad does,
+            ``rhs`` is the continuous-time right-hand side), "c" (a C99 source and header
+            with ``gpquad_fly`` and ``gpquad_rhs``) or "casadi" (a casadi Function, needs
+            the ``casadi`` extra).
         path : str or Path, optional
             Write there ("c": ``model.c`` writes model.c and model.h) and return the paths;
             default: return the text ({file name: text} for "c").

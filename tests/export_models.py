@@ -1,15 +1,18 @@
 """Models and helpers shared by the export tests (tests/test_exports*.py).
 
 - hand_model(): taps, delays, a lag, trim and a protected division that the inputs of
-  hand_inputs() drive to |denominator| < DIV_EPS;
+  hand_inputs() drive to |denominator| < DIV_EPS (an euler model);
+- rk4_model(): an RK4 model (4 substeps) with delays, two lags and products of states and
+  inputs; in_scheme(): a model flown by another scheme;
 - median_model(): the reference simulator's median model, with a quickstart-like trim;
 - load_python(), compile_c(), fly_c(): run the python and C exports;
-- assert_flies_like(): the 1e-9 relative comparison every export is held to.
+- assert_flies_like(): the 1e-12 relative comparison every export is held to.
 """
 
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import importlib.util
 import shutil
 import subprocess
@@ -18,11 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import ADD, CONST, DIV, MUL, SUB, VAR_BASE
 from gpquad.engine.variables import STATE_NAMES
 from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.exports import export
+from gpquad.models.exports.codegen import model_spec
 
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 FIXTURES = Path(__file__).parent / "fixtures"
@@ -92,6 +97,53 @@ def hand_model() -> DiscoveredModel:
     return DiscoveredModel(eqs, INPUTS, dict(t), 0.04, 1, {})
 
 
+def rk4_model(substeps: int = 4) -> DiscoveredModel:
+    """A continuous-time model (integrator "rk4"): delays up to 3, lags on p_dot (30 ms) and
+    r_dot (0.1 s), products state x state (q w, r theta) and input x input / state
+    (u_T(t-1) u_R, u_P q), a protected division, trim."""
+    t = HAND_TRIM
+    delays = [0, 1, 2, 0, 0, 3, 0, 1]
+    eqs = {
+        "a_x": equation(
+            "a_x", ("-", ("*", 9.81, "theta"), ("+", ("*", 0.2, "u"), ("*", "q", "w"))), delays, t
+        ),
+        "a_y": equation("a_y", ("-", ("*", -9.81, "phi"), ("*", 0.15, "v")), delays, t),
+        "a_z": equation(
+            "a_z", ("-", ("*", 12.0, ("*", ("in", 7), ("in", 1))), ("+", "w", 0.4)), delays, t
+        ),
+        "p_dot": equation(
+            "p_dot",
+            (
+                "-",
+                ("+", ("*", 30.0, ("-", ("in", 1), "phi")), ("*", -8.0, ("in", 5))),
+                ("*", 5.0, "p"),
+            ),
+            delays,
+            t,
+            lag=0.03,
+        ),
+        "q_dot": equation(
+            "q_dot",
+            ("-", ("*", ("in", 0), ("-", 20.0, ("*", 2.0, "q"))), ("*", 25.0, "theta")),
+            delays,
+            t,
+        ),
+        "r_dot": equation(
+            "r_dot",
+            ("+", ("*", -2.5, "r"), ("-", ("*", 6.0, ("in", 2)), ("/", ("*", "r", "theta"), "u"))),
+            delays,
+            t,
+            lag=0.1,
+        ),
+    }
+    return DiscoveredModel(eqs, INPUTS, dict(t), 0.04, 1, {}, integrator="rk4", substeps=substeps)
+
+
+def in_scheme(model: DiscoveredModel, integrator: str, substeps: int = 1) -> DiscoveredModel:
+    """The same equations flown (and exported) with another scheme."""
+    return dataclasses.replace(model, integrator=integrator, substeps=substeps)
+
+
 def hand_inputs(n: int = 200, seed: int = 3) -> np.ndarray:
     """Raw inputs for hand_model: u_P (trimmed) exactly 0.5 and 0.5 + 1e-7 on some rows
     (the protected division), otherwise at least 0.1 away from 0.5."""
@@ -124,7 +176,7 @@ def fixture_model(name: str) -> DiscoveredModel:
     return DiscoveredModel.load(FIXTURES / name)
 
 
-def assert_flies_like(states: np.ndarray, reference: np.ndarray, rtol: float = 1e-9) -> None:
+def assert_flies_like(states: np.ndarray, reference: np.ndarray, rtol: float = 1e-12) -> None:
     """states equal reference to rtol relative to each state's largest magnitude."""
     assert states.shape == reference.shape
     assert np.all(np.isfinite(reference)), "the reference flight diverged"
@@ -174,6 +226,29 @@ def compile_c(files: dict[str, str], folder: Path) -> ctypes.CDLL:
     return ctypes.CDLL(str(lib))
 
 
+def kernel_commanded(model, states, inputs) -> np.ndarray:
+    """Each equation's tree value by the numba kernel at every row of (states, raw inputs),
+    rows before the first input held at the first: (n, 6)."""
+    spec = model_spec(model)
+    trimmed = inputs - np.array(spec.trim)
+    padded = np.vstack([np.repeat(trimmed[:1], spec.history, axis=0), trimmed])
+    padded_states = np.vstack([np.repeat(states[:1], spec.history, axis=0), states])
+    rows = np.arange(spec.history, len(padded), dtype=np.int64)
+    out = np.empty((len(states), 6))
+    for i, t in enumerate(spec.targets):
+        n_slots = len(t.tree.delays)
+        taps = np.ascontiguousarray(np.tile(padded, (1, n_slots // padded.shape[1])))
+        out[:, i] = eval_on_samples(
+            t.tree.codes, t.tree.values, t.tree.size, t.tree.delays, padded_states, taps, rows
+        )
+    return out
+
+
+def history_rows(inputs, k: int, history: int) -> np.ndarray:
+    """Raw input rows k, k-1, ..., k-history (held at row 0)."""
+    return np.array([inputs[max(k - d, 0)] for d in range(history + 1)])
+
+
 _P = ctypes.POINTER(ctypes.c_double)
 
 
@@ -204,6 +279,19 @@ def c_step(lib, name: str, state, history, previous=None, prefix: str = "gpquad"
     fn.restype = None
     fn(*[_ptr(a) for a in args], _ptr(out))
     return out
+
+
+def c_rhs(lib, state, history, lag, prefix: str = "gpquad") -> tuple[np.ndarray, np.ndarray]:
+    """(accelerations, lag_dot) of P_rhs; lag None passes NULL."""
+    accel, lag_dot = np.full(6, np.nan), np.full(6, np.nan)
+    fn = getattr(lib, f"{prefix}_rhs")
+    fn.argtypes = [_P] * 5
+    fn.restype = None
+    state = np.ascontiguousarray(state, dtype=float)
+    history = np.ascontiguousarray(history, dtype=float)
+    lag = None if lag is None else np.ascontiguousarray(lag, dtype=float)
+    fn(_ptr(state), _ptr(history), _ptr(lag), _ptr(accel), _ptr(lag_dot))
+    return accel, lag_dot
 
 
 def python_and_c(model, tmp_path, name="model"):

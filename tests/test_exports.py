@@ -1,5 +1,6 @@
-"""Exports that are the model: python and C fly as DiscoveredModel.fly_states to 1e-9;
-sympy and casadi give the kernels' one-step accelerations; the printed forms state dt."""
+"""Exports that are the model: python and C fly euler models as DiscoveredModel.fly_states
+to the bit (tests/test_exports_rk4.py: RK4 models); sympy and casadi give the kernels'
+one-step accelerations; the printed forms state dt."""
 
 from __future__ import annotations
 
@@ -16,16 +17,17 @@ from export_models import (
     fly_c,
     hand_inputs,
     hand_model,
+    history_rows,
+    kernel_commanded,
     load_python,
     median_model,
     python_and_c,
+    rk4_model,
 )
 
 from gpquad.cli.commands import main
-from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.exports import FORMATS, export, sympy_equations
-from gpquad.models.exports.codegen import model_spec
 
 X0 = np.array([0.05, -0.1, 3.0, 1.0, -0.5, 0.2, 0.1, -0.2, 0.3])
 
@@ -49,39 +51,22 @@ def _inputs(name: str, n: int = 200) -> np.ndarray:
     return rng.normal(0.0, 0.15, size=(n, 4)) + np.array([0.0, 0.0, 0.0, 0.4])
 
 
-def _kernel_commanded(model, states, inputs) -> np.ndarray:
-    """Each equation's tree value by the numba kernel at every row of (states, raw inputs),
-    rows before the first input held at the first: (n, 6)."""
-    spec = model_spec(model)
-    trimmed = inputs - np.array(spec.trim)
-    padded = np.vstack([np.repeat(trimmed[:1], spec.history, axis=0), trimmed])
-    padded_states = np.vstack([np.repeat(states[:1], spec.history, axis=0), states])
-    rows = np.arange(spec.history, len(padded), dtype=np.int64)
-    out = np.empty((len(states), 6))
-    for i, t in enumerate(spec.targets):
-        n_slots = len(t.tree.delays)
-        taps = np.ascontiguousarray(np.tile(padded, (1, n_slots // padded.shape[1])))
-        out[:, i] = eval_on_samples(
-            t.tree.codes, t.tree.values, t.tree.size, t.tree.delays, padded_states, taps, rows
-        )
-    return out
-
-
-def _history(inputs, k: int, history: int) -> np.ndarray:
-    """Raw input rows k, k-1, ..., k-history (held at row 0)."""
-    return np.array([inputs[max(k - d, 0)] for d in range(history + 1)])
-
-
 @pytest.mark.parametrize("name", list(MODELS))
 def test_python_and_c_exports_fly_as_fly_states(name, tmp_path):
     model = MODELS[name]
     inputs = _inputs(name)
     reference = model.fly_states(inputs, X0)
+    assert model.integrator == "euler"
     module, lib = python_and_c(model, tmp_path)
+    assert module.INTEGRATOR == "euler" and "accel" in dir(module)
     assert_flies_like(module.fly(inputs, X0), reference)
     code, states = fly_c(lib, inputs, X0)
     assert code == 0
     assert_flies_like(states, reference)
+    # euler exports stay bit-identical to eq. 2's rollout (itself pinned by
+    # tests/test_euler_bit_identical.py), as before the RK4 exports
+    np.testing.assert_array_equal(module.fly(inputs, X0), reference)
+    np.testing.assert_array_equal(states, reference)
     # fly() is fly_states() plus the positions
     np.testing.assert_array_equal(model.fly(inputs, X0).rates, reference[:, 6:9])
 
@@ -92,14 +77,14 @@ def test_hand_model_hits_the_protected_division(tmp_path):
     model = hand_model()
     inputs = hand_inputs()
     states = model.fly_states(inputs, X0)
-    kernel = _kernel_commanded(model, states, inputs)
+    kernel = kernel_commanded(model, states, inputs)
     q = TARGET_NAMES.index("q_dot")
     np.testing.assert_allclose(
         kernel[[10, 13, 40, 42], q] + 3.0 * states[[10, 13, 40, 42], 7], 1.0, rtol=1e-12
     )
     module, lib = python_and_c(model, tmp_path)
     for k in (10, 40):
-        hist = _history(inputs, k, module.HISTORY)
+        hist = history_rows(inputs, k, module.HISTORY)
         assert module.commanded(states[k], hist)[q] == kernel[k, q]
         assert c_step(lib, "commanded", states[k], hist)[q] == kernel[k, q]
 
@@ -111,7 +96,7 @@ def test_one_step_accelerations_match_the_kernel(name, tmp_path):
     model = MODELS[name]
     inputs = _inputs(name, 60)
     states = model.fly_states(inputs, X0)
-    kernel = _kernel_commanded(model, states, inputs)
+    kernel = kernel_commanded(model, states, inputs)
     module, lib = python_and_c(model, tmp_path)
     form = sympy_equations(model, raw=True)
     lambdas = {t: form.lambdify(t) for t in form.rhs}
@@ -120,7 +105,7 @@ def test_one_step_accelerations_match_the_kernel(name, tmp_path):
     alpha = np.array(module.ALPHA)
     previous = np.linspace(-1.0, 1.0, 6)
     for k in range(0, 60, 7):
-        hist = _history(inputs, k, module.HISTORY)
+        hist = history_rows(inputs, k, module.HISTORY)
         np.testing.assert_array_equal(module.commanded(states[k], hist), kernel[k])
         np.testing.assert_array_equal(c_step(lib, "commanded", states[k], hist), kernel[k])
         want = np.where(alpha < 1.0, previous + alpha * (kernel[k] - previous), kernel[k])
@@ -227,7 +212,7 @@ def test_casadi_functions_match_the_python_accel(tmp_path):
     accel = casadi.Function.deserialize(export(model, "casadi"))
     previous = np.linspace(-1.0, 1.0, 6)
     for k in (0, 10, 25, 40, 59):
-        hist = _history(inputs, k, module.HISTORY)
+        hist = history_rows(inputs, k, module.HISTORY)
         want = module.accel(states[k], hist, previous)
         got = np.array(accel(states[k], hist, previous)).ravel()
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
@@ -240,7 +225,7 @@ def test_casadi_functions_match_the_python_accel(tmp_path):
         main(["export", str(run), "--format", "casadi", "--out", str(tmp_path / "m.casadi")]) == 0
     )
     saved = casadi.Function.load(str(tmp_path / "m.casadi"))
-    hist = _history(inputs, 40, module.HISTORY)
+    hist = history_rows(inputs, 40, module.HISTORY)
     np.testing.assert_allclose(
         np.array(saved(states[40], hist, previous)).ravel(),
         module.accel(states[40], hist, previous),
@@ -261,6 +246,9 @@ def test_printed_forms_state_dt_without_float_noise(fmt):
         assert ("dt = 0.04 s" if fmt == "text" else r"$\Delta t = 0.04$ s") in out
         assert "delays in samples" in out
         assert not _NOISE.search(out), _NOISE.search(out)
+    assert "one explicit step per sample (eq. 2)" in export(hand_model(), fmt)
+    rk4 = export(rk4_model(), fmt)
+    assert "continuous time, inputs held over each sample (fitted by RK4, 4 step(s)" in rk4
     assert "0.3*u_Y" not in export(hand_model(), "text")  # 0.1 + 0.2 folded into -2.34
     assert "inputs minus their trim (u_P 0.25, u_R -0.05, u_Y 0.1, u_T 0.5)" in export(
         hand_model(), "text"

@@ -1,10 +1,13 @@
-"""Property: for random equations (taps, delays, lags, trim, divisions), the python export
-flies as DiscoveredModel.fly_states, and its one-step values are the kernel's."""
+"""Property: for random equations (taps, delays, lags, trim, divisions) and either scheme
+(euler, or RK4 with 1-3 substeps), the python and C exports fly as
+DiscoveredModel.fly_states."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
-from export_models import INPUTS, assert_flies_like, equation, load_python
+from export_models import INPUTS, assert_flies_like, compile_c, equation, fly_c, load_python
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -12,7 +15,8 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.equations import DiscoveredModel
 from gpquad.models.exports import export
 
-N_SLOTS = 2 * len(INPUTS)  # two taps per input
+N_SLOTS = 2 * len(INPUTS)
+EXAMPLES = itertools.count()  # two taps per input
 
 leaf = st.one_of(
     st.floats(-3.0, 3.0, allow_nan=False).map(float),
@@ -37,7 +41,8 @@ def models(draw):
         t: equation(t, draw(trees), delays, trim, lag=draw(st.sampled_from([0.0, 0.03, 0.2])))
         for t in targets
     }
-    return DiscoveredModel(eqs, INPUTS, trim, 0.04, 1, {})
+    integrator, substeps = draw(st.sampled_from([("euler", 1), ("rk4", 1), ("rk4", 2), ("rk4", 3)]))
+    return DiscoveredModel(eqs, INPUTS, trim, 0.04, 1, {}, integrator=integrator, substeps=substeps)
 
 
 @settings(
@@ -45,11 +50,17 @@ def models(draw):
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(model=models(), seed=st.integers(0, 2**16))
-def test_python_export_flies_random_models_as_fly_states(model, seed, tmp_path):
+def test_python_and_c_exports_fly_random_models_as_fly_states(model, seed, tmp_path):
     rng = np.random.default_rng(seed)
     inputs = rng.normal(0.0, 0.3, size=(40, len(INPUTS)))
     x0 = rng.normal(0.0, 0.2, size=9)
     reference = model.fly_states(inputs, x0)
     assume(np.all(np.isfinite(reference)) and np.abs(reference).max() < 1e4)
-    module = load_python(export(model, "python"), tmp_path / f"prop_{seed}.py")
+    # a new name per example: dlopen gives an already-loaded library's path the old library
+    name = f"prop_{model.integrator}{model.substeps}_{next(EXAMPLES)}"
+    module = load_python(export(model, "python"), tmp_path / f"{name}.py")
     assert_flies_like(module.fly(inputs, x0), reference)
+    lib = compile_c(export(model, "c", name=name), tmp_path)
+    code, states = fly_c(lib, inputs, x0)
+    assert code == 0
+    assert_flies_like(states, reference)

@@ -28,6 +28,7 @@ _LAZY = {
     "export_c": "c_source",
     "export_casadi": "casadi_function",
     "casadi_functions": "casadi_function",
+    "exported_function": "casadi_function",
 }
 
 
@@ -93,8 +94,9 @@ FORMATS: dict[str, Format] = {
             "python",
             "export_python",
             ".py",
-            "a self-contained numpy module: DT, INPUT_NAMES, "
-            "TRIM, accel(state, input_history), fly(inputs, x0) -> states",
+            "a self-contained numpy module: DT, INPUT_NAMES, TRIM, "
+            "fly(inputs, x0) -> states (as gpquad flies the model), commanded and "
+            "rhs(state, input_history, lag) (the continuous-time right-hand side)",
         ),
         Format(
             "c",
@@ -102,15 +104,17 @@ FORMATS: dict[str, Format] = {
             ".c",
             "a C99 source and header (libm only): "
             "int gpquad_fly(const double *inputs, int n_rows, const double x0[9], "
-            "double *states) and gpquad_accel(...)",
+            "double *states) (as gpquad flies the model), gpquad_commanded and "
+            "gpquad_rhs(...) (the continuous-time right-hand side)",
         ),
         Format(
             "casadi",
             "export_casadi",
             ".casadi",
-            "a casadi.Function accel(x[9], "
-            "H[history+1 x inputs], prev[6]) for MPC (needs casadi): with --out saved "
-            "(casadi.Function.load), else printed serialised (casadi.Function.deserialize)",
+            "a casadi.Function for MPC (needs casadi): rhs(x[9], H[history+1 x inputs], "
+            "lag[6]) -> (a, lag_dot), the continuous-time right-hand side (an euler model: "
+            "accel(x, H, prev), eq. 2's step); with --out saved (casadi.Function.load), "
+            "else printed serialised (casadi.Function.deserialize)",
         ),
     )
 }
@@ -137,7 +141,8 @@ def export(model, fmt: str, **options) -> str | dict[str, str]:
 def write_export(model, fmt: str, out, raw: bool = False) -> list[Path]:
     """Write the model in format `fmt` to `out`; returns the files written. "c" writes
     <stem>.c and <stem>.h beside each other (out may end in .c, .h or neither); "casadi"
-    saves the accel Function (casadi.Function.load reads it)."""
+    saves exported_function (rhs of an rk4 model, accel of an euler one; casadi.Function.load
+    reads it)."""
     out = Path(out)
     options: dict[str, object] = {"raw": True} if raw else {}
     if fmt == "c":
@@ -152,7 +157,7 @@ def write_export(model, fmt: str, out, raw: bool = False) -> list[Path]:
     out.parent.mkdir(parents=True, exist_ok=True)
     if fmt == "casadi":
         export(model, fmt, **options)  # the checks (and casadi's presence)
-        __getattr__("casadi_functions")(model)["accel"].save(str(out))
+        __getattr__("exported_function")(model).save(str(out))
         return [out]
     result = export(model, fmt, **options)
     files = result if isinstance(result, dict) else {out.name: result}

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gpquad.engine.kernels.step import lag_rate
 from gpquad.engine.lag import lag_alpha
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
@@ -119,6 +120,8 @@ class TargetSpec:
     #: Time constant (s) of the first-order lag, 0 = none; alpha = 1 - exp(-dt / tau).
     tau: float
     alpha: float
+    #: 1 / tau as the RK4 kernels compute it (gpquad.engine.kernels.step.lag_rate); 0 = none.
+    rate: float
     #: The equation in one line (gpquad.models.equations.Equation.text), for comments.
     text: str
     #: {input name: delays (samples) the equation reads it at}.
@@ -136,6 +139,10 @@ class ModelSpec:
     targets: tuple[TargetSpec, ...]
     #: The longest delay any equation reads (rows of input history before the current one).
     history: int
+    #: The scheme fly() uses (gpquad.engine.kernels.step): "euler" (eq. 2) or "rk4" with
+    #: `substeps` classical RK4 steps per sample.
+    integrator: str = "euler"
+    substeps: int = 1
 
     @property
     def n_inputs(self) -> int:
@@ -161,24 +168,59 @@ def model_spec(model) -> ModelSpec:
                     delays[name].append(leaf_.delay)
                 history = max(history, leaf_.delay)
         text = eq.text() if eq is not None else f"{target} = 0 (no equation)"
+        alpha = lag_alpha(tau, model.dt)
         targets.append(
             TargetSpec(
                 target,
                 tree,
                 tau,
-                lag_alpha(tau, model.dt),
+                alpha,
+                lag_rate(alpha, model.dt),
                 text,
                 {n: sorted(d) for n, d in delays.items()},
             )
         )
     trim = tuple(float(model.trim.get(n, 0.0)) for n in model.input_names)
-    return ModelSpec(float(model.dt), tuple(model.input_names), trim, tuple(targets), history)
+    return ModelSpec(
+        float(model.dt),
+        tuple(model.input_names),
+        trim,
+        tuple(targets),
+        history,
+        str(model.integrator),
+        int(model.substeps or 1),
+    )
 
 
 def short_number(value: float) -> str:
     """A float for people: at most 6 significant digits, no float noise (0.04, not
     0.03999999999999915)."""
     return f"{value:.6g}"
+
+
+def scheme_lines(spec: ModelSpec) -> list[str]:
+    """The header's statement of the scheme that fly() uses and of the ODE that the
+    equations are the right-hand side of."""
+    if spec.integrator == "euler":
+        return [
+            "scheme: euler (the paper's eq. 2): one explicit step per sample of dt, the",
+            "    equations evaluated at the sample's state; fly() is that map, the one the",
+            "    equations were fitted through (flown by a fine continuous-time integrator",
+            "    they give another model).",
+        ]
+    return [
+        f"scheme: rk4, continuous time: fly() integrates the ODE below by {spec.substeps}",
+        f"    classical RK4 step(s) per sample (h = dt / {spec.substeps} = "
+        f"{short_number(spec.dt / spec.substeps)} s), as gpquad fitted",
+        "    the equations: inputs (and delayed inputs, whole samples) held over each sample,",
+        "    the attitude quaternion normalised at every stage and renormalised (first",
+        "    order) after each step. Another accurate integrator of the ODE flies the",
+        "    same model (to its own discretisation error).",
+        "ODE: q_dot = q * (0, omega) / 2 (body -> world quaternion, omega = [p, q, r]),",
+        "    [u, v, w]_dot = [a_x, a_y, a_z] - omega x [u, v, w],",
+        "    [p, q, r]_dot = [p_dot, q_dot, r_dot], the equations' right-hand sides; a lagged",
+        "    equation applies its lag state a instead, a_dot = (rhs - a) / tau.",
+    ]
 
 
 def describe(spec: ModelSpec) -> list[str]:
@@ -195,16 +237,23 @@ def describe(spec: ModelSpec) -> list[str]:
         f"input history: {spec.history} past row(s) besides the current one; rows before the "
         "first input row are held at the first",
     ]
+    lines += scheme_lines(spec)
     for t in spec.targets:
         state = TARGET_STATE[t.target]
         read = ", ".join(f"{n} at {d}" for n, d in t.delays.items()) or "none"
-        lag = (
-            f"first-order lag tau = {short_number(t.tau)} s: tau d({t.target})/dt + "
-            f"{t.target} = rhs, discretely a_k = a_(k-1) + alpha (rhs_k - a_(k-1)), "
-            f"alpha = {short_number(t.alpha)}, a_(-1) = 0"
-            if t.tau > 0
-            else "no lag"
-        )
+        if not t.tau > 0:
+            lag = "no lag"
+        elif spec.integrator == "euler":
+            lag = (
+                f"first-order lag tau = {short_number(t.tau)} s: tau d({t.target})/dt + "
+                f"{t.target} = rhs, discretely a_k = a_(k-1) + alpha (rhs_k - a_(k-1)), "
+                f"alpha = {short_number(t.alpha)}, a_(-1) = 0"
+            )
+        else:
+            lag = (
+                f"first-order lag tau = {short_number(t.tau)} s: the applied {t.target} is "
+                f"the lag state a, tau da/dt = rhs - a, a = 0 at the start"
+            )
         lines.append(f"{t.target} (d{state}/dt): inputs read (delays) {read}; {lag}")
         lines.append(f"    {t.text}")
     lines.append(f"protected division: |denominator| < {DIV_EPS:g} gives 1")

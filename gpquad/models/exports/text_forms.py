@@ -21,14 +21,27 @@ def _trim_note(model, raw: bool) -> str:
 
 
 def dt_line(model, form: str = "text", raw: bool = False) -> str:
-    """ "dt = 0.04 s; delays in samples (u_R(t-2) is u_R 2 samples back)", with the trim;
-    form "text", "latex" or "markdown" (math in $...$)."""
+    """ "dt = 0.04 s; delays in samples (u_R(t-2) is u_R 2 samples back)", with the trim and
+    the scheme; form "text", "latex" or "markdown" (math in $...$)."""
     name = model.input_names[0] if model.input_names else "u"
     if form == "text":
         dt, example = f"dt = {short_number(model.dt)} s", f"{name}(t-2)"
     else:
         dt, example = rf"$\Delta t = {short_number(model.dt)}$ s", f"${input_latex(name, 2)}$"
-    return f"{dt}; delays in samples ({example} is {name} 2 samples back){_trim_note(model, raw)}"
+    return (
+        f"{dt}; delays in samples ({example} is {name} 2 samples back)"
+        f"{_trim_note(model, raw)}{_scheme_note(model)}"
+    )
+
+
+def _scheme_note(model) -> str:
+    """How the equations fly: continuous time (RK4) or the paper's eq. 2."""
+    if model.integrator == "euler":
+        return "; flown by one explicit step per sample (eq. 2)"
+    return (
+        f"; continuous time, inputs held over each sample (fitted by RK4, "
+        f"{model.substeps} step(s) per sample)"
+    )
 
 
 def export_text(model, raw: bool = False) -> str:
