@@ -105,7 +105,8 @@ def without_negligible_terms(equation, arrays, rows):
         return equation
     budget = 0.5 * TOLERANCE * float(np.sqrt(np.mean(total[finite] ** 2)))
     sizes = [float(np.max(np.abs(v[finite]))) for v in values]
-    dropped, moved = set(), 0.0
+    dropped: set[int] = set()
+    moved = 0.0
     for k in sorted(range(len(terms)), key=lambda k: sizes[k]):
         if moved + sizes[k] > budget or len(dropped) == len(terms) - 1:
             break
