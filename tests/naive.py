@@ -162,7 +162,8 @@ def rk4_window_error(
 ):
     """window_error flown by RK4 on the continuous-time ODE: `substeps` steps per sample, the
     tree at every stage, inputs and the data's other accelerations held over the sample, a
-    lag as the state l with tau l_dot = tree - l (1 / tau = -log(1 - alpha) / dt)."""
+    lag as the state l with tau l_dot = tree - l (1 / tau = -log(1 - alpha) / dt); for a
+    linear target the attitude and rates restart from the data's at every sample."""
     dt = arrays.dt
     rate = -np.log1p(-alpha) / dt if alpha < 1.0 else 0.0
     y = np.concatenate(
@@ -177,6 +178,8 @@ def rk4_window_error(
     for k in range(n_steps):
         idx = start + k
         held = [arrays.inputs[idx - d, j] for j, d in enumerate(tree.delays)]
+        if target < 3:  # a linear target: attitude and rates start each sample at the data's
+            y[:4], y[7:10] = arrays.quat[idx], arrays.states[idx, 6:9]
 
         def f(state, idx=idx, held=held):
             leaves = list(euler(state[:4])) + list(state[4:10])

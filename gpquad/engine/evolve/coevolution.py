@@ -376,27 +376,25 @@ class Coevolution:
         """Prune `model` while its training BIC does not grow, then pick the lowest BIC over
         the training and validation windows among it and the front's climbers
         (gpquad.engine.evolve.selection). The pruning flies the search's scheme; with another
-        configured `integrator` the candidates' constants are then fitted through it, and
-        the choice is made in it."""
+        configured `integrator` the pruned equation is pruned again in it, the front's
+        constants are fitted through it, and the choice is made in it."""
         cfg = self.cfg
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
-        ev_search, fit_search = self._mse_fitter(SEARCH_SCHEME, 1)
-        pruned = prune_by_bic(
-            ev_search,
-            model,
-            starts,
-            steps,
-            lambda t, a, b: self.subtree_mean(t, a, b, samples),
-            fit_search,
-            self.regain_fitter(cfg.gradient_steps, ev_search),
-        )
+
+        def pruned_in(scheme: str, substeps: int, tree: Tree):
+            ev, fit = self._mse_fitter(scheme, substeps)
+            constant_of = lambda t, a, b: self.subtree_mean(t, a, b, samples)  # noqa: E731
+            regain = self.regain_fitter(cfg.gradient_steps, ev)
+            return ev, fit, prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain)
+
+        ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
         candidates = [pruned] + [t for t, _ in self.front(state, train)]
-        ev_mse = ev_search
         if cfg.integrator != SEARCH_SCHEME:
-            ev_mse, fit = self._mse_fitter(cfg.integrator, cfg.substeps)
-            candidates = [
-                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0] for t in candidates
+            # pruned again: terms the surrogate needed only for its own discretisation go
+            ev_mse, fit, candidates[0] = pruned_in(cfg.integrator, cfg.substeps, pruned)
+            candidates[1:] = [
+                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0] for t in candidates[1:]
             ]
         # BIC over every window, training and validation: a criterion made for the data the
         # constants were fitted on, and the validation windows alone are often one or two

@@ -10,8 +10,10 @@ eq. 2's discrete inverse (gpquad.engine.kernels.integrator.body_accelerations): 
 reproduce the data's rates at every sample exactly (alpha is constant over the sample and
 RK4 integrates a linear rate exactly), and the data's velocity and attitude to O(dt^2) per
 sample (eq. 2 rotates V + a dt by the sample's increment, the ODE rotates V as it goes).
-Unlike the eq. 2 kernels, which read the data's angles and rates for linear targets (where
-they coincide with the integrated ones), every state a tree reads is the integrated one.
+For a linear target the attitude and rates start every sample from the data's (they do not
+depend on the tree; integrated over a window from noisy data rates the attitude would random
+walk), as the eq. 2 kernels read the data's; within the sample they are integrated. For an
+angular target every state a tree reads is the integrated one.
 
 A lag (alpha < 1) is one more state, tau a_dot = f - a from the data's acceleration of the
 sample before the window, with 1 / tau from alpha (gpquad.engine.kernels.step.lag_rate).
@@ -59,6 +61,17 @@ def stage_features(ys, lane, used, features):
             features[3 + i, lane] = ys[V + i, lane]
         if used[6 + i]:
             features[6 + i, lane] = ys[W + i, lane]
+
+
+@njit(inline="always")
+def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
+    """y's attitude and rate rows of `lane` set to the data's at sample idx: a linear
+    target's tree does not drive them, and integrating them over a window from noisy data
+    rates would let the attitude random-walk away (the eq. 2 kernels read them likewise)."""
+    for i in range(4):
+        y[Q + i, lane] = quat_d[idx, i]
+    for i in range(3):
+        y[W + i, lane] = states[idx, 6 + i]
 
 
 @njit
@@ -126,6 +139,8 @@ def rk4_tree_window_errors(
     for k in range(n_steps):
         for lane in range(n):  # inputs held over the sample
             idx = starts[lane] + k
+            if linear and k > 0:
+                attitude_and_rates_from_data(y, lane, quat_d, states, idx)
             for j in range(n_in):
                 if used[9 + j]:
                     features[9 + j, lane] = inputs[idx - delays[j], j]

@@ -21,7 +21,7 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
 import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT
-from gpquad.engine.kernels.fitness_rk4 import LAG, stage_features
+from gpquad.engine.kernels.fitness_rk4 import LAG, attitude_and_rates_from_data, stage_features
 from gpquad.engine.kernels.quaternion import euler_angle
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
@@ -122,6 +122,8 @@ def rk4_window_residuals(
                     jac[row + extra, :] = 0.0
                 continue
             idx = s + k
+            if linear and k > 0:
+                attitude_and_rates_from_data(y, 0, quat_d, states, idx)
             for jj in range(n_in):
                 leaf[9 + jj] = inputs[idx - delays[jj], jj]
             for _ in range(substeps):
