@@ -30,7 +30,7 @@ alpha = 1 is no lag and leaves every result bit-identical to the kernels without
 import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
-from gpquad.engine.kernels.fitness_rk4 import rk4_tree_window_errors
+from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
 from gpquad.engine.kernels.quaternion import (
     euler_angle,
     euler_phi,
@@ -57,7 +57,6 @@ __all__ = [
 ]
 
 
-@njit
 def tree_window_errors(
     codes,
     values,
@@ -80,6 +79,8 @@ def tree_window_errors(
     alpha: the equation's lag factor in (0, 1] (module notes; 1 = no lag).
     scheme, substeps: the integrator (gpquad.engine.kernels.step: EULER, one step per
     sample, or RK4 with `substeps` steps per sample, gpquad.engine.kernels.fitness_rk4).
+    The scheme is picked here, in Python, so that a process compiles only the kernels of
+    the schemes it flies.
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
@@ -318,7 +319,6 @@ def euler_tree_window_errors(
     return False
 
 
-@njit
 def population_window_errors(
     codes,
     values,
@@ -337,8 +337,60 @@ def population_window_errors(
     substeps,
 ):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
+    if scheme == RK4:
+        rk4_population_window_errors(
+            codes,
+            values,
+            sizes,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds,
+            out,
+            substeps,
+        )
+    else:
+        euler_population_window_errors(
+            codes,
+            values,
+            sizes,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds,
+            out,
+        )
+
+
+@njit
+def euler_population_window_errors(
+    codes,
+    values,
+    sizes,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bounds,
+    out,
+):
+    """population_window_errors flown by eq. 2."""
     for i in range(codes.shape[0]):
-        tree_window_errors(
+        euler_tree_window_errors(
             codes[i],
             values[i],
             sizes[i],
@@ -352,6 +404,4 @@ def population_window_errors(
             alpha,
             bounds[i],
             out[i],
-            scheme,
-            substeps,
         )

@@ -72,7 +72,6 @@ __all__ = [
 ]
 
 
-@njit
 def window_residuals(
     codes,
     values,
@@ -98,7 +97,8 @@ def window_residuals(
     nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
     and zero Jacobian rows from that step on. Returns the number of diverged windows.
     scheme, substeps: the integrator (gpquad.engine.kernels.step; RK4 in
-    gpquad.engine.kernels.sensitivity_rk4).
+    gpquad.engine.kernels.sensitivity_rk4), picked here in Python so that a process compiles
+    only the kernels of the schemes it flies.
     """
     if scheme == RK4:
         return rk4_window_residuals(
@@ -117,6 +117,40 @@ def window_residuals(
             jac,
             substeps,
         )
+    return euler_window_residuals(
+        codes,
+        values,
+        size,
+        delays,
+        target,
+        flight,
+        starts,
+        n_steps,
+        att_weight,
+        angle_tangents,
+        alpha,
+        res,
+        jac,
+    )
+
+
+@njit
+def euler_window_residuals(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    att_weight,
+    angle_tangents,
+    alpha,
+    res,
+    jac,
+):
+    """window_residuals flown by eq. 2 (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
