@@ -39,8 +39,8 @@ from gpquad.engine.kernels.quaternion import (
 )
 from gpquad.engine.kernels.step import (
     RK4,
+    euler_lanes_step,
     euler_rate_step,
-    euler_step,
     euler_velocity_step,
     wrap_angle,
 )
@@ -152,6 +152,7 @@ def euler_tree_window_errors(
     att_err = (not linear) and att_weight > 0.0
     need_att = (not linear) and (uses_euler or att_err)
     budget = bound * n * n_steps
+    body_step = (not linear) and (need_vel or need_att)  # an angular target's full eq. 2 step
 
     features = np.zeros((9 + n_in, n))
     stack = np.empty((STACK_ROWS, n))
@@ -160,6 +161,7 @@ def euler_tree_window_errors(
     vel = np.empty((3, n))
     rates = np.empty((3, n))
     err = np.zeros(n)
+    inc = np.empty((5, n))
     alive = np.ones(n, dtype=np.bool_)
     n_alive = n
     lagged = alpha < 1.0
@@ -228,6 +230,22 @@ def euler_tree_window_errors(
                 applied[lane] += alpha * (pred[lane] - applied[lane])
                 pred[lane] = applied[lane]
 
+        if body_step:  # all lanes at once (vectorised), the same bits as lane by lane
+            euler_lanes_step(
+                quat,
+                vel,
+                rates,
+                acc,
+                starts,
+                k,
+                target - 3,
+                pred,
+                alive,
+                dt,
+                need_vel,
+                need_att,
+                inc,
+            )
         total = 0.0
         for lane in range(n):
             if not alive[lane]:
@@ -247,47 +265,7 @@ def euler_tree_window_errors(
                 )
                 x = vel[target, lane]
             else:
-                if need_vel or need_att:
-                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
-                    if target == 3:
-                        a3 = pred[lane]
-                    elif target == 4:
-                        a4 = pred[lane]
-                    else:
-                        a5 = pred[lane]
-                    (
-                        quat[0, lane],
-                        quat[1, lane],
-                        quat[2, lane],
-                        quat[3, lane],
-                        vel[0, lane],
-                        vel[1, lane],
-                        vel[2, lane],
-                        rates[0, lane],
-                        rates[1, lane],
-                        rates[2, lane],
-                    ) = euler_step(
-                        quat[0, lane],
-                        quat[1, lane],
-                        quat[2, lane],
-                        quat[3, lane],
-                        vel[0, lane],
-                        vel[1, lane],
-                        vel[2, lane],
-                        rates[0, lane],
-                        rates[1, lane],
-                        rates[2, lane],
-                        acc[idx, 0],
-                        acc[idx, 1],
-                        acc[idx, 2],
-                        a3,
-                        a4,
-                        a5,
-                        dt,
-                        need_vel,
-                        need_att,
-                    )
-                else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
+                if not body_step:  # nothing reads the attitude or the velocity: rates alone
                     for i in range(3):
                         if i == target - 3:
                             rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
