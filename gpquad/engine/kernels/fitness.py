@@ -202,13 +202,15 @@ def euler_tree_window_errors(
             n_used_in += 1
 
     for k in range(n_steps):
-        for lane in range(n):
-            if not alive[lane]:
-                continue
-            idx = starts[lane] + k
-            for c in range(n_data):
-                features[data_cols[c], lane] = states[idx, data_cols[c]]
-            if need_att:
+        # the leaves column by column (loops without branches; a dead lane's are not read)
+        for c in range(n_data):
+            col = data_cols[c]
+            for lane in range(n):
+                features[col, lane] = states[starts[lane] + k, col]
+        if need_att:
+            for lane in range(n):
+                if not alive[lane]:
+                    continue
                 q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
                 if uses_phi:
                     features[0, lane] = euler_phi(q0, q1, q2, q3)
@@ -216,21 +218,27 @@ def euler_tree_window_errors(
                     features[1, lane] = euler_theta(q0, q1, q2, q3)
                 if uses_psi:
                     features[2, lane] = euler_psi(q0, q1, q2, q3)
-            for c in range(n_rate):
-                features[6 + rate_cols[c], lane] = rates[rate_cols[c], lane]
-            if uses_vel:
-                for i in range(3):
+        for c in range(n_rate):
+            col = rate_cols[c]
+            for lane in range(n):
+                features[6 + col, lane] = rates[col, lane]
+        if uses_vel:
+            for i in range(3):
+                for lane in range(n):
                     features[3 + i, lane] = vel[i, lane]
-            for c in range(n_used_in):
-                j = input_cols[c]
-                features[9 + j, lane] = inputs[idx - delays[j], j]
+        for c in range(n_used_in):
+            j = input_cols[c]
+            shift = k - delays[j]
+            for lane in range(n):
+                features[9 + j, lane] = inputs[starts[lane] + shift, j]
         eval_lanes(codes, values, size, features, stack, pred, n)
         if lagged:
             for lane in range(n):
                 applied[lane] += alpha * (pred[lane] - applied[lane])
                 pred[lane] = applied[lane]
 
-        if body_step:  # all lanes at once (vectorised), the same bits as lane by lane
+        # the state of every lane at once (loops that vectorise; a dead lane's is not read)
+        if body_step:
             euler_lanes_step(
                 quat,
                 vel,
@@ -246,32 +254,32 @@ def euler_tree_window_errors(
                 need_att,
                 inc,
             )
+        elif linear:
+            for lane in range(n):
+                idx = starts[lane] + k
+                a0 = pred[lane] if target == 0 else acc[idx, 0]
+                a1 = pred[lane] if target == 1 else acc[idx, 1]
+                a2 = pred[lane] if target == 2 else acc[idx, 2]
+                vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
+                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt
+                )
+        else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
+            for i in range(3):
+                if i == target - 3:
+                    for lane in range(n):
+                        rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
+                else:
+                    for lane in range(n):
+                        rates[i, lane] = euler_rate_step(
+                            rates[i, lane], acc[starts[lane] + k, 3 + i], dt
+                        )
         total = 0.0
         for lane in range(n):
             if not alive[lane]:
                 total += err[lane]
                 continue
             idx = starts[lane] + k
-            if linear:
-                a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
-                if target == 0:
-                    a0 = pred[lane]
-                elif target == 1:
-                    a1 = pred[lane]
-                else:
-                    a2 = pred[lane]
-                vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
-                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt
-                )
-                x = vel[target, lane]
-            else:
-                if not body_step:  # nothing reads the attitude or the velocity: rates alone
-                    for i in range(3):
-                        if i == target - 3:
-                            rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
-                        else:
-                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i], dt)
-                x = rates[target - 3, lane]
+            x = vel[target, lane] if linear else rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
                 e = e * e
