@@ -215,3 +215,33 @@ def test_lm_rejects_diverged_trials_and_stops_at_an_exact_fit():
     x = levenberg_marquardt(fun, np.array([-2.0]), jac, 30)
     np.testing.assert_allclose(x, [3.0], atol=1e-8)
     assert levenberg_marquardt(fun, np.array([3.0]), jac, 20)[0] == 3.0
+
+
+def test_search_tolerance_stops_earlier_within_its_relative_drop():
+    """The search's LM tolerance (SEARCH_FTOL) stops a slowly converging fit in fewer
+    evaluations than MINPACK's FTOL, at a sum of squares within a few SEARCH_FTOL of it."""
+    from gpquad.engine.evolve.gradient_fit import SEARCH_FTOL
+    from gpquad.engine.evolve.lm import FTOL
+
+    t = np.linspace(0.0, 4.0, 200)
+    y = 2.0 * np.exp(-1.3 * t) + 0.5 + 0.01 * np.sin(17.0 * t)  # not exactly the model
+
+    def fun(x):
+        return x[0] * np.exp(-x[1] * t) + x[2] - y
+
+    def jac(x):
+        e = np.exp(-x[1] * t)
+        return np.column_stack([e, -x[0] * t * e, np.ones_like(t)])
+
+    costs, calls = {}, {}
+    for name, tol in (("tight", FTOL), ("search", SEARCH_FTOL)):
+        n = [0]
+
+        def counted(x, n=n):
+            n[0] += 1
+            return fun(x)
+
+        x = levenberg_marquardt(counted, np.array([0.5, 0.2, 0.0]), jac, 100, ftol=tol)
+        costs[name], calls[name] = float(np.sum(fun(x) ** 2)), n[0]
+    assert calls["search"] < calls["tight"]
+    assert costs["tight"] <= costs["search"] <= costs["tight"] * (1.0 + 10.0 * SEARCH_FTOL)

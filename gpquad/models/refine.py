@@ -41,6 +41,7 @@ import sympy as sp
 from gpquad.data.mirror import mirror_dataset
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.lm import FTOL
 from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
@@ -172,6 +173,7 @@ class RefineProblem:
             self.error,
             FIT_STEPS,
             self.short,
+            FTOL,
         )
         return self.expr(fitted), float(error)
 

@@ -17,6 +17,7 @@ import sympy as sp
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.evolve.lm import FTOL
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.taps import taps_of, with_taps
 from gpquad.engine.tree.export import from_sympy, round_constants
@@ -63,7 +64,7 @@ def refit(equation, tree, dataset, evolution):
         return float(ev.window_errors([t], starts, n_steps=steps).mean())
 
     start_error = error_of(tree)
-    return gauss_newton_constants(ev, tree, start_error, starts, steps, error_of, REFIT_STEPS)
+    return gauss_newton_constants(ev, tree, start_error, starts, steps, error_of, REFIT_STEPS, FTOL)
 
 
 def symmetrize(model, dataset, evolution, flipped):

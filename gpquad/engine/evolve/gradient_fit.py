@@ -23,6 +23,10 @@ from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 
+#: Relative drop of the squared residuals (actual and predicted) below which the search's
+#: LM fits stop: a fit that gains less is as good for ranking trees, and the finishing
+#: steps refit with MINPACK's FTOL (docs/decisions/2026-11-26-speed.md).
+SEARCH_FTOL = 1e-4
 #: A constant is held fixed when its Jacobian column is this close to a combination of the
 #: others (relative pivot of the pivoted QR, unit-norm columns).
 IDENTIFIABLE_RTOL = 1e-9
@@ -93,12 +97,20 @@ def identifiable(jac: np.ndarray, rtol: float = IDENTIFIABLE_RTOL) -> np.ndarray
 
 
 def gauss_newton_constants(
-    ev: Evaluator, model: Tree, error: float, starts, n_steps: int, error_of, max_steps: int
+    ev: Evaluator,
+    model: Tree,
+    error: float,
+    starts,
+    n_steps: int,
+    error_of,
+    max_steps: int,
+    ftol: float = SEARCH_FTOL,
 ) -> tuple[Tree, float]:
     """LM fit of all constants of `model` on the windows `starts` (n_steps each).
 
     Keeps the result only if error_of(fitted) < error. max_steps bounds the number of
-    residual evaluations (each one flies every window once with sensitivities).
+    residual evaluations (each one flies every window once with sensitivities); ftol is
+    the LM's relative-drop tolerance (gpquad.engine.evolve.lm).
     """
     slots = np.flatnonzero(model.codes == CONST)
     if slots.size == 0 or max_steps == 0:
@@ -136,6 +148,7 @@ def gauss_newton_constants(
             x0[free],
             lambda x: evaluate(full(x))[1][:, free],
             max_steps,
+            ftol=ftol,
         )
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - non-finite steps
         return model, error
@@ -157,6 +170,7 @@ def continued_constants(
     error_of,
     max_steps: int,
     short_windows,
+    ftol: float = SEARCH_FTOL,
 ) -> tuple[Tree, float]:
     """LM fit with a growing horizon: the direct fit on (starts, n_steps), and a fit that
     starts on each (short_starts, short_steps) of `short_windows` in turn (each from the
@@ -166,16 +180,17 @@ def continued_constants(
     Short windows are nearly the one-step problem, whose error has one basin for a model
     linear in its constants; the long-window error of a stiff closed loop has many, and a
     fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
+    ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish).
     """
     best, best_error = gauss_newton_constants(
-        ev, model, error, starts, n_steps, error_of, max_steps
+        ev, model, error, starts, n_steps, error_of, max_steps, ftol
     )
     if not short_windows:
         return best, best_error
     tree = model
     for short_starts, short_steps in short_windows:
         tree, _ = gauss_newton_constants(
-            ev, tree, np.inf, short_starts, short_steps, lambda t: 0.0, max_steps
+            ev, tree, np.inf, short_starts, short_steps, lambda t: 0.0, max_steps, ftol
         )
     if tree is model:
         return best, best_error
@@ -183,7 +198,7 @@ def continued_constants(
     if not np.isfinite(tree_error):
         return best, best_error
     tree, tree_error = gauss_newton_constants(
-        ev, tree, tree_error, starts, n_steps, error_of, max_steps
+        ev, tree, tree_error, starts, n_steps, error_of, max_steps, ftol
     )
     if tree_error < best_error:
         return tree, tree_error

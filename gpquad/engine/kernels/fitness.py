@@ -30,7 +30,7 @@ alpha = 1 is no lag and leaves every result bit-identical to the kernels without
 import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
-from gpquad.engine.kernels.fitness_rk4 import rk4_tree_window_errors
+from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
 from gpquad.engine.kernels.quaternion import (
     euler_angle,
     euler_phi,
@@ -39,8 +39,8 @@ from gpquad.engine.kernels.quaternion import (
 )
 from gpquad.engine.kernels.step import (
     RK4,
+    euler_lanes_step,
     euler_rate_step,
-    euler_step,
     euler_velocity_step,
     wrap_angle,
 )
@@ -57,7 +57,6 @@ __all__ = [
 ]
 
 
-@njit
 def tree_window_errors(
     codes,
     values,
@@ -80,6 +79,8 @@ def tree_window_errors(
     alpha: the equation's lag factor in (0, 1] (module notes; 1 = no lag).
     scheme, substeps: the integrator (gpquad.engine.kernels.step: EULER, one step per
     sample, or RK4 with `substeps` steps per sample, gpquad.engine.kernels.fitness_rk4).
+    The scheme is picked here, in Python, so that a process compiles only the kernels of
+    the schemes it flies.
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
@@ -151,6 +152,7 @@ def euler_tree_window_errors(
     att_err = (not linear) and att_weight > 0.0
     need_att = (not linear) and (uses_euler or att_err)
     budget = bound * n * n_steps
+    body_step = (not linear) and (need_vel or need_att)  # an angular target's full eq. 2 step
 
     features = np.zeros((9 + n_in, n))
     stack = np.empty((STACK_ROWS, n))
@@ -159,6 +161,7 @@ def euler_tree_window_errors(
     vel = np.empty((3, n))
     rates = np.empty((3, n))
     err = np.zeros(n)
+    inc = np.empty((5, n))
     alive = np.ones(n, dtype=np.bool_)
     n_alive = n
     lagged = alpha < 1.0
@@ -199,13 +202,15 @@ def euler_tree_window_errors(
             n_used_in += 1
 
     for k in range(n_steps):
-        for lane in range(n):
-            if not alive[lane]:
-                continue
-            idx = starts[lane] + k
-            for c in range(n_data):
-                features[data_cols[c], lane] = states[idx, data_cols[c]]
-            if need_att:
+        # the leaves column by column (loops without branches; a dead lane's are not read)
+        for c in range(n_data):
+            col = data_cols[c]
+            for lane in range(n):
+                features[col, lane] = states[starts[lane] + k, col]
+        if need_att:
+            for lane in range(n):
+                if not alive[lane]:
+                    continue
                 q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
                 if uses_phi:
                     features[0, lane] = euler_phi(q0, q1, q2, q3)
@@ -213,86 +218,68 @@ def euler_tree_window_errors(
                     features[1, lane] = euler_theta(q0, q1, q2, q3)
                 if uses_psi:
                     features[2, lane] = euler_psi(q0, q1, q2, q3)
-            for c in range(n_rate):
-                features[6 + rate_cols[c], lane] = rates[rate_cols[c], lane]
-            if uses_vel:
-                for i in range(3):
+        for c in range(n_rate):
+            col = rate_cols[c]
+            for lane in range(n):
+                features[6 + col, lane] = rates[col, lane]
+        if uses_vel:
+            for i in range(3):
+                for lane in range(n):
                     features[3 + i, lane] = vel[i, lane]
-            for c in range(n_used_in):
-                j = input_cols[c]
-                features[9 + j, lane] = inputs[idx - delays[j], j]
+        for c in range(n_used_in):
+            j = input_cols[c]
+            shift = k - delays[j]
+            for lane in range(n):
+                features[9 + j, lane] = inputs[starts[lane] + shift, j]
         eval_lanes(codes, values, size, features, stack, pred, n)
         if lagged:
             for lane in range(n):
                 applied[lane] += alpha * (pred[lane] - applied[lane])
                 pred[lane] = applied[lane]
 
+        # the state of every lane at once (loops that vectorise; a dead lane's is not read)
+        if body_step:
+            euler_lanes_step(
+                quat,
+                vel,
+                rates,
+                acc,
+                starts,
+                k,
+                target - 3,
+                pred,
+                alive,
+                dt,
+                need_vel,
+                need_att,
+                inc,
+            )
+        elif linear:
+            for lane in range(n):
+                idx = starts[lane] + k
+                a0 = pred[lane] if target == 0 else acc[idx, 0]
+                a1 = pred[lane] if target == 1 else acc[idx, 1]
+                a2 = pred[lane] if target == 2 else acc[idx, 2]
+                vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
+                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt
+                )
+        else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
+            for i in range(3):
+                if i == target - 3:
+                    for lane in range(n):
+                        rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
+                else:
+                    for lane in range(n):
+                        rates[i, lane] = euler_rate_step(
+                            rates[i, lane], acc[starts[lane] + k, 3 + i], dt
+                        )
         total = 0.0
         for lane in range(n):
             if not alive[lane]:
                 total += err[lane]
                 continue
             idx = starts[lane] + k
-            if linear:
-                a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
-                if target == 0:
-                    a0 = pred[lane]
-                elif target == 1:
-                    a1 = pred[lane]
-                else:
-                    a2 = pred[lane]
-                vel[0, lane], vel[1, lane], vel[2, lane] = euler_velocity_step(
-                    rot, idx, vel[0, lane], vel[1, lane], vel[2, lane], a0, a1, a2, dt
-                )
-                x = vel[target, lane]
-            else:
-                if need_vel or need_att:
-                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
-                    if target == 3:
-                        a3 = pred[lane]
-                    elif target == 4:
-                        a4 = pred[lane]
-                    else:
-                        a5 = pred[lane]
-                    (
-                        quat[0, lane],
-                        quat[1, lane],
-                        quat[2, lane],
-                        quat[3, lane],
-                        vel[0, lane],
-                        vel[1, lane],
-                        vel[2, lane],
-                        rates[0, lane],
-                        rates[1, lane],
-                        rates[2, lane],
-                    ) = euler_step(
-                        quat[0, lane],
-                        quat[1, lane],
-                        quat[2, lane],
-                        quat[3, lane],
-                        vel[0, lane],
-                        vel[1, lane],
-                        vel[2, lane],
-                        rates[0, lane],
-                        rates[1, lane],
-                        rates[2, lane],
-                        acc[idx, 0],
-                        acc[idx, 1],
-                        acc[idx, 2],
-                        a3,
-                        a4,
-                        a5,
-                        dt,
-                        need_vel,
-                        need_att,
-                    )
-                else:  # nothing reads the attitude or the velocity: eq. 2's rate steps alone
-                    for i in range(3):
-                        if i == target - 3:
-                            rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
-                        else:
-                            rates[i, lane] = euler_rate_step(rates[i, lane], acc[idx, 3 + i], dt)
-                x = rates[target - 3, lane]
+            x = vel[target, lane] if linear else rates[target - 3, lane]
             e = x - states[idx + 1, 3 + target]
             if squared:
                 e = e * e
@@ -318,7 +305,6 @@ def euler_tree_window_errors(
     return False
 
 
-@njit
 def population_window_errors(
     codes,
     values,
@@ -337,8 +323,60 @@ def population_window_errors(
     substeps,
 ):
     """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
+    if scheme == RK4:
+        rk4_population_window_errors(
+            codes,
+            values,
+            sizes,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds,
+            out,
+            substeps,
+        )
+    else:
+        euler_population_window_errors(
+            codes,
+            values,
+            sizes,
+            delays,
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds,
+            out,
+        )
+
+
+@njit
+def euler_population_window_errors(
+    codes,
+    values,
+    sizes,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bounds,
+    out,
+):
+    """population_window_errors flown by eq. 2."""
     for i in range(codes.shape[0]):
-        tree_window_errors(
+        euler_tree_window_errors(
             codes[i],
             values[i],
             sizes[i],
@@ -352,6 +390,4 @@ def population_window_errors(
             alpha,
             bounds[i],
             out[i],
-            scheme,
-            substeps,
         )

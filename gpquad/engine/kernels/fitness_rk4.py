@@ -208,6 +208,43 @@ def rk4_tree_window_errors(
 
 
 @njit
+def rk4_population_window_errors(
+    codes,
+    values,
+    sizes,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    squared,
+    att_weight,
+    alpha,
+    bounds,
+    out,
+    substeps,
+):
+    """population_window_errors flown by RK4 (gpquad.engine.kernels.fitness_rk4)."""
+    for i in range(codes.shape[0]):
+        rk4_tree_window_errors(
+            codes[i],
+            values[i],
+            sizes[i],
+            delays[i],
+            target,
+            flight,
+            starts,
+            n_steps,
+            squared,
+            att_weight,
+            alpha,
+            bounds[i],
+            out[i],
+            substeps,
+        )
+
+
+@njit
 def rk4_rollout(
     codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise, substeps
 ):

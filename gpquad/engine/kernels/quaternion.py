@@ -30,61 +30,67 @@ def quat_mul(a0, a1, a2, a3, b0, b1, b2, b3):
 SERIES_LIMIT = 0.5
 
 
+@njit(inline="always")
+def increment_series(p, q, r, dt):
+    """(d0, d1, d2, d3, h2): rate_increment by its series in h^2 = h2, exact only for
+    h2 < SERIES_LIMIT^2 (rate_increment's hot path; without its sin/cos branch a loop over
+    lanes vectorises)."""
+    h2 = 0.25 * (p * p + q * q + r * r) * dt * dt
+    sinc = 1.0 + h2 * (
+        -1.0 / 6.0
+        + h2
+        * (
+            1.0 / 120.0
+            + h2
+            * (
+                -1.0 / 5040.0
+                + h2
+                * (
+                    1.0 / 362880.0
+                    + h2
+                    * (
+                        -1.0 / 39916800.0
+                        + h2 * (1.0 / 6227020800.0 + h2 * (-1.0 / 1307674368000.0))
+                    )
+                )
+            )
+        )
+    )
+    cosh = 1.0 + h2 * (
+        -0.5
+        + h2
+        * (
+            1.0 / 24.0
+            + h2
+            * (
+                -1.0 / 720.0
+                + h2
+                * (
+                    1.0 / 40320.0
+                    + h2
+                    * (-1.0 / 3628800.0 + h2 * (1.0 / 479001600.0 + h2 * (-1.0 / 87178291200.0)))
+                )
+            )
+        )
+    )
+    s = 0.5 * dt * sinc
+    return cosh, p * s, q * s, r * s, h2
+
+
 @njit
 def rate_increment(p, q, r, dt):
     """dq = exp(omega dt / 2) for body rates (p, q, r) rad/s held over dt s.
 
     With h = |omega| dt / 2, dq = (cos h, sin(h)/h * omega dt / 2). Below SERIES_LIMIT
-    both are evaluated as series in h^2 (no sqrt, sin or cos: this is the hot path).
+    both are evaluated as series in h^2 (increment_series: no sqrt, sin or cos, the hot
+    path).
     """
-    h2 = 0.25 * (p * p + q * q + r * r) * dt * dt
+    d0, d1, d2, d3, h2 = increment_series(p, q, r, dt)
     if h2 < SERIES_LIMIT * SERIES_LIMIT:
-        sinc = 1.0 + h2 * (
-            -1.0 / 6.0
-            + h2
-            * (
-                1.0 / 120.0
-                + h2
-                * (
-                    -1.0 / 5040.0
-                    + h2
-                    * (
-                        1.0 / 362880.0
-                        + h2
-                        * (
-                            -1.0 / 39916800.0
-                            + h2 * (1.0 / 6227020800.0 + h2 * (-1.0 / 1307674368000.0))
-                        )
-                    )
-                )
-            )
-        )
-        cosh = 1.0 + h2 * (
-            -0.5
-            + h2
-            * (
-                1.0 / 24.0
-                + h2
-                * (
-                    -1.0 / 720.0
-                    + h2
-                    * (
-                        1.0 / 40320.0
-                        + h2
-                        * (
-                            -1.0 / 3628800.0
-                            + h2 * (1.0 / 479001600.0 + h2 * (-1.0 / 87178291200.0))
-                        )
-                    )
-                )
-            )
-        )
-    else:
-        h = math.sqrt(h2)
-        sinc = math.sin(h) / h
-        cosh = math.cos(h)
-    s = 0.5 * dt * sinc
-    return cosh, p * s, q * s, r * s
+        return d0, d1, d2, d3
+    h = math.sqrt(h2)
+    s = 0.5 * dt * (math.sin(h) / h)
+    return math.cos(h), p * s, q * s, r * s
 
 
 @njit

@@ -11,7 +11,6 @@ from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.numba_config import njit
 
 
-@njit
 def rollout(
     codes,
     values,
@@ -33,7 +32,8 @@ def rollout(
     modelled (6,) bool: use the tree for this target, else the data's acceleration;
     alphas (6,): each equation's lag factor (module notes; 1 = no lag).
     input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
-    scheme, substeps: the integrator (gpquad.engine.kernels.step).
+    scheme, substeps: the integrator (gpquad.engine.kernels.step), picked here in Python so
+    that a process compiles only the kernels of the schemes it flies.
     Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
     """
     if scheme == RK4:
@@ -50,6 +50,34 @@ def rollout(
             input_noise,
             substeps,
         )
+    return euler_rollout(
+        codes,
+        values,
+        sizes,
+        delays,
+        modelled,
+        alphas,
+        flight,
+        starts,
+        n_steps,
+        input_noise,
+    )
+
+
+@njit
+def euler_rollout(
+    codes,
+    values,
+    sizes,
+    delays,
+    modelled,
+    alphas,
+    flight,
+    starts,
+    n_steps,
+    input_noise,
+):
+    """rollout flown by eq. 2."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]

@@ -43,8 +43,8 @@ Flat arrays only: codes, values, size, delays as the fitness kernel; flight is F
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT
-from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
+from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.quaternion import euler_phi, euler_psi, euler_theta
 from gpquad.engine.kernels.sensitivity_rk4 import rk4_window_residuals
 from gpquad.engine.kernels.step import (
     RK4,
@@ -72,7 +72,6 @@ __all__ = [
 ]
 
 
-@njit
 def window_residuals(
     codes,
     values,
@@ -98,7 +97,8 @@ def window_residuals(
     nodes. A window whose state diverges (NaN or beyond STATE_LIMIT) gets DIVERGED_RESIDUAL
     and zero Jacobian rows from that step on. Returns the number of diverged windows.
     scheme, substeps: the integrator (gpquad.engine.kernels.step; RK4 in
-    gpquad.engine.kernels.sensitivity_rk4).
+    gpquad.engine.kernels.sensitivity_rk4), picked here in Python so that a process compiles
+    only the kernels of the schemes it flies.
     """
     if scheme == RK4:
         return rk4_window_residuals(
@@ -117,6 +117,40 @@ def window_residuals(
             jac,
             substeps,
         )
+    return euler_window_residuals(
+        codes,
+        values,
+        size,
+        delays,
+        target,
+        flight,
+        starts,
+        n_steps,
+        att_weight,
+        angle_tangents,
+        alpha,
+        res,
+        jac,
+    )
+
+
+@njit
+def euler_window_residuals(
+    codes,
+    values,
+    size,
+    delays,
+    target,
+    flight,
+    starts,
+    n_steps,
+    att_weight,
+    angle_tangents,
+    alpha,
+    res,
+    jac,
+):
+    """window_residuals flown by eq. 2 (module notes)."""
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
@@ -124,6 +158,11 @@ def window_residuals(
     n_rows = residual_rows(target, att_weight)
     # the angles' sensitivities are followed only where something reads them
     track_angles = (not linear) and (angle_tangents or n_rows == 2)
+    # an angle is computed where the tree or the angles' tangents read it; the step's
+    # angles after it are the next step's before it
+    need_phi = track_angles or uses_leaves(codes, size, 0, 0)
+    need_theta = track_angles or uses_leaves(codes, size, 1, 1)
+    need_psi = uses_leaves(codes, size, 2, 2)
     slot_of = constant_slots(codes, size)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
@@ -151,6 +190,8 @@ def window_residuals(
         sens[:, :] = 0.0
         asens[:, :] = 0.0
         alive = True
+        phi1 = euler_phi(q0, q1, q2, q3) if need_phi else 0.0
+        theta1 = euler_theta(q0, q1, q2, q3) if need_theta else 0.0
         for k in range(n_steps):
             row = (w * n_steps + k) * n_rows
             if not alive:
@@ -170,9 +211,10 @@ def window_residuals(
                     for c in range(n_c):
                         tangents[3 + i, c] = sens[i, c]
             else:
-                features[0] = euler_phi(q0, q1, q2, q3)
-                features[1] = euler_theta(q0, q1, q2, q3)
-                features[2] = euler_psi(q0, q1, q2, q3)
+                features[0] = phi1
+                features[1] = theta1
+                if need_psi:
+                    features[2] = euler_psi(q0, q1, q2, q3)
                 for i in range(3):
                     features[3 + i] = vel[i]
                     features[6 + i] = rates[i]
@@ -236,8 +278,8 @@ def window_residuals(
                     True,
                     True,
                 )
-                phi1 = euler_phi(q0, q1, q2, q3) if track_angles else 0.0
-                theta1 = euler_theta(q0, q1, q2, q3) if track_angles else 0.0
+                phi1 = euler_phi(q0, q1, q2, q3) if need_phi else 0.0
+                theta1 = euler_theta(q0, q1, q2, q3) if need_theta else 0.0
                 euler_rate_tangent(
                     target - 3,
                     features[0],
@@ -267,7 +309,7 @@ def window_residuals(
             res[row] = x - states[idx + 1, 3 + target]
             if n_rows == 2:
                 a = target - 3
-                angle = euler_angle(a, q0, q1, q2, q3)
+                angle = phi1 if a == 0 else theta1 if a == 1 else euler_psi(q0, q1, q2, q3)
                 res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, a])
                 for c in range(n_c):
                     jac[row + 1, c] = att_weight * asens[a, c]

@@ -42,6 +42,8 @@ import math
 import numpy as np
 
 from gpquad.engine.kernels.quaternion import (
+    SERIES_LIMIT,
+    increment_series,
     quat_mul,
     rate_increment,
     renormalize,
@@ -118,6 +120,66 @@ def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, 
         euler_rate_step(q, a4, dt),
         euler_rate_step(r, a5, dt),
     )
+
+
+@njit
+def euler_lanes_step(
+    quat, vel, rates, acc, starts, k, axis, pred, alive, dt, move_vel, move_att, inc
+):
+    """euler_step of every alive lane at step k of windows `starts` for an angular target,
+    in place on quat (4, n), vel (3, n), rates (3, n): the velocity when move_vel, the
+    attitude when move_att; rate `axis` driven by pred (n,), the others by the data's acc.
+    inc (5, n) is a work buffer.
+
+    The same bits as euler_step lane by lane, in loops over lanes without branches (which
+    vectorise): the rate increments by their series (the rare lane beyond SERIES_LIMIT is
+    redone by rate_increment), then the velocity, attitude and rates. A dead lane's state is
+    stepped too, to no purpose: nothing reads it again.
+    """
+    n = starts.shape[0]
+    big = 0
+    for lane in range(n):
+        d0, d1, d2, d3, h2 = increment_series(rates[0, lane], rates[1, lane], rates[2, lane], dt)
+        inc[0, lane], inc[1, lane], inc[2, lane], inc[3, lane] = d0, d1, d2, d3
+        inc[4, lane] = h2
+        big += not (h2 < SERIES_LIMIT * SERIES_LIMIT)
+    if big > 0:
+        for lane in range(n):
+            if alive[lane] and not (inc[4, lane] < SERIES_LIMIT * SERIES_LIMIT):
+                inc[0, lane], inc[1, lane], inc[2, lane], inc[3, lane] = rate_increment(
+                    rates[0, lane], rates[1, lane], rates[2, lane], dt
+                )
+    if move_vel:
+        for lane in range(n):
+            idx = starts[lane] + k
+            vel[0, lane], vel[1, lane], vel[2, lane] = rotate_back(
+                inc[0, lane],
+                inc[1, lane],
+                inc[2, lane],
+                inc[3, lane],
+                vel[0, lane] + acc[idx, 0] * dt,
+                vel[1, lane] + acc[idx, 1] * dt,
+                vel[2, lane] + acc[idx, 2] * dt,
+            )
+    for lane in range(n if move_att else 0):
+        n0, n1, n2, n3 = quat_mul(
+            quat[0, lane],
+            quat[1, lane],
+            quat[2, lane],
+            quat[3, lane],
+            inc[0, lane],
+            inc[1, lane],
+            inc[2, lane],
+            inc[3, lane],
+        )
+        quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane] = renormalize(n0, n1, n2, n3)
+    for i in range(3):
+        if i == axis:
+            for lane in range(n):
+                rates[i, lane] = euler_rate_step(rates[i, lane], pred[lane], dt)
+        else:
+            for lane in range(n):
+                rates[i, lane] = euler_rate_step(rates[i, lane], acc[starts[lane] + k, 3 + i], dt)
 
 
 @njit(inline="always")
