@@ -1,5 +1,5 @@
-"""Generate every rotorpy flight of the benchmark (both fleets, angle and rate mode, clean and
-noisy).
+"""Generate every rotorpy flight of the benchmark (every fleet, angle and rate mode, clean,
+noisy and the noise family).
 
     python benchmarks/make_rotorpy_flights.py [--out results/benchmark_data/rotorpy]
 
@@ -23,10 +23,15 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"cache folder (default {DEFAULT_OUT})")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    for name, (mode, noisy, fleet) in ROTORPY.items():
+    for name, (mode, noise, fleet) in ROTORPY.items():
         t0 = time.perf_counter()
         res = ensure_flights(
-            mode, noisy, args.out, fleet=fleet, progress=lambda m: print(" ", m, flush=True)
+            mode,
+            noise > 0,
+            args.out,
+            fleet=fleet,
+            noise_scale=max(noise, 1),
+            progress=lambda m: print(" ", m, flush=True),
         )
         n = sum(len(res[r]) for r in ("train", "validation", "test"))
         print(

@@ -5,6 +5,7 @@ import dataclasses
 import sys
 import types
 
+import numpy as np
 import pytest
 
 from gpquad.benchmark import scenarios
@@ -23,8 +24,12 @@ def _fake_module(tmp_path, calls):
     """Stands in for gpquad.benchmark.rotorpy_flights: two vehicles a and b whose roll
     equations differ, 2 training, 1 validation and 1 test flight each."""
 
-    def ensure_flights(mode, noisy, cache_dir, fleet="tuned"):
-        calls.append((mode, noisy, str(cache_dir)) + (() if fleet == "tuned" else (fleet,)))
+    def ensure_flights(mode, noisy, cache_dir, fleet="tuned", **scale):
+        calls.append(
+            (mode, noisy, str(cache_dir))
+            + (() if fleet == "tuned" else (fleet,))
+            + tuple(scale.values())
+        )
         paths, flights = {"train": [], "validation": [], "test": []}, []
         for vehicle in ("a", "b"):
             sim = SimulatorConfig(duration_s=20.0)
@@ -194,3 +199,125 @@ def test_named_log_scenario_without_its_log_is_skipped(tmp_path, monkeypatch):
     config.write_text(config.read_text() + 'validation = ["nowhere/other"]\n')
     with pytest.raises(GpquadError):
         scenarios.user_scenario(config)
+
+
+def test_noise_family_and_third_vehicle_ask_for_their_fleet_and_noise_multiple(
+    tmp_path, monkeypatch
+):
+    """The 2x and 4x noise family exists for the tuned fleet, the third vehicle (px4sih) and
+    the median simulator, not for the held-out fleet or rigid-body; each rotorpy member asks
+    the generator for its fleet and noise multiple and records the multiple."""
+    calls = []
+    monkeypatch.setitem(
+        sys.modules, "gpquad.benchmark.rotorpy_flights", _fake_module(tmp_path, calls)
+    )
+    family = [n for n in scenarios.SCENARIOS if n.endswith(("-noisy2x", "-noisy4x"))]
+    assert sorted(family) == sorted(
+        f"{base}-noisy{k}x"
+        for base in (
+            "median",
+            "rotorpy-angle",
+            "rotorpy-rate",
+            "rotorpy-px4sih-angle",
+            "rotorpy-px4sih-rate",
+        )
+        for k in (2, 4)
+    )
+    for base in ("rotorpy-px4sih-angle", "rotorpy-px4sih-rate"):
+        assert base in scenarios.SCENARIOS and f"{base}-noisy" in scenarios.SCENARIOS
+    expected = {
+        "rotorpy-angle-noisy2x": ("angle", True, 2),
+        "rotorpy-rate-noisy4x": ("rate", True, 4),
+        "rotorpy-px4sih-angle": ("angle", False, "px4sih"),
+        "rotorpy-px4sih-rate-noisy": ("rate", True, "px4sih"),
+        "rotorpy-px4sih-angle-noisy4x": ("angle", True, "px4sih", 4),
+    }
+    for name, call in expected.items():
+        sc = scenarios.build_scenario(name, tmp_path / "cache")
+        assert (calls[-1][0], calls[-1][1]) + calls[-1][3:] == call, name
+        assert sc.source.get("noise_scale") == (call[-1] if call[-1] in (2, 4) else None)
+
+
+def _short_median():
+    from gpquad.study.config import Config
+
+    cfg = Config()
+    return dataclasses.replace(cfg, simulator=dataclasses.replace(cfg.simulator, duration_s=20.0))
+
+
+def test_median_noise_family_is_exactly_2x_and_4x_the_benchmark_noise(tmp_path, monkeypatch):
+    """median-noisy2x / 4x fly median-noisy's flights with every noise SD doubled or
+    quadrupled (exactly, not approximately), and the noise itself scales: the same standard
+    normals times 2 or 4 on top of the same clean flight."""
+    monkeypatch.setattr(scenarios, "TEST_DURATION_S", 20.0)
+    cfg = _short_median()
+    built = {k: scenarios._simulated(f"m{k}", cfg, k) for k in (0, 1, 2, 4)}
+    for k in (2, 4):
+        assert built[k].source["measurement_noise"] == {
+            s: k * sd for s, sd in scenarios.NOISE.items()
+        }
+        assert all(
+            built[k].source["measurement_noise"][s] == k * built[1].source["measurement_noise"][s]
+            for s in scenarios.NOISE
+        )
+    assert built[0].source["measurement_noise"] == {}
+    sim = dataclasses.replace(cfg.simulator, seed=3)
+    raw = {
+        k: simulate(
+            dataclasses.replace(
+                sim, measurement_noise={s: k * sd for s, sd in scenarios.NOISE.items()}
+            ),
+            INPUTS,
+        )
+        for k in (0, 1, 2, 4)
+    }
+    base = raw[1].vel - raw[0].vel
+    assert np.std(base) == pytest.approx(scenarios.NOISE["velocity"], rel=0.1)
+    for k in (2, 4):
+        np.testing.assert_allclose(raw[k].vel - raw[0].vel, k * base, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            raw[k].rates - raw[0].rates, k * (raw[1].rates - raw[0].rates), atol=1e-12
+        )
+    # the bad case: a family member whose noise is not the stated multiple fails the check
+    wrong = dataclasses.replace(sim, measurement_noise={"velocity": 0.041})
+    with pytest.raises(AssertionError):
+        np.testing.assert_allclose(
+            simulate(wrong, INPUTS).vel - raw[0].vel, 2 * base, rtol=1e-9, atol=1e-12
+        )
+
+
+def test_motor_level_scenario_is_configured_with_the_four_motors_and_skipped_without_log(
+    tmp_path, monkeypatch
+):
+    """betaflight-gecko-motors: its config's inputs are the four motor outputs (the reader's
+    names), with no left-right mirror (it would swap motors, not flip signs); the scenario is
+    skipped, not an error, where the log is not on this machine."""
+    from gpquad.study.config import load_config
+
+    path = scenarios.repo_root() / "experiments" / scenarios.LOGS["betaflight-gecko-motors"]
+    cfg = load_config(path)
+    assert cfg.data.format == "betaflight"
+    assert tuple(cfg.data.inputs) == ("motor_0", "motor_1", "motor_2", "motor_3")
+    assert cfg.vehicle.flipped(cfg.data.inputs) == () and not cfg.vehicle.symmetric
+    assert set(cfg.evolution.targets) == {"p_dot", "q_dot", "r_dot"}
+    (tmp_path / "experiments").mkdir()
+    (tmp_path / "experiments" / path.name).write_text(path.read_text())
+    monkeypatch.setattr(scenarios, "repo_root", lambda: tmp_path / "repo")
+    (tmp_path / "repo").mkdir()
+    (tmp_path / "repo" / "experiments").symlink_to(tmp_path / "experiments")
+    with pytest.raises(scenarios.Skipped, match="betaflight-gecko-motors: its log .* is not"):
+        scenarios.build_scenario("betaflight-gecko-motors", tmp_path)
+
+
+@pytest.mark.skipif(
+    not (scenarios.repo_root().parent / "shared" / "data" / "betaflight").is_dir(),
+    reason="../shared/data/betaflight is not present",
+)
+def test_motor_level_scenario_reads_four_motor_inputs(tmp_path):
+    scenario = scenarios.build_scenario("betaflight-gecko-motors", tmp_path)
+    names = ("motor_0", "motor_1", "motor_2", "motor_3")
+    assert scenario.fit.input_names == names and scenario.test.input_names == names
+    assert set(scenario.fit.trim) == set(names)  # each motor relative to its training mean
+    assert 0.05 < min(scenario.fit.trim.values()) < max(scenario.fit.trim.values()) < 0.6
+    assert {info["name"].split(".")[0] for info in scenario.test.flight_info} == {"btfl_all"}
+    assert [k for k, v in scenario.measured.items() if v] == ["p", "q", "r"]

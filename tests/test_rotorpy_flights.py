@@ -4,6 +4,7 @@ gpquad's pipeline, crash checks, sensor noise, caching and bit-identical regener
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 import numpy as np
 import pytest
@@ -161,6 +162,8 @@ def sign_gains(ds):
         ("rate", "hummingbird"),
         ("angle", "crazyfliebrushless"),
         ("rate", "crazyfliebrushless"),
+        ("angle", "px4sih"),
+        ("rate", "px4sih"),
     ],
 )
 def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_path, mode, vehicle):
@@ -170,7 +173,10 @@ def test_short_flight_signs_and_integration_check_through_gpquads_pipeline(tmp_p
     check = integration_check(flights, 250, 0.05)
     assert check.passed, check.table()
     g_y, g_x, k_t = sign_gains(ds)
-    assert 8.0 < g_y < 10.5 and -10.5 < g_x < -8.0 and -11.0 < k_t < -7.0, (g_y, g_x, k_t)
+    # px4sih's collective swings twice the hummingbird's and its thrust lags it by about two
+    # samples (50 ms motor lag): the static gain of a_z on u_T is about half of -g
+    k_t_high = -4.0 if vehicle == "px4sih" else -7.0
+    assert 8.0 < g_y < 10.5 and -10.5 < g_x < -8.0 and -11.0 < k_t < k_t_high, (g_y, g_x, k_t)
     s, u = ds.arrays.states, ds.arrays.inputs
     names = list(ds.input_names)
     tracked = (0, 1, 2) if mode == "angle" else (6, 7, 8)  # phi..psi or p..r follow the inputs
@@ -287,3 +293,82 @@ def test_heldout_fleet_has_its_own_vehicle_seeds_and_folder(tmp_path, monkeypatc
     assert (tmp_path / "heldout-rate" / "manifest.json").is_file()
     assert not (tmp_path / "rate").exists()
     assert res["seeds"] == [s.seed for s in rf.flight_plan("rate", "heldout")]
+
+
+def test_third_vehicle_differs_from_the_tuned_fleet_with_a_loop_tuned_like_theirs():
+    """px4sih is a vehicle of its own (mass, inertia, arms, motor lag, rotor limits differ
+    from both tuned vehicles), with attitude gains of its own that rotorpy's parameters lack;
+    its loop is tuned like theirs: natural frequency between the crazyflie's and the
+    hummingbird's, damped at least as well, stable behind its motor lag (kd > tau_m kp, the
+    Routh condition of the third-order loop), and its seeds are no other fleet's."""
+    third, k_w = rf.vehicle_params("px4sih")
+    assert "kp_att" not in importlib.import_module(rf.FLEETS["px4sih"]["px4sih"][0]).quad_params
+    assert (third["kp_att"], third["kd_att"]) == (400.0, 80.0) and k_w == 40.0
+    arm = lambda p: max(np.linalg.norm(r) for r in p["rotor_pos"].values())  # noqa: E731
+    wn = lambda p: np.sqrt(p["kp_att"])  # noqa: E731
+    for other in rf.FLEETS["tuned"]:
+        tuned, _ = rf.vehicle_params(other)
+        for key in ("mass", "Ixx", "Izz", "tau_m", "k_eta", "rotor_speed_max", "kp_att"):
+            assert third[key] != tuned[key], (other, key)
+        assert arm(third) != arm(tuned)
+    crazyflie, hummingbird = (rf.vehicle_params(v)[0] for v in rf.FLEETS["tuned"])
+    assert wn(crazyflie) < wn(third) < wn(hummingbird)
+    assert third["kd_att"] / (2 * wn(third)) >= 1.0
+    assert third["kd_att"] > third["tau_m"] * third["kp_att"]
+    seeds = {
+        fleet: {s.seed for m in rf.MODES for s in rf.flight_plan(m, fleet)} for fleet in rf.FLEETS
+    }
+    assert not seeds["px4sih"] & (seeds["tuned"] | seeds["heldout"])
+
+
+def test_noise_family_is_exactly_2x_and_4x_the_noisy_variant(tmp_path, monkeypatch):
+    """noise_scale 2 and 4: the manifest's SDs (gyro bias included) are exactly 2 and 4 times
+    the benchmark's, the flight is the clean flight, and the added noise is exactly 2 and 4
+    times the noisy variant's (the same draws): velocity, rates with their bias, and the
+    attitude noise's rotation angles. A scale outside NOISE_SCALES is a one-line error."""
+    import json
+
+    import pandas as pd
+
+    monkeypatch.setattr(rf, "PLAN", (("train", 1, 6.0), ("validation", 1, 6.0), ("test", 1, 6.0)))
+    made = {
+        k: rf.ensure_flights("angle", True, tmp_path, fleet="px4sih", noise_scale=k)
+        for k in (1, 2, 4)
+    }
+    assert "/px4sih-angle-noisy2x/" in made[2]["train"][0]
+    assert "/px4sih-angle-noisy/" in made[1]["train"][0]
+    base = {**rf.NOISE, "gyro_bias_sd": rf.GYRO_BIAS_SD}
+    for k in (2, 4):
+        manifest = json.loads((tmp_path / f"px4sih-angle-noisy{k}x" / "manifest.json").read_text())
+        assert manifest["settings"]["noise"] == {n: k * v for n, v in base.items()}
+        assert manifest["settings"]["noise_scale"] == k
+    one = json.loads((tmp_path / "px4sih-angle-noisy" / "manifest.json").read_text())
+    assert one["settings"]["noise"] == base and "noise_scale" not in one["settings"]
+    for i, path in enumerate(made[1]["train"] + made[1]["validation"] + made[1]["test"]):
+        clean = pd.read_parquet(path.replace("angle-noisy", "angle"))
+        frames = {
+            k: pd.read_parquet((made[k]["train"] + made[k]["validation"] + made[k]["test"])[i])
+            for k in (1, 2, 4)
+        }
+        d1 = {c: frames[1][c].to_numpy() - clean[c].to_numpy() for c in ("vx", "p", "r")}
+        assert np.std(d1["vx"]) == pytest.approx(rf.NOISE["velocity"], rel=0.2)
+        # the attitude noise is the rotation (1, h) / |(1, h)| with h ~ N(0, (sd / 2)^2)
+        half = {k: tilt_vector(clean, f) for k, f in frames.items()}
+        for k in (2, 4):
+            assert np.array_equal(frames[k]["u_R"], clean["u_R"])  # the same flight
+            for c, d in d1.items():
+                np.testing.assert_allclose(
+                    frames[k][c].to_numpy() - clean[c].to_numpy(), k * d, rtol=1e-9, atol=1e-12
+                )
+            np.testing.assert_allclose(half[k], k * half[1], rtol=1e-7, atol=1e-12)
+    with pytest.raises(GpquadError, match="noise scale 3 is not one of"):
+        rf.ensure_flights("angle", True, tmp_path, noise_scale=3)
+
+
+def tilt_vector(clean, noisy):
+    """h of conj(clean) * noisy = (w, w h) per row: the attitude noise's vector."""
+    cols = ["qw", "qx", "qy", "qz"]
+    a, b = clean[cols].to_numpy(), noisy[cols].to_numpy()
+    aw, av, bw, bv = a[:, 0], -a[:, 1:], b[:, 0], b[:, 1:]
+    w = aw * bw - np.sum(av * bv, axis=1)
+    return (aw[:, None] * bv + bw[:, None] * av + np.cross(av, bv)) / w[:, None]

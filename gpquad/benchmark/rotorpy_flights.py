@@ -1,10 +1,17 @@
 """Flights of rotorpy's vehicles for the benchmark's `rotorpy-*` scenarios.
 
-Two fleets: "tuned", rotorpy's crazyflie and hummingbird (the `rotorpy-*` scenarios, on which
-the engine settings of experiments/recommended.toml were measured and chosen), and
-"heldout", rotorpy's brushless crazyflie (the `rotorpy-heldout-*` scenarios: a vehicle that no
-setting was chosen on; its attitude loop, kp_att 3265 and kd_att 362, is six to eight times
-stiffer than the tuned fleet's, its motor lag 50 ms).
+Three fleets: "tuned", rotorpy's crazyflie and hummingbird (the `rotorpy-*` scenarios, on which
+the engine settings of experiments/recommended.toml were measured and chosen); "heldout",
+rotorpy's brushless crazyflie (the `rotorpy-heldout-*` scenarios: a vehicle that no setting was
+chosen on; its attitude loop, kp_att 3265 and kd_att 362, is six to eight times stiffer than
+the tuned fleet's, its motor lag 50 ms); and "px4sih", rotorpy's parameters of PX4's SIH quad X
+(the `rotorpy-px4sih-*` scenarios: 1 kg, arms of 0.24 m, motor lag 50 ms). rotorpy ships no
+attitude gains for it, so it gets a loop like the tuned fleet's (`GAINS`: kp_att 400, natural
+frequency 20 rad/s as the crazyflie's 17.6 and the hummingbird's 23.3; kd_att 80, damping 2,
+kd_att / kp_att = 4 motor lags) and the tuned fleet's rate gain k_w 40. Its yaw authority per
+unit of yaw inertia is about 1/50 of the crazyflie's, so in rate mode its set-point excitation
+is scaled (`EXCITATION_SCALE`: roll and pitch 0.7, yaw 0.35): the full rate-mode excitation
+drives it into the ground within seconds.
 
 Each flight: rotorpy's SE3 controller follows a slow random reference around a hover point;
 a band-limited, pilot-like excitation (second-order Butterworth-filtered Gaussian noise) is
@@ -23,7 +30,9 @@ u_T is the commanded collective thrust divided by the vehicle's weight.
 
 Every random draw comes from `numpy.random.default_rng([seed, stream])` with the flight's
 recorded seed: stream 0 for the reference and excitation, stream 1 for the sensor noise of
-the noisy variant, so the noisy flight is the clean flight plus noise.
+the noisy variant, so the noisy flight is the clean flight plus noise. The noise family
+(`noise_scale` 2 and 4 of `ensure_flights`) multiplies every SD of NOISE and GYRO_BIAS_SD and
+draws the same standard normals: its noise is exactly 2 or 4 times the noisy flight's.
 """
 
 from __future__ import annotations
@@ -39,6 +48,7 @@ import pandas as pd
 from scipy.signal import butter, sosfilt
 
 from gpquad.benchmark import rotorpy_model as model
+from gpquad.benchmark.rotorpy_checks import LIMITS, check_flight
 from gpquad.data.simulator import add_measurement_noise
 from gpquad.engine.kernels.quaternion import euler_array
 from gpquad.errors import GpquadError
@@ -58,10 +68,17 @@ FLEETS = {
         "hummingbird": ("rotorpy.vehicles.hummingbird_params", 40.0),
     },
     "heldout": {"crazyfliebrushless": ("rotorpy.vehicles.crazyfliebrushless_params", 40.0)},
+    "px4sih": {"px4sih": ("rotorpy.vehicles.px4_sihsim_quadx_params", 40.0)},
 }
 VEHICLES = FLEETS["tuned"]
+#: Attitude gains of vehicles whose rotorpy parameters have none (see the module docstring).
+GAINS = {"px4sih": {"kp_att": 400.0, "kd_att": 80.0}}
+#: Per fleet and mode: factors of EXCITATION's SDs (roll, pitch, yaw, thrust).
+EXCITATION_SCALE = {"px4sih": {"rate": (0.7, 0.7, 0.35, 1.0)}}
 #: Added to the flight seeds of a fleet, so that no two fleets share a seed.
-FLEET_SEED_OFFSET = {"tuned": 0, "heldout": 500}
+FLEET_SEED_OFFSET = {"tuned": 0, "heldout": 500, "px4sih": 300}
+#: Multiples of NOISE of the noise family (1 is the benchmark's noisy variant).
+NOISE_SCALES = (1, 2, 4)
 INPUT_NAMES = ("u_P", "u_R", "u_Y", "u_T")
 LOG_HZ = 100.0
 SUB_STEPS = 5  # physics at 500 Hz
@@ -81,14 +98,6 @@ REFERENCE = {"centre": (0.0, 0.0, 2.0), "amplitude": (0.8, 0.8, 0.3), "period_s"
 #: bias is constant per flight, drawn with this SD per axis (rad/s).
 NOISE = {"attitude": 0.005, "velocity": 0.03, "rates": 0.02}
 GYRO_BIAS_SD = 0.01
-#: A flight fails (GpquadError) when it leaves these bounds.
-LIMITS = {
-    "min_altitude_m": 0.5,
-    "max_tracking_m": 3.0,
-    "max_tilt_deg": 60.0,
-    "max_rate": 15.0,
-    "max_saturation_fraction": 0.01,
-}
 #: The [data] fields with which gpquad's pipeline reads these files.
 DATA_CONFIG = {
     "format": "table",
@@ -146,10 +155,15 @@ def flight_plan(mode: str, fleet: str = "tuned") -> list[FlightSpec]:
 
 
 def vehicle_params(vehicle: str) -> tuple[dict, float | None]:
-    """rotorpy's parameter dict of a vehicle (of any fleet) and the cmd_ctbr gain override
-    (or None)."""
+    """rotorpy's parameter dict of a vehicle (of any fleet), with its GAINS, and the cmd_ctbr
+    gain override (or None)."""
     module, k_w = next(f[vehicle] for f in FLEETS.values() if vehicle in f)
-    return importlib.import_module(module).quad_params, k_w
+    params = importlib.import_module(module).quad_params
+    return ({**params, **GAINS[vehicle]} if vehicle in GAINS else params), k_w
+
+
+def fleet_of(vehicle: str) -> str:
+    return next(name for name, f in FLEETS.items() if vehicle in f)
 
 
 def reference(rng: np.random.Generator, t: np.ndarray) -> np.ndarray:
@@ -164,13 +178,14 @@ def reference(rng: np.random.Generator, t: np.ndarray) -> np.ndarray:
     )
 
 
-def excitation(rng: np.random.Generator, n: int, mode: str) -> np.ndarray:
-    """Band-limited set-point excitation (n, 4) with the mode's SDs, faded in over RAMP_S."""
+def excitation(rng: np.random.Generator, n: int, mode: str, scale=(1.0, 1.0, 1.0, 1.0)):
+    """Band-limited set-point excitation (n, 4) with the mode's SDs times `scale`, faded in
+    over RAMP_S."""
     ex = EXCITATION[mode]
     sos = butter(2, ex["cutoff_hz"], fs=LOG_HZ, output="sos")
     warm = int(10 * LOG_HZ)  # start from the stationary filtered process
     x = sosfilt(sos, rng.standard_normal((n + warm, 4)), axis=0)[warm:]
-    x = x / x.std(axis=0) * np.asarray(ex["sd"])
+    x = x / x.std(axis=0) * np.asarray(ex["sd"]) * np.asarray(scale)
     ramp = np.clip(np.arange(n) / (RAMP_S * LOG_HZ), 0.0, 1.0)
     return np.ascontiguousarray(x * ramp[:, None])
 
@@ -183,7 +198,8 @@ def simulate_flight(spec: FlightSpec) -> tuple[np.ndarray, np.ndarray, np.ndarra
     t = np.arange(n) / LOG_HZ
     rng = np.random.default_rng([spec.seed, 0])
     ref = np.ascontiguousarray(reference(rng, t))
-    exc = excitation(rng, n, spec.mode)
+    scale = EXCITATION_SCALE.get(fleet_of(spec.vehicle), {}).get(spec.mode, (1.0,) * 4)
+    exc = excitation(rng, n, spec.mode, scale)
     s0 = np.zeros(20)
     s0[0:6] = ref[0, 0:6]
     s0[9] = 1.0
@@ -205,47 +221,6 @@ def simulate_flight(spec: FlightSpec) -> tuple[np.ndarray, np.ndarray, np.ndarra
         spec, t, states, ref, flown, (params["rotor_speed_min"], params["rotor_speed_max"])
     )
     return t, states, commands, checks
-
-
-def check_flight(spec: FlightSpec, t, states, ref, flown: int, rotor_limits) -> dict:
-    """Bounds of a flight (dict); GpquadError naming the flight if it crashed or diverged."""
-
-    def fail(what: str, k: int | None = None):
-        at = "" if k is None else f" at t = {t[k]:.2f} s"
-        raise GpquadError(
-            f"flight {spec.mode}/{spec.name} (seed {spec.seed}) {what}{at}; lower the excitation",
-            field="EXCITATION",
-        )
-
-    finite = np.isfinite(states[:flown]).all(axis=1)
-    if flown < len(t) or not finite.all():
-        fail("diverged (non-finite state)", int(np.argmin(finite)) if not finite.all() else flown)
-    tilt = np.degrees(
-        np.arccos(np.clip(1.0 - 2.0 * (states[:, 6] ** 2 + states[:, 7] ** 2), -1.0, 1.0))
-    )
-    tracking = np.linalg.norm(states[:, 0:3] - ref[:, 0:3], axis=1)
-    rates = np.abs(states[:, 10:13]).max(axis=1)
-    for value, limit, what, below in (
-        (states[:, 2], LIMITS["min_altitude_m"], "hit the ground (altitude < limit)", True),
-        (tracking, LIMITS["max_tracking_m"], "left the reference (> limit m)", False),
-        (tilt, LIMITS["max_tilt_deg"], "tilted beyond the limit", False),
-        (rates, LIMITS["max_rate"], "spun beyond the rate limit", False),
-    ):
-        bad = np.flatnonzero(value < limit if below else value > limit)
-        if bad.size:
-            fail(what, int(bad[0]))
-    saturated = (
-        (states[:, 16:] <= rotor_limits[0] + 1e-9) | (states[:, 16:] >= rotor_limits[1] - 1e-9)
-    ).mean()
-    if saturated > LIMITS["max_saturation_fraction"]:
-        fail(f"saturated its rotors {100 * saturated:.1f} % of the time")
-    return {
-        "min_altitude_m": float(states[:, 2].min()),
-        "max_tilt_deg": float(tilt.max()),
-        "max_tracking_m": float(tracking.max()),
-        "max_rate": float(rates.max()),
-        "rotor_saturation_fraction": float(saturated),
-    }
 
 
 def to_ned_frame(spec: FlightSpec, t, states, commands, weight: float) -> pd.DataFrame:
@@ -270,15 +245,21 @@ def to_ned_frame(spec: FlightSpec, t, states, commands, weight: float) -> pd.Dat
     return pd.DataFrame(cols)
 
 
-def add_sensor_noise(frame: pd.DataFrame, seed: int) -> pd.DataFrame:
-    """The noisy variant of a clean flight table: NOISE plus a constant gyro bias, from
-    default_rng([seed, 1]) (the flight itself is unchanged)."""
+def noise_sd(scale: float = 1.0) -> dict:
+    """The sensor noise SDs of the noisy variant times `scale` (with "gyro_bias_sd")."""
+    return {k: scale * v for k, v in {**NOISE, "gyro_bias_sd": GYRO_BIAS_SD}.items()}
+
+
+def add_sensor_noise(frame: pd.DataFrame, seed: int, scale: float = 1.0) -> pd.DataFrame:
+    """The noisy variant of a clean flight table: NOISE plus a constant gyro bias, every SD
+    times `scale`, from default_rng([seed, 1]) (the flight itself is unchanged)."""
     rng = np.random.default_rng([seed, 1])
+    sd = noise_sd(scale)
     quat = frame[["qw", "qx", "qy", "qz"]].to_numpy()
     vel = frame[["vx", "vy", "vz"]].to_numpy()
     rates = frame[["p", "q", "r"]].to_numpy()
-    q, v, w = add_measurement_noise(quat, vel, rates, NOISE, rng)
-    w = w + rng.normal(0.0, GYRO_BIAS_SD, size=3)
+    q, v, w = add_measurement_noise(quat, vel, rates, sd, rng)
+    w = w + rng.normal(0.0, sd["gyro_bias_sd"], size=3)
     out = frame.copy()
     out[["qw", "qx", "qy", "qz"]] = q * np.where(q[:, :1] < 0, -1.0, 1.0)
     out[["vx", "vy", "vz"]] = v
@@ -286,14 +267,20 @@ def add_sensor_noise(frame: pd.DataFrame, seed: int) -> pd.DataFrame:
     return out
 
 
-def settings(mode: str, noisy: bool, fleet: str = "tuned") -> dict:
+def settings(mode: str, noisy: bool, fleet: str = "tuned", noise_scale: float = 1.0) -> dict:
     """Everything that determines the files (compared with a cache's manifest)."""
     vehicles = FLEETS[fleet]
+    extra = {
+        "gains": {v: GAINS[v] for v in vehicles if v in GAINS},
+        "excitation_scale": EXCITATION_SCALE.get(fleet, {}).get(mode),
+        "noise_scale": noise_scale if noisy and noise_scale != 1 else None,
+    }
     return {
         "generator_version": GENERATOR_VERSION,
         "mode": mode,
         "noisy": noisy,
         **({} if fleet == "tuned" else {"fleet": fleet}),
+        **{k: v for k, v in extra.items() if v},  # only where set: older caches stay valid
         "plan": [asdict(s) for s in flight_plan(mode, fleet)],
         "vehicles": list(vehicles),
         "ctbr_k_w_override": {v: k for v, (_, k) in vehicles.items()},
@@ -303,7 +290,7 @@ def settings(mode: str, noisy: bool, fleet: str = "tuned") -> dict:
         "log_hz": LOG_HZ,
         "physics_hz": LOG_HZ * SUB_STEPS,
         "limits": LIMITS,
-        "noise": {**NOISE, "gyro_bias_sd": GYRO_BIAS_SD} if noisy else None,
+        "noise": noise_sd(noise_scale) if noisy else None,
         "data_config": DATA_CONFIG,
     }
 
@@ -355,24 +342,36 @@ def _cached(folder: Path, wanted: dict, specs: list[FlightSpec]) -> bool:
 
 
 def ensure_flights(
-    mode: str, noisy: bool, cache_dir: str | Path, progress=None, fleet: str = "tuned"
+    mode: str,
+    noisy: bool,
+    cache_dir: str | Path,
+    progress=None,
+    fleet: str = "tuned",
+    noise_scale: float = 1,
 ) -> dict:
     """The rotorpy flights of a mode and fleet, generated once and cached under
-    cache_dir/[<fleet>-]<mode>[-noisy] (no prefix for the tuned fleet).
+    cache_dir/[<fleet>-]<mode>[-noisy[<k>x]] (no prefix for the tuned fleet; the suffix
+    -noisy2x for noise_scale 2 of a noisy variant).
 
-    mode "angle" or "rate"; fleet a key of FLEETS. Returns {"train", "validation", "test":
-    [absolute paths], "input_names", "config": [data] fields for gpquad's pipeline,
-    "vehicles", "seeds" (one per flight, in the order train, validation, test per vehicle),
+    mode "angle" or "rate"; fleet a key of FLEETS; noise_scale one of NOISE_SCALES.
+    Returns {"train", "validation", "test": [absolute paths], "input_names", "config":
+    [data] fields for gpquad's pipeline, "vehicles", "seeds" (one per flight, in the order
+    train, validation, test per vehicle),
     "flights" (path, vehicle, role, seed, duration_s of each), "mode", "noisy"}.
     Files are 100 Hz gpquad "table" logs (Parquet, NED/FRD); the noisy variant is the clean
     flights plus sensor noise. Each file and then the manifest are written atomically; a
     cache made with other settings is regenerated. progress: optional callable(str).
     """
+    if noise_scale not in NOISE_SCALES:
+        raise GpquadError(
+            f"noise scale {noise_scale} is not one of {NOISE_SCALES}", field="noise_scale"
+        )
     specs = flight_plan(mode, fleet)
     clean_name = mode if fleet == "tuned" else f"{fleet}-{mode}"
     clean_folder = Path(cache_dir).resolve() / clean_name
-    folder = clean_folder.with_name(f"{clean_name}-noisy") if noisy else clean_folder
-    wanted = settings(mode, noisy, fleet)
+    suffix = "-noisy" + (f"{noise_scale:g}x" if noise_scale != 1 else "")
+    folder = clean_folder.with_name(clean_name + suffix) if noisy else clean_folder
+    wanted = settings(mode, noisy, fleet, noise_scale)
     if _cached(folder, wanted, specs):
         return _result(folder, specs, mode, noisy)
     flights = {}
@@ -381,9 +380,8 @@ def ensure_flights(
         clean_meta = json.loads((Path(clean["train"][0]).parent / "manifest.json").read_text())
         for s in specs:
             frame = pd.read_parquet(clean_folder / f"{s.name}.parquet")
-            atomic_write_bytes(
-                folder / f"{s.name}.parquet", _parquet_bytes(add_sensor_noise(frame, s.seed))
-            )
+            noisy_frame = add_sensor_noise(frame, s.seed, noise_scale)
+            atomic_write_bytes(folder / f"{s.name}.parquet", _parquet_bytes(noisy_frame))
             flights[s.name] = clean_meta["flights"][s.name]
     else:
         for s in specs:

@@ -9,6 +9,8 @@ held-out flights that every method is scored on (same trim as `fit`).
   flight of simulator seed 0, test flights of seeds 1001 and 1002 (180 s each);
 - rigid-body, rigid-body-noisy: the same with `experiments/rigid_body.toml`'s [simulator];
   noisy: simulator.measurement_noise = NOISE on every flight (training and test);
+- median-noisy2x, median-noisy4x: median-noisy's flights with 2 and 4 times NOISE (the
+  noise family; rigid-body, the same simulator with other equations, has none);
 - rotorpy-angle, rotorpy-angle-noisy, rotorpy-rate, rotorpy-rate-noisy: flights made by
   `gpquad.benchmark.rotorpy_flights.ensure_flights` (cached), skipped when it or rotorpy
   is missing. Two vehicles whose attitude loops differ (crazyflie: kp_att 310, kd_att 57;
@@ -19,11 +21,20 @@ held-out flights that every method is scored on (same trim as `fit`).
   rotorpy-heldout-rate-noisy: the same flights of rotorpy's brushless crazyflie, a vehicle
   that no engine setting was chosen on (`rotorpy_flights.FLEETS`): how the recommended
   engine does on a vehicle it was not tuned to;
+- rotorpy-px4sih-angle, rotorpy-px4sih-rate and their -noisy variants: a third vehicle,
+  rotorpy's parameters of PX4's SIH quad X (1 kg) with an attitude loop tuned like the two
+  tuned vehicles' (`rotorpy_flights.GAINS`);
+- the noise family, rotorpy-{angle,rate}-noisy{2x,4x} and rotorpy-px4sih-{angle,rate}-
+  noisy{2x,4x}: the noisy variants' flights with 2 and 4 times their sensor noise (every SD,
+  the gyro bias's too: `rotorpy_flights.noise_sd`); the held-out fleet has none (it asks
+  how the engine does on an untuned vehicle at the benchmark's noise);
 - px4-s250, px4-aquaquad: the real logs of `experiments/px4_*.toml`, first 70 % of the
   flight time trains, the last 30 % tests; only measured states are scored;
 - betaflight-gecko: `experiments/betaflight_gecko.toml`, a 5" quad's Betaflight blackbox
   log trains, another flight of the same quad (its `data.validation` file) tests; only p,
   q, r are measured and scored;
+- betaflight-gecko-motors: the same flights with the four motor outputs as the inputs
+  (`experiments/betaflight_gecko_motors.toml`): the rate equations must read the motors;
 - a user's TOML: the files of its data.validation list test and the others train; without
   such a list its training part trains and its held-out part (data.validation_fraction of
   each flight) tests.
@@ -48,30 +59,32 @@ NOISE = {"attitude": 0.005, "velocity": 0.02, "rates": 0.01}
 TEST_SEEDS = (1001, 1002)
 TEST_DURATION_S = 180.0
 TRAIN_FRACTION = 0.7
-SCENARIOS = (
-    "median",
-    "median-noisy",
-    "rigid-body",
-    "rigid-body-noisy",
-    "rotorpy-angle",
-    "rotorpy-angle-noisy",
-    "rotorpy-rate",
-    "rotorpy-rate-noisy",
-    "rotorpy-heldout-angle",
-    "rotorpy-heldout-angle-noisy",
-    "rotorpy-heldout-rate",
-    "rotorpy-heldout-rate-noisy",
-    "px4-s250",
-    "px4-aquaquad",
-    "betaflight-gecko",
-)
-#: rotorpy scenario -> (mode, noisy, fleet of gpquad.benchmark.rotorpy_flights.FLEETS).
-ROTORPY = {
-    f"rotorpy-{prefix}{mode}{suffix}": (mode, bool(suffix), fleet)
-    for prefix, fleet in (("", "tuned"), ("heldout-", "heldout"))
-    for mode in ("angle", "rate")
-    for suffix in ("", "-noisy")
+#: Noise of a scenario name's suffix, as a multiple of the benchmark's (0: clean).
+NOISE_SUFFIX = {"": 0, "-noisy": 1, "-noisy2x": 2, "-noisy4x": 4}
+#: The simulator scenarios: name -> (experiment config, noise multiple).
+SIMULATED = {
+    **{f"median{k}": ("quickstart.toml", v) for k, v in NOISE_SUFFIX.items()},
+    **{f"rigid-body{k}": ("rigid_body.toml", NOISE_SUFFIX[k]) for k in ("", "-noisy")},
 }
+#: rotorpy scenario -> (mode, noise multiple, fleet of gpquad.benchmark.rotorpy_flights.FLEETS).
+ROTORPY = {
+    f"rotorpy-{prefix}{mode}{suffix}": (mode, NOISE_SUFFIX[suffix], fleet)
+    for prefix, fleet, suffixes in (
+        ("", "tuned", tuple(NOISE_SUFFIX)),
+        ("heldout-", "heldout", ("", "-noisy")),
+        ("px4sih-", "px4sih", tuple(NOISE_SUFFIX)),
+    )
+    for mode in ("angle", "rate")
+    for suffix in suffixes
+}
+#: Real logs: name -> experiment config.
+LOGS = {
+    "px4-s250": "px4_s250.toml",
+    "px4-aquaquad": "px4_aquaquad.toml",
+    "betaflight-gecko": "betaflight_gecko.toml",
+    "betaflight-gecko-motors": "betaflight_gecko_motors.toml",
+}
+SCENARIOS = (*SIMULATED, *ROTORPY, *LOGS)
 
 
 class Skipped(Exception):
@@ -185,12 +198,13 @@ def time_split(flights: list[Flight], fraction: float) -> tuple[list[Flight], li
     return train, test
 
 
-def _simulated(name: str, cfg: Config, noisy: bool) -> Scenario:
+def _simulated(name: str, cfg: Config, noise: float) -> Scenario:
+    """The simulator's flights of cfg; with `noise` > 0, NOISE times `noise` on each."""
     from gpquad.data.simulator import completed, simulate
 
     sim = completed(cfg.simulator)
-    if noisy:
-        sim = dataclasses.replace(sim, measurement_noise=dict(NOISE))
+    if noise:
+        sim = dataclasses.replace(sim, measurement_noise={k: noise * v for k, v in NOISE.items()})
     train = [simulate(sim, cfg.data.inputs)]
     duration = min(TEST_DURATION_S, sim.duration_s)
     test = [
@@ -263,13 +277,15 @@ def _from_log(name: str, path: Path, named: bool = True) -> Scenario:
 
 
 def _rotorpy(name: str, cache_dir: Path) -> Scenario:
-    mode, noisy, fleet = ROTORPY[name]
+    mode, noise, fleet = ROTORPY[name]
+    noisy = noise > 0
     try:
         rotorpy_flights = importlib.import_module("gpquad.benchmark.rotorpy_flights")
     except ImportError as exc:
         raise Skipped(f"{name}: gpquad.benchmark.rotorpy_flights unavailable ({exc})") from None
+    scale = {} if noise <= 1 else {"noise_scale": noise}
     try:
-        made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir, fleet=fleet)
+        made = rotorpy_flights.ensure_flights(mode, noisy, cache_dir, fleet=fleet, **scale)
     except ImportError as exc:
         raise Skipped(f"{name}: rotorpy is not installed ({exc})") from None
     from gpquad.data.io import load_flights
@@ -306,6 +322,7 @@ def _rotorpy(name: str, cache_dir: Path) -> Scenario:
         "kind": "rotorpy",
         "mode": mode,
         "noisy": noisy,
+        **scale,
         **({} if fleet == "tuned" else {"fleet": fleet}),  # the tuned cells' fingerprint
         "vehicles": made.get("vehicles"),
         "seeds": made.get("seeds"),
@@ -327,7 +344,7 @@ def user_scenario(path: Path) -> Scenario:
 
     cfg = load_config(path)
     if not cfg.data.files:
-        return _simulated(path.stem, cfg, noisy=False)
+        return _simulated(path.stem, cfg, noise=0)
     if held_out_paths(cfg):
         return _from_log(path.stem, path, named=False)
     if cfg.data.validation_fraction <= 0:
@@ -360,23 +377,16 @@ def build_scenario(name: str, cache_dir: Path) -> Scenario:
     root = repo_root()
     if name.endswith(".toml"):
         return user_scenario(Path(name))
-    if name in ("median", "median-noisy"):
-        cfg = load_config(root / "experiments" / "quickstart.toml")
-        return _simulated(
-            name, dataclasses.replace(cfg, simulator=Config().simulator), name.endswith("noisy")
-        )
-    if name in ("rigid-body", "rigid-body-noisy"):
-        return _simulated(
-            name, load_config(root / "experiments" / "rigid_body.toml"), name.endswith("noisy")
-        )
+    if name in SIMULATED:
+        config, noise = SIMULATED[name]
+        cfg = load_config(root / "experiments" / config)
+        if name.startswith("median"):  # the paper's median model, not the quickstart's
+            cfg = dataclasses.replace(cfg, simulator=Config().simulator)
+        return _simulated(name, cfg, noise)
     if name in ROTORPY:
         return _rotorpy(name, cache_dir)
-    if name == "px4-s250":
-        return _from_log(name, root / "experiments" / "px4_s250.toml")
-    if name == "px4-aquaquad":
-        return _from_log(name, root / "experiments" / "px4_aquaquad.toml")
-    if name == "betaflight-gecko":
-        return _from_log(name, root / "experiments" / "betaflight_gecko.toml")
+    if name in LOGS:
+        return _from_log(name, root / "experiments" / LOGS[name])
     raise GpquadError(
         f"unknown scenario '{name}'; choose from {list(SCENARIOS)} or give a config .toml",
         field="scenario",

@@ -8,6 +8,8 @@ of the roll and pitch set-points at several delays, filtered by the motors
 (docs/decisions). This step gives each found equation, flown alone through the integrator
 as in the search:
 
+0. beyond FREE_TERMS terms, those that do not lower the validation error are removed
+   (gpquad.models.earned); the found equation is then no longer a choice of step 3;
 1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried, the
    equation's own terms refitted (one-step least squares on the inverse-filtered target,
    then Levenberg-Marquardt through the integrator with a growing horizon); a lag is kept
@@ -50,6 +52,7 @@ from gpquad.engine.taps import base_input, tap_name, with_taps
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.export import from_sympy, round_constants, to_sympy
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
+from gpquad.models.earned import earn_terms
 from gpquad.models.equation import Equation
 from gpquad.models.joint_fit import JOINT_HORIZONS_S, judged_windows
 from gpquad.models.stability import FullModelFlights
@@ -186,6 +189,7 @@ class Step(NamedTuple):
     error: float  # training windows
     validation: float  # validation windows
     added: list  # the terms added so far
+    dropped: tuple = ()  # the found equation's terms that did not earn their place
 
 
 def monomials(expr: sp.Expr) -> list[sp.Expr]:
@@ -292,11 +296,14 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
             "validation_after": path[0].validation,
             "tried": 0,
         }
-    tau, expr, error = choose_lag(problem, found, found_error, gain(found_error))
+    expr, dropped, validation = earn_terms(problem, found, dataset.validation, gain)
+    error = problem.error(problem.tree(expr)) if dropped else found_error
+    if dropped:  # the found equation is no longer a choice: its extra terms did not earn
+        path.append(Step(0.0, expr, error, validation, [], tuple(dropped)))
+    tau, expr, error = choose_lag(problem, expr, error, gain(error))
     if tau > 0:
-        path.append(
-            Step(tau, expr, error, problem.error(problem.tree(expr), dataset.validation), [])
-        )
+        val = problem.error(problem.tree(expr), dataset.validation)
+        path.append(Step(tau, expr, error, val, [], tuple(dropped)))
     added: list[sp.Expr] = []
     candidates = library(problem, frozenset(flipped))
     columns = np.column_stack([problem.values(c) for c in candidates])
@@ -315,16 +322,15 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
             break
         expr, error = best[0], best[1]
         added.append(best[2])
-        path.append(
-            Step(
-                tau, expr, error, problem.error(problem.tree(expr), dataset.validation), list(added)
-            )
-        )
-    # path[0] has a finite validation error (checked above); a later step may have diverged
-    chosen = min((p for p in path if np.isfinite(p.validation)), key=lambda p: p.validation)
+        val = problem.error(problem.tree(expr), dataset.validation)
+        path.append(Step(tau, expr, error, val, list(added), tuple(dropped)))
+    # path[0] (path[1] after earn_terms) has a finite validation error; a later step may not
+    eligible = [p for p in path[1 if dropped else 0 :] if np.isfinite(p.validation)]
+    chosen = min(eligible, key=lambda p: p.validation)
     report = {
         "lag": chosen.lag,
         "added": [text(equation, t) for t in chosen.added],
+        "dropped": [text(equation, t) for t in chosen.dropped],
         "error_before": found_error,
         "error_after": chosen.error,
         "validation_before": path[0].validation,
@@ -433,10 +439,11 @@ def refined_summary(report: dict) -> str:
                 "to judge a refinement on: raise data.validation_fraction or name "
                 "validation files in data.validation)"
             )
-        elif entry["validation_after"] < entry["validation_before"]:
+        elif entry.get("dropped") or entry["validation_after"] < entry["validation_before"]:
             lag = f"lag {1000 * entry['lag']:.0f} ms, " if entry["lag"] > 0 else ""
+            cut = f"-{len(entry['dropped'])} unearned " if entry.get("dropped") else ""
             parts.append(
-                f"{target}: {lag}+{len(entry['added'])} terms, validation error "
+                f"{target}: {lag}{cut}+{len(entry['added'])} terms, validation error "
                 f"{entry['validation_before']:.4g} -> {entry['validation_after']:.4g}"
             )
         else:
