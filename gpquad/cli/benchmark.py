@@ -70,7 +70,7 @@ def check_arguments(args) -> tuple[list[str], list[str], list[float]]:
 
 def write_report(out: Path, info: dict) -> dict:
     """Aggregate the cells into results.json and benchmark.md, and draw the figures."""
-    from gpquad.benchmark import fidelity, fidelity_table, table
+    from gpquad.benchmark import fidelity, fidelity_table, loop_gains, table
     from gpquad.benchmark.figures import scenario_figure
     from gpquad.benchmark.paired import paired, paired_markdown
     from gpquad.benchmark.runner import collect
@@ -82,9 +82,16 @@ def write_report(out: Path, info: dict) -> dict:
     summary = {k: v for k, v in info.items() if k not in ("figures",)}
     pairs = paired(found)
     fid = fidelity_table.aggregate(fidelity.load(out, found))
+    gains = loop_gains.benchmark_gains(info, found)
     write_json(
         out / "results.json",
-        {"results": agg, "paired": pairs, "fidelity": fid, "benchmark": summary},
+        {
+            "results": agg,
+            "paired": pairs,
+            "fidelity": fid,
+            "loop_gains": gains,
+            "benchmark": summary,
+        },
     )
     head = [
         f"gpquad benchmark, git {info['git_revision']}, engine settings from "
@@ -113,6 +120,15 @@ def write_report(out: Path, info: dict) -> dict:
                 else []
             ),
             fidelity_table.markdown(fid),
+        ]
+    if gains:
+        head += [
+            "## Loop gains implied by the roll and pitch equations (rotorpy angle mode)",
+            "",
+            "Linearised at hover (docs/guide.md, gpquad.benchmark.loop_gains); in brackets "
+            "the controller's gain and the relative error.",
+            "",
+            loop_gains.markdown(gains),
         ]
     head += ["## Per state", "", table.markdown(agg)]
     atomic_write_text(out / "benchmark.md", "\n".join(head))
