@@ -195,3 +195,17 @@ def test_report_of_a_folder_without_a_benchmark_is_one_line(tmp_path, capsys):
     )
     assert main(["benchmark", "--report", "--out", str(tmp_path), "rigid-body"]) == 2
     assert "not in this benchmark" in capsys.readouterr().err
+
+
+def test_a_cell_whose_text_does_not_parse_is_skipped_with_a_warning(continuous, tmp_path):
+    scenario, _ = continuous
+    cell = {
+        "scenario": "roll",
+        "method": "operon",
+        "seed": 1,
+        "equations": {**PEER_ZERO, "p_dot": "sin(p)"},
+        "metrics": {},
+    }
+    said = []
+    assert fidelity.update(tmp_path, [cell], {"roll": scenario}, (7.0,), log=said.append) == []
+    assert len(said) == 1 and "no fidelity for roll/operon/seed1" in said[0]

@@ -256,7 +256,14 @@ def update(out, cells: list[dict], scenarios: dict, horizons_s, log=print) -> li
         except (OSError, ValueError):
             saved = None
         if not isinstance(saved, dict) or saved.get("key") != key:
-            result = cell_fidelity(cell, scenario, horizons_s)
+            try:
+                result = cell_fidelity(cell, scenario, horizons_s)
+            except GpquadError as exc:  # a text this reader does not parse: say so, go on
+                log(
+                    f"gpquad benchmark: warning: no fidelity for {cell['scenario']}/"
+                    f"{cell['method']}/seed{cell['seed']}: {exc}"
+                )
+                continue
             saved = {"scenario": cell["scenario"], "method": cell["method"], "seed": cell["seed"]}
             saved.update(key=key, **result)
             write_json(path, _finite(saved))
