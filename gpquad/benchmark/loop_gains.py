@@ -20,8 +20,9 @@ attitude set-points 0 and u_T = 1 (the thrust set-point is thrust / weight). For
 equation: rate gain = -d f / d p, angle gain = -d f / d phi, set-point gain = the sum of
 d f / d u_R over every delay at which the equation reads u_R (its taps; a peer's lagged
 features u_R_l0 .. u_R_l5); pitch likewise with q, theta, u_P. A printed first-order lag
-(tau d(p_dot)/dt + p_dot = f) does not change them and is shown beside them; the set-point's
-delay is the gain-weighted mean of its taps' delays (samples). Each gain's error is relative
+(tau d(p_dot)/dt + p_dot = f) does not change them and is shown beside them. The JSON also
+holds each tap's gain and their gain-weighted mean delay (samples), which means little when
+the taps alternate in sign. Each gain's error is relative
 to the controller's (kd_att, kp_att, kp_att).
 """
 
@@ -154,7 +155,9 @@ def benchmark_gains(info: dict, cells: list[dict]) -> dict:
 
 def markdown(gains: dict) -> str:
     """Per scenario: one row per method, seed, vehicle and loop: the implied rate, angle
-    and set-point gains (relative error) beside the controller's, the lag and delay."""
+    and set-point gains (relative error) beside the controller's, and the printed lag
+    beside the motor's (the set-point's taps and mean delay are in the JSON only: taps of
+    alternating sign, as a fitted input filter has, make a mean delay meaningless)."""
     head = [
         "method",
         "seed",
@@ -163,7 +166,6 @@ def markdown(gains: dict) -> str:
         "rate gain (kd_att)",
         "angle gain (kp_att)",
         "set-point gain (kp_att)",
-        "set-point delay, samples",
         "lag s (motor tau_m)",
         "worst error",
     ]
@@ -175,14 +177,12 @@ def markdown(gains: dict) -> str:
                 truth = s["controller"][vehicle]
                 for target, g in loops.items():
                     err = g["error"]
-                    delay = g["setpoint_delay_samples"]
                     cells = [row["method"], str(row["seed"]), vehicle, target]
                     cells += [
                         f"{g[k]:.4g} ({truth[k]:.4g}, {100 * err[k]:+.0f} %)"
                         for k in ("rate", "angle", "setpoint")
                     ]
                     cells += [
-                        "-" if delay is None else f"{delay:.2f}",
                         f"{g['lag_s']:.3g} ({truth['motor_tau_s']:.3g})",
                         f"{100 * max(abs(e) for e in err.values()):.0f} %",
                     ]
