@@ -80,3 +80,12 @@ def test_only_untrimmed_angle_mode_rotorpy_scenarios_apply():
     assert loop_gains.applies({"kind": "rotorpy", "mode": "angle", "config": {"trim": "none"}})
     assert not loop_gains.applies({"kind": "rotorpy", "mode": "angle", "config": {"trim": "mean"}})
     assert not loop_gains.applies({"kind": "simulator"})
+
+
+def test_no_loop_gains_without_rotorpy(monkeypatch):
+    def missing(vehicle):
+        raise ImportError("No module named 'rotorpy'")
+
+    monkeypatch.setattr(loop_gains, "controller_gains", missing)
+    info = {"scenarios": {"rotorpy-angle": {"kind": "rotorpy", "mode": "angle", "vehicles": ["x"]}}}
+    assert loop_gains.benchmark_gains(info, []) == {}
