@@ -147,6 +147,12 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     assert table.parameters({}) is None
     saved = json.loads((out2 / "results.json").read_text())
     assert saved["benchmark"]["engine_config"].endswith("engine.toml")
+    # every cell's printed equations flown by RK4 x 8 beside their own scheme
+    fid = saved["fidelity"]["tiny"]
+    assert set(fid) == {"gpquad", "ols", "zero"} and fid["gpquad"]["seeds"] == [1, 2]
+    assert fid["gpquad"]["rk4"]["2s"]["rse"]["p"]["n"] == 2
+    assert fid["gpquad"]["text_matches_stored"] == 2
+    assert "## Fidelity" in text and "| gpquad (euler) |" in text
 
 
 def test_folder_scored_at_other_horizons_is_refused(tiny, capsys):
@@ -220,3 +226,25 @@ def test_a_comment_in_the_engine_config_recomputes_nothing(tiny):
         log=lambda s: None,
     )
     assert {c: c.read_bytes() for c in before} == before
+
+
+def test_report_flies_the_stored_cells_of_an_older_folder_without_fitting(tiny, capsys):
+    """A folder made by another gpquad (its cells' fingerprints are not today's): --report
+    refits nothing and adds the fidelity of every stored cell."""
+    out = tiny / "run6"
+    shutil.copytree(tiny / "run1", out)
+    shutil.rmtree(out / "fidelity")
+    info = json.loads((out / "benchmark.json").read_text())
+    info["fingerprints"]["tiny"]["gpquad"] = "made-by-an-older-gpquad"
+    (out / "benchmark.json").write_text(json.dumps(info))
+    for path in (out / "cells" / "tiny" / "gpquad").glob("*.json"):
+        cell = json.loads(path.read_text())
+        cell["fingerprint"] = "made-by-an-older-gpquad"
+        path.write_text(json.dumps(cell))
+    before = {c: c.read_bytes() for c in (out / "cells").rglob("*.json")}
+    assert main(["benchmark", "--report", "--out", str(out)]) == 0
+    assert {c: c.read_bytes() for c in before} == before
+    assert len(list((out / "fidelity").rglob("*.json"))) == 4
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["fidelity"]["tiny"]["gpquad"]["seeds"] == [1, 2]
+    assert "## Fidelity" in (out / "benchmark.md").read_text()

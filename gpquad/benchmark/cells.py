@@ -64,17 +64,7 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
     fitted = {
         g: _fit_one(method, sub, seed, engine, fit_jobs) for g, sub in scenario.groups.items()
     }
-    offsets = scenario.group_offsets()
-
-    def simulate(starts, steps):
-        starts = np.asarray(starts, dtype=np.int64)
-        out = np.empty((len(starts), steps + 1, 9))
-        for g, (a, b) in offsets.items():
-            mask = (starts >= a) & (starts < b)
-            if mask.any():
-                out[mask] = fitted[g][0](starts[mask] - a, steps)
-        return out
-
+    simulate = grouped_simulate(scenario, {g: f[0] for g, f in fitted.items()})
     keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit")
     record = {
         k: {g: f[2][k] for g, f in fitted.items()}
@@ -85,6 +75,23 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
     record["recovery"] = None
     record["fitted_per"] = list(scenario.groups)
     return simulate, sum(f[1] for f in fitted.values()), record
+
+
+def grouped_simulate(scenario, simulators: dict):
+    """simulate(starts, steps) on scenario.test of per-group simulators, each flying the
+    windows of its group's test flights (their starts in the group's own test data)."""
+    offsets = scenario.group_offsets()
+
+    def simulate(starts, steps):
+        starts = np.asarray(starts, dtype=np.int64)
+        out = np.empty((len(starts), steps + 1, 9))
+        for g, (a, b) in offsets.items():
+            mask = (starts >= a) & (starts < b)
+            if mask.any():
+                out[mask] = simulators[g](starts[mask] - a, steps)
+        return out
+
+    return simulate
 
 
 def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):

@@ -129,7 +129,7 @@ def run_benchmark(
     run_methods = methods if with_gpquad else use_peers
     if not run_methods:
         raise GpquadError("nothing to run: no gpquad and no installed peer", field="--peers")
-    built, skipped = {}, {}
+    built, skipped, made_from = {}, {}, {}
     for name in names:
         t0 = time.perf_counter()
         try:
@@ -143,6 +143,7 @@ def run_benchmark(
                 f"two scenarios are named {sc.name}; rename a config file", field="scenario"
             )
         built[sc.name] = sc
+        made_from[sc.name] = str(name)
         log(
             f"gpquad benchmark: scenario {sc.name}: {sc.fit.summary()['train_samples']} training "
             f"and {sc.test.summary()['validation_samples']} test samples "
@@ -170,6 +171,7 @@ def run_benchmark(
         "fingerprint": settings_fingerprint(settings),
         "settings": settings,
         "scenarios": {n: sc.source for n, sc in built.items()},
+        "scenario_arguments": made_from,
         "skipped_scenarios": skipped,
         "skipped_peers": skipped_peers,
         "methods": methods,
@@ -218,6 +220,53 @@ def run_benchmark(
         finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     )
     write_json(out / "benchmark.json", info)
+    from gpquad.benchmark import fidelity
+
+    fidelity.update(out, collect(out, info), built, horizons_s, log)
+    return info
+
+
+def report_benchmark(out, names=(), log=print) -> dict:
+    """Re-evaluate a finished benchmark folder without fitting: its cells (as their
+    benchmark.json lists them, with the fingerprints they were made with) are flown again
+    for the fidelity column (gpquad.benchmark.fidelity); returns benchmark.json's content.
+    names: only these of its scenarios (default: all)."""
+    from gpquad.benchmark import fidelity
+
+    out = Path(out)
+    path = out / "benchmark.json"
+    try:
+        info = json.loads(path.read_text())
+        listed = dict(info["scenarios"])
+        horizons_s = info["settings"]["horizons_s"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise GpquadError(
+            "no finished benchmark here (benchmark.json missing or damaged); give the "
+            "--out of a `gpquad benchmark` run",
+            source=str(path),
+            field="--out",
+        ) from None
+    unknown = [n for n in names if n not in listed]
+    if unknown:
+        raise GpquadError(
+            f"scenario {unknown[0]!r} is not in this benchmark; it has {list(listed)}",
+            source=str(path),
+            field="scenario",
+        )
+    built = {}
+    for name in names or listed:
+        # the argument that built it (a user's TOML path); older folders: the name
+        target = str((info.get("scenario_arguments") or {}).get(name, name))
+        if target not in scenarios.SCENARIOS and not target.endswith(".toml"):
+            log(f"gpquad benchmark: skipping scenario {name}: cannot rebuild its flights")
+            continue
+        try:
+            built[name] = scenarios.build_scenario(target, out / "flights")
+        except scenarios.Skipped as exc:
+            log(f"gpquad benchmark: skipping scenario {exc}")
+    info["scenarios"] = {n: listed[n] for n in built}
+    info["fidelity_git_revision"] = provenance().get("git_revision")
+    fidelity.update(out, collect(out, info), built, horizons_s, log)
     return info
 
 

@@ -2,10 +2,13 @@
 
     gpquad benchmark [SCENARIO ... | CONFIG.toml] [--peers zero,ols,sindy,operon] [--seeds N]
                      [--out DIR] [--jobs J] [--horizons 1,7,30] [--skip-gpquad]
+    gpquad benchmark --report --out DIR [SCENARIO ...]
 
 Writes DIR/benchmark.md (tables), DIR/results.json (aggregate, settings, provenance),
 DIR/figures/<scenario>.png and DIR/cells/ (one file per finished cell; rerunning the same
-command resumes). Every bad argument is one line and exit code 2, before any long work.
+command resumes), DIR/fidelity/ (each cell's equations flown by RK4, 8 steps per sample;
+`--report` recomputes them from the stored cells of any benchmark folder, fitting nothing).
+Every bad argument is one line and exit code 2, before any long work.
 """
 
 from __future__ import annotations
@@ -67,7 +70,7 @@ def check_arguments(args) -> tuple[list[str], list[str], list[float]]:
 
 def write_report(out: Path, info: dict) -> dict:
     """Aggregate the cells into results.json and benchmark.md, and draw the figures."""
-    from gpquad.benchmark import table
+    from gpquad.benchmark import fidelity, fidelity_table, loop_gains, table
     from gpquad.benchmark.figures import scenario_figure
     from gpquad.benchmark.paired import paired, paired_markdown
     from gpquad.benchmark.runner import collect
@@ -78,7 +81,18 @@ def write_report(out: Path, info: dict) -> dict:
     figures = {k: v for k, v in info.items() if k == "figures"}
     summary = {k: v for k, v in info.items() if k not in ("figures",)}
     pairs = paired(found)
-    write_json(out / "results.json", {"results": agg, "paired": pairs, "benchmark": summary})
+    fid = fidelity_table.aggregate(fidelity.load(out, found))
+    gains = loop_gains.benchmark_gains(info, found)
+    write_json(
+        out / "results.json",
+        {
+            "results": agg,
+            "paired": pairs,
+            "fidelity": fid,
+            "loop_gains": gains,
+            "benchmark": summary,
+        },
+    )
     head = [
         f"gpquad benchmark, git {info['git_revision']}, engine settings from "
         f"{info['engine_config']}; gpquad and operon: mean over seeds "
@@ -96,8 +110,28 @@ def write_report(out: Path, info: dict) -> dict:
             "",
             paired_markdown(pairs),
         ]
-    head += ["## Per state", ""]
-    atomic_write_text(out / "benchmark.md", "\n".join(head) + table.markdown(agg))
+    if fid:
+        head += [
+            "## Fidelity: the printed equations flown by RK4, 8 steps per sample",
+            "",
+            *(
+                [f"Flown again by git {info['fidelity_git_revision']} (`--report`).", ""]
+                if info.get("fidelity_git_revision")
+                else []
+            ),
+            fidelity_table.markdown(fid),
+        ]
+    if gains:
+        head += [
+            "## Loop gains implied by the roll and pitch equations (rotorpy angle mode)",
+            "",
+            "Linearised at hover (docs/guide.md, gpquad.benchmark.loop_gains); in brackets "
+            "the controller's gain and the relative error.",
+            "",
+            loop_gains.markdown(gains),
+        ]
+    head += ["## Per state", "", table.markdown(agg)]
+    atomic_write_text(out / "benchmark.md", "\n".join(head))
     for name in info["scenarios"]:
         scenario_figure(name, figures["figures"].get(name), found, out)
     return agg
@@ -106,8 +140,15 @@ def write_report(out: Path, info: dict) -> dict:
 def _cmd_benchmark(args) -> int:
     from gpquad.benchmark.runner import run_benchmark
 
-    names, peer_names, horizons = check_arguments(args)
     out = Path(args.out)
+    if args.report:
+        from gpquad.benchmark.runner import report_benchmark
+
+        info = report_benchmark(out, [n for n in args.scenarios])
+        write_report(out, info)
+        print((out / "benchmark.md").read_text())
+        return 0
+    names, peer_names, horizons = check_arguments(args)
     info = run_benchmark(
         names,
         peer_names,
@@ -161,5 +202,12 @@ def register(subparsers) -> None:
         "--skip-gpquad",
         action="store_true",
         help="run the peers only (gpquad's finished cells in --out are still reported)",
+    )
+    b.add_argument(
+        "--report",
+        action="store_true",
+        help="fit nothing: re-read the finished cells of --out (any gpquad version), fly "
+        "their printed equations for the fidelity column and rewrite the report "
+        "(scenarios: only these of the folder's)",
     )
     b.set_defaults(func=_cmd_benchmark)
