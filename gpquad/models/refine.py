@@ -5,8 +5,7 @@ A parsimonious search with depth 7 finds the loop of a closed-loop rate equation
 what a controller's attitude error adds to it through a motor's lag: on rotorpy's
 crazyflie (angle mode, 72 ms motors) r_dot needs the yaw part of the SO(3) error, products
 of the roll and pitch set-points at several delays, filtered by the motors
-(docs/decisions). This step gives each found equation, flown alone through the integrator
-as in the search:
+(docs/decisions). This step gives each found equation, flown alone through the integrator:
 
 0. beyond FREE_TERMS terms, those that do not lower the validation error are removed
    (gpquad.models.earned); the found equation is then no longer a choice of step 3;
