@@ -59,8 +59,10 @@ def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: s
     tree, train, val = co.best(state, train_errors)
     front = co.front(state, train_errors)
     if co.cfg.selection != "bic":
-        errors = co.tiled_errors([t for t, _ in front], dataset.train, co.model_evaluator)
-        better = [(t, e) for (t, _), e in zip(front, errors) if t.size <= tree.size and e < train]
+        if co.model_evaluator is not co.evaluator:  # the front's errors are the surrogate's
+            errors = co.tiled_errors([t for t, _ in front], dataset.train, co.model_evaluator)
+            front = [(t, float(e)) for (t, _), e in zip(front, errors)]
+        better = [(t, e) for t, e in front if t.size <= tree.size and e < train]
         if better:
             tree, train = min(better, key=lambda te: (te[1], te[0].size))
             val = float(co.tiled_errors([tree], dataset.validation, co.model_evaluator)[0])

@@ -11,6 +11,7 @@ printed equations as the ODEs they are).
 import numpy as np
 
 from gpquad.engine.kernels.fitness_rk4 import stage_features
+from gpquad.engine.kernels.integrator import integrate_step
 from gpquad.engine.kernels.quaternion import euler_from_quat
 from gpquad.engine.kernels.step import (
     N_STAGES,
@@ -25,8 +26,6 @@ from gpquad.engine.kernels.step import (
     accumulate,
     body_derivative,
     body_stage_state,
-    euler_position_step,
-    euler_step,
     finish_step,
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
@@ -82,7 +81,7 @@ def fly_truth(
     a = np.empty(6)
     state = np.empty(9)
     mat = np.empty((3, 3))
-    xyz = np.empty(3)
+    q4, v3, w3, x3 = np.empty(4), np.empty(3), np.empty(3), np.empty(3)
     every_state = np.ones(9, dtype=np.bool_)
     h = dt / substeps
     for k in range(n):
@@ -120,35 +119,16 @@ def fly_truth(
                 return quat, vel, rates, pos, inputs, acc, k
         if k == n - 1:
             break
-        if scheme != RK4:  # eq. 2, as gpquad.engine.kernels.integrator.integrate_step
+        if scheme != RK4:  # eq. 2, the engine's own step
+            for i in range(4):
+                q4[i] = y[Q + i, 0]
             for i in range(3):
-                xyz[i] = y[X + i, 0]
-            euler_position_step(quat[k], vel[k], xyz, dt, mat)
+                v3[i], w3[i], x3[i] = y[V + i, 0], y[W + i, 0], y[X + i, 0]
+            integrate_step(q4, v3, w3, x3, a, dt, mat)
+            for i in range(4):
+                y[Q + i, 0] = q4[i]
             for i in range(3):
-                y[X + i, 0] = xyz[i]
-            out = euler_step(
-                y[Q, 0],
-                y[Q + 1, 0],
-                y[Q + 2, 0],
-                y[Q + 3, 0],
-                y[V, 0],
-                y[V + 1, 0],
-                y[V + 2, 0],
-                y[W, 0],
-                y[W + 1, 0],
-                y[W + 2, 0],
-                a[0],
-                a[1],
-                a[2],
-                a[3],
-                a[4],
-                a[5],
-                dt,
-                True,
-                True,
-            )
-            for i in range(10):
-                y[i, 0] = out[i]
+                y[V + i, 0], y[W + i, 0], y[X + i, 0] = v3[i], w3[i], x3[i]
             continue
         for _ in range(substeps):
             for stage in range(N_STAGES):
