@@ -27,10 +27,12 @@ from gpquad.engine.kernels.step import (
     BODY_ROWS,
     N_STAGES,
     NODES,
+    PLANT_ROWS,
     WEIGHTS,
     Q,
     V,
     W,
+    X,
     accumulate,
     body_derivative,
     body_stage_state,
@@ -246,16 +248,34 @@ def rk4_population_window_errors(
 
 @njit
 def rk4_rollout(
-    codes, values, sizes, delays, modelled, alphas, flight, starts, n_steps, input_noise, substeps
+    codes,
+    values,
+    sizes,
+    delays,
+    modelled,
+    alphas,
+    flight,
+    starts,
+    n_steps,
+    input_noise,
+    substeps,
+    pos,
 ):
     """gpquad.engine.kernels.rollout.rollout flown by RK4 (module notes): states
-    (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state."""
+    (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state.
+
+    The world position x_dot = R(q) V is one more part of the RK4 state (rows X, from x = 0
+    at each window start); pos (n_windows, n_steps + 1, 3) receives it, or has no rows
+    (it is then flown and not kept).
+    """
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
     n_slots = delays.shape[1]
     noisy = input_noise.shape[0] > 0
-    n_rows = BODY_ROWS + 6
+    keep_pos = pos.shape[0] > 0
+    lag = PLANT_ROWS  # each target's lag state: row lag + t
+    n_rows = PLANT_ROWS + 6
     h = dt / substeps
     out = np.empty((n, n_steps + 1, 9))
     features = np.empty((9 + n_slots, 1))
@@ -274,17 +294,21 @@ def rk4_rollout(
     for lane in range(n):
         s = starts[lane]
         for t in range(6):
-            y[LAG + t, 0] = acc[s - 1, t] if s > 0 else 0.0
+            y[lag + t, 0] = acc[s - 1, t] if s > 0 else 0.0
         for i in range(4):
             y[Q + i, 0] = quat_d[s, i]
         for i in range(3):
             y[V + i, 0] = states[s, 3 + i]
             y[W + i, 0] = states[s, 6 + i]
+            y[X + i, 0] = 0.0
         for k in range(n_steps + 1):
             idx = s + k
             stage_features(y, 0, every_state, features)
             for i in range(9):
                 out[lane, k, i] = features[i, 0]
+            if keep_pos:
+                for i in range(3):
+                    pos[lane, k, i] = y[X + i, 0]
             if k == n_steps:
                 break
             for t in range(6):
@@ -301,17 +325,17 @@ def rk4_rollout(
                     stage_features(ys, 0, every_state, features)
                     for t in range(6):
                         a[t] = acc[idx, t]
-                        slope[LAG + t, 0] = 0.0
+                        slope[lag + t, 0] = 0.0
                         if modelled[t]:
                             for j in range(n_slots):
                                 features[9 + j, 0] = held[t, j]
                             eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
                             if alphas[t] < 1.0:
-                                a[t] = ys[LAG + t, 0]
-                                slope[LAG + t, 0] = rates[t] * (pred[0] - a[t])
+                                a[t] = ys[lag + t, 0]
+                                slope[lag + t, 0] = rates[t] * (pred[0] - a[t])
                             else:
                                 a[t] = pred[0]
-                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
+                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], True, slope)
                     accumulate(total, slope, WEIGHTS[stage], stage, 0, n_rows)
                 finish_step(y, total, h, 0, n_rows)
     return out

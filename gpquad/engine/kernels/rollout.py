@@ -24,6 +24,7 @@ def rollout(
     input_noise,
     scheme,
     substeps,
+    pos=None,
 ):
     """Fly a full model: integrate every state from each window start, all six accelerations.
 
@@ -34,6 +35,9 @@ def rollout(
     input_noise: (n_windows, n_steps, n_inputs) added to the recorded inputs, or shape (0, 0, 0).
     scheme, substeps: the integrator (gpquad.engine.kernels.step), picked here in Python so
     that a process compiles only the kernels of the schemes it flies.
+    pos: None, or (n_windows, n_steps + 1, 3) that an RK4 rollout fills with the world position
+    from each window start (x = 0), flown as part of the RK4 state. Eq. 2 has none to give:
+    its position step x' = x + R(q) V dt reads only the flown states (DiscoveredModel.fly).
     Returns states (n_windows, n_steps + 1, 9) [phi, theta, psi, u, v, w, p, q, r].
     """
     if scheme == RK4:
@@ -49,7 +53,10 @@ def rollout(
             n_steps,
             input_noise,
             substeps,
+            np.empty((0, 0, 3)) if pos is None else pos,
         )
+    if pos is not None:
+        raise ValueError("eq. 2's position is x' = x + R(q) V dt of the flown states")
     return euler_rollout(
         codes,
         values,
