@@ -26,6 +26,7 @@ from export_models import (
 )
 
 from gpquad.cli.commands import main
+from gpquad.engine.kernels.quaternion import rotation_matrix
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.exports import FORMATS, export, sympy_equations
 
@@ -67,8 +68,21 @@ def test_python_and_c_exports_fly_as_fly_states(name, tmp_path):
     # tests/test_euler_bit_identical.py), as before the RK4 exports
     np.testing.assert_array_equal(module.fly(inputs, X0), reference)
     np.testing.assert_array_equal(states, reference)
-    # fly() is fly_states() plus the positions
-    np.testing.assert_array_equal(model.fly(inputs, X0).rates, reference[:, 6:9])
+    # fly() is fly_states() plus eq. 2's position x' = x + R(q) V dt of those states, to
+    # the bit as fly summed it before RK4 models flew theirs with the RK4 state
+    flight = model.fly(inputs, X0)
+    np.testing.assert_array_equal(flight.rates, reference[:, 6:9])
+    np.testing.assert_array_equal(flight.pos, eq2_position(flight.quat, flight.vel, model.dt))
+
+
+def eq2_position(quat: np.ndarray, vel: np.ndarray, dt: float) -> np.ndarray:
+    """x_0 = 0, x_{k+1} = x_k + R(q_k) V_k dt, summed by np.cumsum."""
+    mat = np.empty((3, 3))
+    world = []
+    for q, v in zip(quat, vel, strict=True):
+        rotation_matrix(*q, mat)
+        world.append(mat @ v)
+    return np.vstack([np.zeros(3), np.cumsum(np.array(world)[:-1] * dt, axis=0)])
 
 
 def test_hand_model_hits_the_protected_division(tmp_path):

@@ -130,25 +130,27 @@ def test_rhs_is_f_or_the_lag_state_and_the_lag_derivative(model, tmp_path):
         module.rhs(states[0], history_rows(inputs, 0, module.HISTORY), np.zeros(5))
 
 
-def own_flight(module, inputs, x0) -> np.ndarray:
-    """The exported model flown as a user would: the header's ODE with module.rhs, by
-    scipy's DOP853 over each sample (inputs held), attitude as a scipy Rotation."""
+def own_flight(module, inputs, x0) -> tuple[np.ndarray, np.ndarray]:
+    """The exported model flown as a user would: the header's ODE with module.rhs and the
+    world position x_dot = R(q) V, by scipy's DOP853 over each sample (inputs held), attitude
+    as a scipy Rotation. Returns states (N, 9) and position (N, 3) from x = 0."""
     quat = Rotation.from_euler("ZYX", [x0[2], x0[1], x0[0]]).as_quat()  # x y z w
-    y = np.concatenate([quat[[3, 0, 1, 2]], x0[3:], np.zeros(6)])
+    y = np.concatenate([quat[[3, 0, 1, 2]], x0[3:], np.zeros(6), np.zeros(3)])
     out = np.empty((len(inputs), 9))
+    pos = np.empty((len(inputs), 3))
 
     def state_of(y):
         psi, theta, phi = Rotation.from_quat(y[[1, 2, 3, 0]]).as_euler("ZYX")
         return np.concatenate([[phi, theta, psi], y[4:10]])
 
     for k in range(len(inputs)):
-        out[k] = state_of(y)
+        out[k], pos[k] = state_of(y), y[16:19]
         hist = history_rows(inputs, k, module.HISTORY)
 
         def ode(_t, y, hist=hist):
             q0, q1, q2, q3 = y[:4]
             vel, omega = y[4:7], y[7:10]
-            accel, lag_dot = module.rhs(state_of(y), hist, y[10:])
+            accel, lag_dot = module.rhs(state_of(y), hist, y[10:16])
             p, q, r = omega
             quat_dot = 0.5 * np.array(
                 [
@@ -158,10 +160,13 @@ def own_flight(module, inputs, x0) -> np.ndarray:
                     q0 * r + q1 * q - q2 * p,
                 ]
             )
-            return np.concatenate([quat_dot, accel[:3] - np.cross(omega, vel), accel[3:], lag_dot])
+            world_vel = Rotation.from_quat(y[[1, 2, 3, 0]]).apply(vel)
+            return np.concatenate(
+                [quat_dot, accel[:3] - np.cross(omega, vel), accel[3:], lag_dot, world_vel]
+            )
 
         y = solve_ivp(ode, (0.0, module.DT), y, method="DOP853", rtol=1e-11, atol=1e-12).y[:, -1]
-    return out
+    return out, pos
 
 
 def test_an_own_integrator_of_rhs_flies_the_model(tmp_path):
@@ -170,10 +175,31 @@ def test_an_own_integrator_of_rhs_flies_the_model(tmp_path):
     model = rk4_model(32)
     inputs = hand_inputs(100)
     module = load_python(export(model, "python"), tmp_path / "own_export.py")
-    own = own_flight(module, inputs, X0)
+    own = own_flight(module, inputs, X0)[0]
     assert_flies_like(own, module.fly(inputs, X0), rtol=1e-7)
     with pytest.raises(AssertionError, match="largest difference"):
         assert_flies_like(own, in_scheme(model, "euler").fly_states(inputs, X0), rtol=1e-7)
+
+
+def test_rk4_fly_position_is_the_odes(tmp_path):
+    """An RK4 model's fly() position is x_dot = R(q) V flown as part of its RK4 state: within
+    1e-7 of the path's scale of DOP853 on the same ODE (inputs held) at 4 substeps, and
+    converging at RK4's order. Eq. 2's sum x' = x + R(q) V dt over the same flown states
+    (what fly gave before) is about 1e-2 off however many the substeps."""
+    inputs = hand_inputs(100)
+    module = load_python(export(rk4_model(1), "python"), tmp_path / "position_export.py")
+    reference = own_flight(module, inputs, X0)[1]
+    scale = np.abs(reference).max()
+    assert scale > 10.0  # metres: the flight goes somewhere
+    errors = {}
+    for substeps in (2, 4):
+        model = rk4_model(substeps)
+        flight = model.fly(inputs, X0)
+        errors[substeps] = np.abs(flight.pos - reference).max() / scale
+        world_vel = Rotation.from_quat(flight.quat[:, [1, 2, 3, 0]]).apply(flight.vel)
+        summed = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * model.dt, axis=0)])
+        assert np.abs(summed - reference).max() / scale > 1e-3, substeps
+    assert errors[4] < 1e-7 and errors[2] > 10.0 * errors[4], errors
 
 
 def test_casadi_rhs_matches_the_python_rhs(tmp_path):

@@ -230,6 +230,13 @@ class DiscoveredModel:
         equation starts from zero acceleration. Targets without an equation have zero
         acceleration. This is the reference every export (gpquad.models.exports) flies to.
         """
+        return self._flown(inputs, initial_state, raw_inputs, False)[0]
+
+    def _flown(
+        self, inputs, initial_state, raw_inputs: bool, keep_pos: bool
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """fly_states, and with keep_pos an RK4 model's world position (N, 3) from x = 0,
+        flown as part of the RK4 state; None for eq. 2 (fly sums it from the states)."""
         inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
         n_in = len(self.input_names)
         if inputs.ndim != 2 or inputs.shape[1] != n_in or len(inputs) < 1:
@@ -260,7 +267,11 @@ class DiscoveredModel:
             rot=np.zeros((rows, 9)),
             dt=float(self.dt),
         )
-        return self._rollout(arrays, np.array([history]), n - 1, None, missing_from_data=False)[0]
+        pos = np.empty((1, n, 3)) if keep_pos and self.integrator == "rk4" else None
+        flown = self._rollout(
+            arrays, np.array([history]), n - 1, None, missing_from_data=False, pos=pos
+        )
+        return flown[0], None if pos is None else pos[0]
 
     def fly(self, inputs, initial_state=None, raw_inputs: bool = True) -> Flight:
         """Fly the model from an initial state with given inputs (no data needed).
@@ -269,8 +280,9 @@ class DiscoveredModel:
         trim is subtracted here) unless raw_inputs=False. initial_state: 9 values
         [phi, theta, psi, u, v, w, p, q, r] (rad, m/s, rad/s), default all zero. Inputs
         before the first row are held at the first row. Targets without an equation have
-        zero acceleration. Returns a Flight (NED/FRD, position from x = 0) that
-        gpquad.data.flight.write_flight_file can save; its states are `fly_states`.
+        zero acceleration. Returns a Flight (NED/FRD) that gpquad.data.flight.write_flight_file
+        can save; its states are `fly_states`, its position x_dot = R(q) V from x = 0 flown by
+        the model's scheme: eq. 2's x' = x + R(q) V dt, or as part of an RK4 model's state.
         """
         inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
         n_in = len(self.input_names)
@@ -278,11 +290,12 @@ class DiscoveredModel:
             raise GpquadError(
                 f"inputs must have shape (N >= 2, {n_in}) for {self.input_names}", field="inputs"
             )
-        flown = self.fly_states(inputs, initial_state, raw_inputs)
+        flown, pos = self._flown(inputs, initial_state, raw_inputs, True)
         n = len(inputs)
         out_quat = np.array([quat_from_euler(*row[:3]) for row in flown])
-        world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
-        pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
+        if pos is None:  # eq. 2: x' = x + R(q) V dt
+            world_vel = np.array([_rotate(q, v) for q, v in zip(out_quat, flown[:, 3:6])])
+            pos = np.vstack([np.zeros(3), np.cumsum(world_vel[:-1] * self.dt, axis=0)])
         return Flight(
             name="simulated model",
             t=np.arange(n) * self.dt,
@@ -307,10 +320,16 @@ class DiscoveredModel:
         return self._rollout(dataset.arrays, starts, n_steps, input_noise, missing_from_data=True)
 
     def _rollout(
-        self, arrays: FlightArrays, starts, n_steps: int, input_noise, missing_from_data: bool
+        self,
+        arrays: FlightArrays,
+        starts,
+        n_steps: int,
+        input_noise,
+        missing_from_data: bool,
+        pos=None,
     ) -> np.ndarray:
         """The rollout kernel over `arrays`; targets without an equation take the data's
-        acceleration (missing_from_data) or zero."""
+        acceleration (missing_from_data) or zero. pos: as rollout's (RK4 only)."""
         from gpquad.engine.kernels.rollout import rollout
         from gpquad.engine.lag import lag_alpha
 
@@ -339,6 +358,7 @@ class DiscoveredModel:
             noise,
             SCHEMES[str(self.integrator)],
             int(self.substeps or 1),
+            pos,
         )
 
 
