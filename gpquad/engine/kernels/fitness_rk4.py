@@ -266,7 +266,7 @@ def rk4_rollout(
 
     The world position x_dot = R(q) V is one more part of the RK4 state (rows X, from x = 0
     at each window start); pos (n_windows, n_steps + 1, 3) receives it, or has no rows
-    (it is then flown and not kept).
+    (it is then not flown).
     """
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
@@ -335,7 +335,7 @@ def rk4_rollout(
                                 slope[lag + t, 0] = rates[t] * (pred[0] - a[t])
                             else:
                                 a[t] = pred[0]
-                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], True, slope)
+                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], keep_pos, slope)
                     accumulate(total, slope, WEIGHTS[stage], stage, 0, n_rows)
                 finish_step(y, total, h, 0, n_rows)
     return out
