@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy.signal import firwin
 
 from gpquad.data.flight import MAX_PLAUSIBLE_RATE, Flight
 from gpquad.data.plausibility import runs
@@ -99,6 +98,8 @@ def is_measured(description: str) -> bool:
 
 def lowpass_taps(taps: int, cutoff_hz: float, rate_hz: float) -> np.ndarray:
     """Symmetric (linear-phase) FIR low-pass taps, unit DC gain."""
+    from scipy.signal import firwin  # scipy.signal takes a second to import: only when used
+
     h = firwin(taps, cutoff_hz, fs=rate_hz)
     return h / h.sum()
 
