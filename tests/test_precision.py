@@ -122,3 +122,25 @@ def test_terms_a_fit_drove_to_round_off_are_dropped_and_real_ones_kept(dataset):
     assert without_negligible_terms(lag_filter, dataset.arrays, rows) is lag_filter
     model = DiscoveredModel({"p_dot": noisy}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
     assert "q" not in with_printed_digits(model, dataset).equations["p_dot"].text()
+
+
+def test_the_finishing_steps_fit_the_printed_terms(dataset, monkeypatch):
+    """finish_model hands its steps the equations without their round-off terms, so that
+    the joint refit fits the constants that will be printed; without steps it changes
+    nothing but the digits."""
+    from gpquad.models import finish
+
+    noisy = _equation("-4.15*p + 10.3*u_R(t-1) + 1e-6*q*r - 2e-6*theta", dataset)
+    model = DiscoveredModel({"p_dot": noisy}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
+    seen = []
+
+    def step(model, dataset, evolution, flipped):
+        seen.append(model.equations["p_dot"].sympy().free_symbols)
+        return model
+
+    monkeypatch.setitem(finish.STEPS, "repair", step)
+    evolution = type("E", (), {"finish": ("repair",)})()
+    finish.finish_model(model, dataset, evolution)
+    assert {s.name for s in seen[0]} == {"p", "u_R"}
+    unfinished = finish.finish_model(model, dataset, type("E", (), {"finish": ()})())
+    assert unfinished.equations["p_dot"].tree.size < noisy.tree.size  # the printing drops it

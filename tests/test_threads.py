@@ -46,6 +46,7 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
 
     monkeypatch.setattr(search, "Coevolution", record)
     monkeypatch.setattr(finish, "repair_stability", record)
+    monkeypatch.setattr(finish, "without_negligible", lambda model, dataset: model)
     with threadpool_limits(limits=2, user_api="blas"):
         if 2 not in blas_threads():
             pytest.skip("no BLAS here runs on two threads")

@@ -11,7 +11,7 @@ import dataclasses
 from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import joint_refit
-from gpquad.models.precision import with_printed_digits
+from gpquad.models.precision import with_printed_digits, without_negligible
 from gpquad.models.refine import refine
 from gpquad.models.stability import repair_stability
 from gpquad.models.symmetrize import symmetrize
@@ -56,6 +56,8 @@ def finish_model(model, dataset, evolution, vehicle=None, on_step=None):
     all six equations and leave a partial model as it is. `on_step(name)` is called
     before each step (progress)."""
     flipped = () if vehicle is None else vehicle.flipped(dataset.input_names)
+    if evolution.finish:
+        model = without_negligible(model, dataset)
     for name in evolution.finish:
         if on_step is not None:
             on_step(name)

@@ -119,11 +119,28 @@ def without_negligible_terms(equation, arrays, rows):
     return dataclasses.replace(equation, tree=tree)
 
 
+def _model_rows(model, dataset) -> np.ndarray:
+    """The training samples (else validation) on which a model's equations are compared."""
+    max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
+    return sample_rows(dataset.train or dataset.validation, max_delay)
+
+
+def without_negligible(model, dataset):
+    """The model with each equation without its negligible terms (without_negligible_terms);
+    the finishing steps start from it, so that they fit the terms that will be printed."""
+    rows = _model_rows(model, dataset)
+    if len(rows) == 0:
+        return model
+    equations = {
+        t: without_negligible_terms(e, dataset.arrays, rows) for t, e in model.equations.items()
+    }
+    return dataclasses.replace(model, equations=equations)
+
+
 def with_printed_digits(model, dataset):
     """The model without negligible terms (without_negligible_terms) and with each
     equation's `digits` set from the dataset's training samples."""
-    max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
-    rows = sample_rows(dataset.train or dataset.validation, max_delay)
+    rows = _model_rows(model, dataset)
     if len(rows) == 0:
         return model
     equations = {}
