@@ -63,6 +63,18 @@ def test_perturbed_constants_come_back_to_the_truth(raw_dataset):
         )
 
 
+def test_threads_give_the_same_refit(raw_dataset):
+    """The Jacobian's rollouts in two threads: the same constants, bit for bit, and the same
+    count of rollouts."""
+    wrong = dict(TRUTH, q_dot="-9.0*u_P - 3.3*q", a_x="10.0*theta - 0.78*u")
+    model = model_of(wrong, raw_dataset)
+    one, report_one = joint_fit.joint_refit(model, raw_dataset, horizons_s=(1.0,))
+    two, report_two = joint_fit.joint_refit(model, raw_dataset, horizons_s=(1.0,), workers=2)
+    assert report_one["rollouts"] == report_two["rollouts"] > 0
+    for target in TARGET_NAMES:
+        assert np.array_equal(one.equations[target].tree.values, two.equations[target].tree.values)
+
+
 def test_a_refit_that_does_not_help_is_not_kept(raw_dataset, monkeypatch):
     """The validation check can fail: a least-squares result that is worse on the validation
     windows leaves the model as it was."""

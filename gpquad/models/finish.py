@@ -17,31 +17,31 @@ from gpquad.models.stability import repair_stability
 from gpquad.models.symmetrize import symmetrize
 
 
-def _symmetrize(model, dataset, evolution, flipped):
+def _symmetrize(model, dataset, evolution, flipped, workers):
     if not flipped:
         return model
     model, report = symmetrize(model, dataset, evolution, flipped)
     return dataclasses.replace(model, symmetrized=report)
 
 
-def _refine(model, dataset, evolution, flipped):
+def _refine(model, dataset, evolution, flipped, workers):
     if not any(evolution.refine_for(t) for t in model.equations):
         return model
     model, report = refine(model, dataset, evolution, flipped)
     return dataclasses.replace(model, refined=report)
 
 
-def _repair(model, dataset, evolution, flipped):
+def _repair(model, dataset, evolution, flipped, workers):
     if not all(t in model.equations for t in TARGET_NAMES):
         return model
     repaired, report = repair_stability(model, dataset, mirror=flipped)
     return dataclasses.replace(repaired, stability=report)
 
 
-def _joint_fit(model, dataset, evolution, flipped):
+def _joint_fit(model, dataset, evolution, flipped, workers):
     if not all(t in model.equations for t in TARGET_NAMES):
         return model
-    refitted, report = joint_refit(model, dataset)
+    refitted, report = joint_refit(model, dataset, workers=workers)
     return dataclasses.replace(refitted, joint_fit=report)
 
 
@@ -49,17 +49,18 @@ STEPS = {"symmetrize": _symmetrize, "refine": _refine, "repair": _repair, "joint
 
 
 @one_blas_thread
-def finish_model(model, dataset, evolution, vehicle=None, on_step=None):
+def finish_model(model, dataset, evolution, vehicle=None, on_step=None, workers: int = 1):
     """The model after `evolution.finish`'s steps, in their order, with the significant
     digits its printed equations need. `vehicle` (the config's [vehicle], or None: no
     mirror) says which inputs a left-right mirror flips; "repair" and "joint_fit" need
     all six equations and leave a partial model as it is. `on_step(name)` is called
-    before each step (progress)."""
+    before each step (progress). workers: threads a step may use (the joint refit's
+    Jacobian); the result is the same for any number."""
     flipped = () if vehicle is None else vehicle.flipped(dataset.input_names)
     if evolution.finish:
         model = without_negligible(model, dataset)
     for name in evolution.finish:
         if on_step is not None:
             on_step(name)
-        model = STEPS[name](model, dataset, evolution, flipped)
+        model = STEPS[name](model, dataset, evolution, flipped, workers)
     return with_printed_digits(model, dataset)

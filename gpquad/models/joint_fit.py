@@ -38,6 +38,7 @@ Equations whose state the log does not measure keep their constants.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from typing import Any
 
@@ -169,9 +170,10 @@ def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str
     return starts, steps, "training"
 
 
-def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
+def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     """(model, report): the model with its constants refitted jointly, or the model as it
-    was when that does not lower the full-model error at the longest horizon.
+    was when that does not lower the full-model error at the longest horizon. workers:
+    threads for the Jacobian's rollouts (the same result for any number).
 
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
@@ -208,6 +210,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
     before = float(before_w.sum())
     x = x0.copy()
     objectives = []
+    rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
     for seconds in horizons_s:
         starts, steps = horizon_starts(dataset, dataset.train, seconds, history, MAX_WINDOWS)
         if len(starts) == 0:
@@ -215,12 +218,13 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S):
         objectives.append(FullModelError(dataset, starts, steps, states))
 
         def residuals(v, objectives=tuple(objectives)):
-            report["rollouts"] += 1
+            next(rollouts)
             m = with_constants(model, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
-        value, jacobian = forward_difference(residuals)
+        value, jacobian = forward_difference(residuals, workers)
         x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL)
+    report["rollouts"] = next(rollouts)
     refitted = with_constants(model, slots, x)
     after_w = judge.window_errors(refitted)
     after = float(after_w.sum())

@@ -269,13 +269,17 @@ def finish(
     cfg: Config,
     report: Progress | None = None,
     seconds: dict[str, float] | None = None,
+    workers: int = 1,
 ) -> DiscoveredModel:
     """The finished model (cfg.evolution.finish), each step's summary line reported, and
     its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
-    given, receives each step's wall time."""
+    given, receives each step's wall time; `workers`: threads of the steps (the run's
+    jobs; the same model for any number)."""
     say = (lambda text: None) if report is None else report.say
     clock = StepClock(say)
-    model = finish_model(model, dataset, cfg.evolution, cfg.vehicle, on_step=clock.start)
+    model = finish_model(
+        model, dataset, cfg.evolution, cfg.vehicle, on_step=clock.start, workers=workers
+    )
     clock.stop()
     if seconds is not None:
         seconds.update(clock.seconds)
@@ -307,4 +311,4 @@ def fit_dataset(
     folder the searches may run in `jobs` processes (the same equations for any value)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     equations, _ = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
-    return finish(new_model(equations, dataset, cfg), dataset, cfg, report)
+    return finish(new_model(equations, dataset, cfg), dataset, cfg, report, workers=jobs)

@@ -196,7 +196,9 @@ def run_experiment(
         )
         raise
     finish_seconds: dict[str, float] = {}
-    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds)
+    model = finish(
+        new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs
+    )
     write_model(run_dir, model)
     wall = time.time() - started
     info.update(

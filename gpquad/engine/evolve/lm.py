@@ -21,6 +21,8 @@ result is also a function of the inputs alone.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -168,11 +170,15 @@ def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.nda
     return np.asarray(fit.x, dtype=float)
 
 
-def forward_difference(fun):
+def forward_difference(fun, workers: int = 1):
     """(value, jac) for a residual function without an analytic Jacobian: value(x) is fun(x)
     remembered at the last point asked, jac(x) the forward-difference Jacobian there with
     step FD_STEP * max(1, |x_j|) (signed like x_j, as scipy's '2-point'), also remembered,
-    so that LM's repeated requests at one point cost one evaluation each."""
+    so that LM's repeated requests at one point cost one evaluation each.
+
+    workers > 1: the columns are computed in that many threads (`fun` must be thread-safe
+    and release the GIL for its work, as the numba kernels do); each column is the same
+    function of x, so the Jacobian is the same for any number of workers."""
     memo: dict[str, tuple[bytes, np.ndarray]] = {}
 
     def remembered(name, x, compute):
@@ -187,11 +193,15 @@ def forward_difference(fun):
     def jacobian(x):
         f0 = value(x)
         h = FD_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
-        columns = []
-        for j in range(x.size):
+
+        def column(j: int) -> np.ndarray:
             shifted = x.copy()
             shifted[j] += h[j]
-            columns.append((np.asarray(fun(shifted), dtype=float) - f0) / (shifted[j] - x[j]))
-        return np.column_stack(columns)
+            return (np.asarray(fun(shifted), dtype=float) - f0) / (shifted[j] - x[j])
+
+        if workers > 1 and x.size > 1:
+            with ThreadPoolExecutor(max_workers=min(workers, x.size)) as pool:
+                return np.column_stack(list(pool.map(column, range(x.size))))
+        return np.column_stack([column(j) for j in range(x.size)])
 
     return value, (lambda x: remembered("jac", x, jacobian))
