@@ -79,19 +79,17 @@ class Evaluator:
 
     def pack(self, trees: list[Tree]):
         """Population arrays (codes, values, sizes, delays) for the kernel."""
-        sizes = np.array([len(t.codes) for t in trees], dtype=np.int64)
-        capacity = max(self.capacity, int(sizes.max()))
-        filled = np.arange(capacity) < sizes[:, None]  # row-major: the trees one after another
+        lengths = [len(t.codes) for t in trees]
+        capacity = max(self.capacity, max(lengths))
         codes = np.zeros((len(trees), capacity), dtype=np.int64)
         values = np.zeros((len(trees), capacity))
-        codes[filled] = np.concatenate([t.codes for t in trees])
-        values[filled] = np.concatenate([t.values for t in trees])
         delays = np.empty((len(trees), self.n_inputs), dtype=np.int64)
-        try:
-            delays[:] = np.stack([t.delays for t in trees])
-        except ValueError:  # trees of different delay counts: each row broadcasts its own
-            for i, t in enumerate(trees):
-                delays[i] = t.delays
+        for i, t in enumerate(trees):
+            n = lengths[i]
+            codes[i, :n] = t.codes
+            values[i, :n] = t.values
+            delays[i] = t.delays
+        sizes = np.array(lengths, dtype=np.int64)
         if (capacity + 1) // 2 > STACK_ROWS:  # n nodes hold <= (n + 1) // 2 leaves >= height
             check_stack(codes, sizes)
         return codes, values, sizes, delays
