@@ -79,16 +79,17 @@ class Evaluator:
 
     def pack(self, trees: list[Tree]):
         """Population arrays (codes, values, sizes, delays) for the kernel."""
-        capacity = max(self.capacity, max(t.size for t in trees))
+        lengths = [len(t.codes) for t in trees]
+        capacity = max(self.capacity, max(lengths))
         codes = np.zeros((len(trees), capacity), dtype=np.int64)
         values = np.zeros((len(trees), capacity))
-        sizes = np.empty(len(trees), dtype=np.int64)
         delays = np.empty((len(trees), self.n_inputs), dtype=np.int64)
         for i, t in enumerate(trees):
-            codes[i, : t.size] = t.codes
-            values[i, : t.size] = t.values
-            sizes[i] = t.size
+            n = lengths[i]
+            codes[i, :n] = t.codes
+            values[i, :n] = t.values
             delays[i] = t.delays
+        sizes = np.array(lengths, dtype=np.int64)
         if (capacity + 1) // 2 > STACK_ROWS:  # n nodes hold <= (n + 1) // 2 leaves >= height
             check_stack(codes, sizes)
         return codes, values, sizes, delays

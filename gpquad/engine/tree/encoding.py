@@ -80,7 +80,7 @@ def subtree_end(codes, start: int) -> int:
     need = 1
     i = start
     while need:
-        need += (2 if codes[i] < N_OPERATORS else 0) - 1
+        need += 1 if codes[i] < N_OPERATORS else -1
         i += 1
     return i
 
@@ -97,6 +97,19 @@ def node_depths(codes) -> list[int]:
     return depths
 
 
+def node_depth(codes, index: int) -> int:
+    """Depth of node `index` of a prefix tree, reading only the nodes before it."""
+    depth = 0
+    right_children: list[int] = []  # depths of the right children still to be read
+    for k in range(index):
+        if codes[k] < N_OPERATORS:
+            depth += 1
+            right_children.append(depth)
+        else:
+            depth = right_children.pop()
+    return depth
+
+
 def tree_depth(codes) -> int:
     """Largest node depth."""
     return max(node_depths(codes))
@@ -106,16 +119,19 @@ def tree_degree(codes) -> int:
     """Polynomial degree of a prefix tree: a variable 1, a constant 0, + and - the larger of
     their children's, * and / the sum (a quotient counts its denominator's variables, so
     1 / x is degree 1: an upper bound that keeps the rule one of counting)."""
+    if isinstance(codes, np.ndarray):
+        codes = codes.tolist()
     stack: list[int] = []
-    for c in reversed(list(codes)):
-        c = int(c)
-        if c == CONST:
-            stack.append(0)
-        elif c >= VAR_BASE:
-            stack.append(1)
+    push, pop = stack.append, stack.pop
+    for c in reversed(codes):
+        if c >= VAR_BASE:
+            push(1)
+        elif c == CONST:
+            push(0)
         else:
-            a, b = stack.pop(), stack.pop()
-            stack.append(max(a, b) if c in (ADD, SUB) else a + b)
+            a = pop()
+            b = pop()
+            push((a if a > b else b) if c == ADD or c == SUB else a + b)
     return stack[0]
 
 

@@ -3,35 +3,38 @@
 numpy's Generator costs ~1-5 us per scalar call, which dominated mutation time.
 RandomStream draws blocks from an explicit Generator and hands out scalars, so the
 sequence is fully determined by the Generator's state (no global randomness).
+A block is drawn only when the previous one is used up and a value is asked for, so the
+Generator's own draws between them (the test phase's) see the same state.
 """
 
 from __future__ import annotations
+
+from itertools import chain
 
 import numpy as np
 
 BLOCK = 4096
 
 
-class RandomStream:
-    """Scalar uniform/normal/integer draws served from blocks of a numpy Generator."""
+def _blocks(draw):
+    """Endless lists of BLOCK values, each drawn when it is asked for."""
+    while True:
+        yield draw(BLOCK).tolist()
 
-    __slots__ = ("_rng", "_uniform", "_u", "_normal", "_n")
+
+class RandomStream:
+    """Scalar uniform/normal/integer draws served from blocks of a numpy Generator.
+
+    `random()` is the bound __next__ of an iterator over the blocks: a C call, no Python frame.
+    """
+
+    __slots__ = ("_rng", "random", "_normal")
 
     def __init__(self, rng: np.random.Generator):
         self._rng = rng
-        self._uniform: list[float] = []
-        self._u = 0
-        self._normal: list[float] = []
-        self._n = 0
-
-    def random(self) -> float:
-        """U[0, 1)."""
-        if self._u == len(self._uniform):
-            self._uniform = self._rng.random(BLOCK).tolist()
-            self._u = 0
-        value = self._uniform[self._u]
-        self._u += 1
-        return value
+        #: U[0, 1)
+        self.random = chain.from_iterable(_blocks(rng.random)).__next__
+        self._normal = chain.from_iterable(_blocks(rng.standard_normal)).__next__
 
     def below(self, n: int) -> int:
         """Uniform integer in 0..n-1."""
@@ -42,12 +45,7 @@ class RandomStream:
 
     def normal(self, sigma: float) -> float:
         """N(0, sigma^2)."""
-        if self._n == len(self._normal):
-            self._normal = self._rng.standard_normal(BLOCK).tolist()
-            self._n = 0
-        value = self._normal[self._n]
-        self._n += 1
-        return sigma * value
+        return sigma * self._normal()
 
 
 def as_stream(rng) -> RandomStream:

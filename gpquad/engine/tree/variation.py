@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpquad.engine.taps import initial_delays
-from gpquad.engine.tree.encoding import Tree, node_depths, subtree_end, tree_degree
+from gpquad.engine.tree.encoding import Tree, node_depth, subtree_end, tree_degree
 from gpquad.engine.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
 from gpquad.engine.tree.random_stream import RandomStream, as_stream
 
@@ -58,23 +58,32 @@ def random_leaf(rng: RandomStream, params: VariationParams):
 
 
 def random_subtree(rng, params: VariationParams, max_depth: int):
-    """Grow a random subtree of depth <= max_depth; each node is a leaf with p = p_leaf."""
+    """Grow a random subtree of depth <= max_depth; each node is a leaf with p = p_leaf.
+    Nodes are drawn in prefix order (a node, then its left subtree, then its right)."""
     rng = as_stream(rng)
+    random = rng.random
+    p_leaf = params.p_leaf
+    p_constant = params.p_constant_leaf
+    low = params.const_low
+    span = params.const_high - params.const_low
+    variables = params.variables
+    n_leaves = params.n_variables if variables is None else len(variables)
     codes: list[int] = []
     values: list[float] = []
-
-    def grow(depth_left: int):
-        if depth_left == 0 or rng.random() < params.p_leaf:
-            c, v = random_leaf(rng, params)
-            codes.append(c)
-            values.append(v)
-            return
-        codes.append(rng.below(N_OPERATORS))
+    depths_left = [max_depth]  # the nodes still to draw, the next one last
+    while depths_left:
+        depth_left = depths_left.pop()
+        if depth_left == 0 or random() < p_leaf:
+            if random() < p_constant:
+                codes.append(CONST)
+                values.append(low + span * random())
+                continue
+            k = min(int(random() * n_leaves), n_leaves - 1)
+            codes.append(VAR_BASE + (k if variables is None else variables[k]))
+        else:
+            codes.append(min(int(random() * N_OPERATORS), N_OPERATORS - 1))
+            depths_left += (depth_left - 1, depth_left - 1)
         values.append(0.0)
-        grow(depth_left - 1)
-        grow(depth_left - 1)
-
-    grow(max_depth)
     return codes, values
 
 
@@ -89,35 +98,46 @@ def random_tree(rng, params: VariationParams) -> Tree:
             return Tree.from_lists(codes, values, delays)
 
 
+def _spliced(items: list, start: int, end: int, new: list) -> list:
+    """A copy of `items` with items[start:end] replaced by `new`."""
+    out = items.copy()
+    out[start:end] = new
+    return out
+
+
 def macro_mutation(rng, codes, values, params: VariationParams):
     """Replace one node by a new one, dropping or growing children as needed."""
     rng = as_stream(rng)
     i = rng.below(len(codes))
-    depth = node_depths(codes)[i]
-    end = subtree_end(codes, i)
+    depth = node_depth(codes, i)
     was_op = codes[i] < N_OPERATORS
     if depth < params.max_depth and rng.random() >= params.p_leaf:
         new_op = rng.below(N_OPERATORS)
         if was_op:
-            return codes[:i] + [new_op] + codes[i + 1 :], values[:i] + [0.0] + values[i + 1 :]
+            new_codes = codes.copy()
+            new_codes[i] = new_op
+            new_values = values.copy()
+            new_values[i] = 0.0
+            return new_codes, new_values
         left_c, left_v = random_subtree(rng, params, params.max_depth - depth - 1)
         right_c, right_v = random_subtree(rng, params, params.max_depth - depth - 1)
         return (
-            codes[:i] + [new_op] + left_c + right_c + codes[end:],
-            values[:i] + [0.0] + left_v + right_v + values[end:],
+            _spliced(codes, i, i + 1, [new_op, *left_c, *right_c]),
+            _spliced(values, i, i + 1, [0.0, *left_v, *right_v]),
         )
+    end = subtree_end(codes, i)
     c, v = random_leaf(rng, params)
-    return codes[:i] + [c] + codes[end:], values[:i] + [v] + values[end:]
+    return _spliced(codes, i, end, [c]), _spliced(values, i, end, [v])
 
 
 def micro_mutation(rng, codes, values, params: VariationParams):
     """Replace the subtree at one node by a newly grown subtree."""
     rng = as_stream(rng)
     i = rng.below(len(codes))
-    depth = node_depths(codes)[i]
+    depth = node_depth(codes, i)
     end = subtree_end(codes, i)
     new_c, new_v = random_subtree(rng, params, params.max_depth - depth)
-    return codes[:i] + new_c + codes[end:], values[:i] + new_v + values[end:]
+    return _spliced(codes, i, end, new_c), _spliced(values, i, end, new_v)
 
 
 def perturb_constant(rng, codes, values, sigma: float) -> list[float]:
@@ -135,22 +155,27 @@ def mutate(rng, tree: Tree, params: VariationParams) -> Tree:
     """The paper's mutation: macro or micro (p = 0.5 each), then constant and delay mutation.
     With params.max_degree, a structure above it is drawn again (DEGREE_TRIES times)."""
     rng = as_stream(rng)
+    random = rng.random
     parent_codes = tree.codes.tolist()
     parent_values = tree.values.tolist()
+    max_degree = params.max_degree
     for _ in range(DEGREE_TRIES):  # one draw unless the degree limit refuses it
-        if rng.random() < 0.5:
+        if random() < 0.5:
             codes, values = macro_mutation(rng, parent_codes, parent_values, params)
         else:
             codes, values = micro_mutation(rng, parent_codes, parent_values, params)
-        if params.allows(codes):
+        if max_degree <= 0 or tree_degree(codes) <= max_degree:
             break
     else:
         codes, values = parent_codes, parent_values
-    if rng.random() < params.p_const_perturb:
+    if random() < params.p_const_perturb:
         values = perturb_constant(rng, codes, values, params.const_sigma)
-    delays = tree.delays.tolist()
+    delays = tree.delays  # shared with the parent unless a delay changes
+    p_delay = params.p_delay
     for j in range(params.n_inputs):
-        if rng.random() < params.p_delay:
+        if random() < p_delay:
+            if delays is tree.delays:
+                delays = delays.tolist()
             delays[j] = rng.below(params.max_delay + 1)
     return Tree.from_lists(codes, values, delays)
 
