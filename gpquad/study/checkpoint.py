@@ -138,8 +138,12 @@ def _rng_state(record) -> dict:
 def state_from_dict(fields: dict) -> RunState:
     """The RunState of checked plain data (CorruptCheckpoint when any field is off)."""
     names = {f.name for f in dataclasses.fields(RunState)} - {"history"}
-    if not isinstance(fields, dict) or set(fields) != names:
+    # a checkpoint of gpquad 0.2 has no best_errors: its run goes on without them
+    if not isinstance(fields, dict) or set(fields) not in (names, names - {"best_errors"}):
         raise CorruptCheckpoint("the state's fields are not RunState's")
+    best_errors = fields.get("best_errors", [])
+    if not isinstance(best_errors, list) or not all(type(e) in (int, float) for e in best_errors):
+        raise CorruptCheckpoint("best_errors is not a list of numbers")
     if (
         not isinstance(fields["target"], str)
         or type(fields["iteration"]) is not int
@@ -162,6 +166,7 @@ def state_from_dict(fields: dict) -> RunState:
         models=models,
         inserted=fields["inserted"],
         rng_state=_rng_state(fields["rng_state"]),
+        best_errors=[float(e) for e in best_errors],
         **arrays,  # type: ignore[arg-type]
     )
 

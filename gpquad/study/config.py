@@ -152,6 +152,10 @@ class EvolutionConfig:
 
     targets: tuple[str, ...] = TARGET_NAMES  # the accelerations to identify, each alone
     iterations: int = 12  # coevolution iterations (paper: 30)
+    # Stop a search early when `stall_iterations` iterations in a row (0 = never) did not
+    # lower its best training error by `stall_gain` of it (docs/decisions).
+    stall_iterations: int = 3
+    stall_gain: float = 0.01
     model_generations: int = 600  # model hill-climber generations per iteration
     test_generations: int = 80  # test hill-climber generations per iteration
     n_models: int = 14  # model hill climbers

@@ -55,7 +55,14 @@ def validate_evolution(cfg: Config, source: str) -> None:
     for name in ("iterations", "n_models", "n_tests", "suite_size", "model_generations"):
         if getattr(ev, name) < 1:
             raise GpquadError("must be >= 1", source=source, field=f"evolution.{name}")
+    if not 0.0 <= ev.stall_gain < 1.0:
+        raise GpquadError(
+            "must be a fraction, at least 0 and below 1",
+            source=source,
+            field="evolution.stall_gain",
+        )
     for name in (
+        "stall_iterations",
         "test_generations",
         "simplify_generations",
         "max_delay",

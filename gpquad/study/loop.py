@@ -1,6 +1,7 @@
 """The one run loop, shared by `gpquad run` (gpquad.study.runner) and `gpquad sweep`.
 
-`evolve` iterates a coevolution state to its last iteration. After every iteration it
+`evolve` iterates a coevolution state to its last iteration, or until it stops gaining
+(gpquad.engine.evolve.stall). After every iteration it
 appends the iteration's history rows (written and fsynced by HistoryWriter), then replaces
 the checkpoint atomically, recording the history's length, so that a run killed at any
 moment resumes from its last iteration with no duplicated history rows. `final_equation`
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.stall import best_error, stalled
 from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
@@ -29,9 +31,13 @@ def evolve(
     meta: dict | None = None,
     on_iteration: Callable[[RunState], None] | None = None,
 ) -> RunState:
-    """Iterate `state` until `iterations`; history, checkpoint, then `on_iteration(state)`."""
-    while state.iteration < iterations:
+    """Iterate `state` until `iterations`, or until the search stalls (`search_stalled`);
+    after each iteration: its best training error, history, checkpoint, then
+    `on_iteration(state)`."""
+    while state.iteration < iterations and not search_stalled(co, state):
         co.iterate(state)
+        if co.cfg.stall_iterations > 0:
+            state.best_errors.append(best_error(co.training_errors(state)))
         if history is not None:
             history.write(state.history)
         state.history.clear()
@@ -44,6 +50,12 @@ def evolve(
         if on_iteration is not None:
             on_iteration(state)
     return state
+
+
+def search_stalled(co: Coevolution, state: RunState) -> bool:
+    """Whether the search stopped gaining (gpquad.engine.evolve.stall, the config's
+    stall_iterations and stall_gain)."""
+    return stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain)
 
 
 def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:

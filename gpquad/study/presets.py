@@ -20,6 +20,7 @@ PRESETS: dict[str, dict] = {
         "vehicle": {"symmetric": False},
         "evolution": {
             "iterations": 30,
+            "stall_iterations": 0,
             "window_s": 30.0,
             "max_depth": 5,
             "max_degree": 0,

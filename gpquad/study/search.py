@@ -57,6 +57,16 @@ class Progress:
             flush=True,
         )
 
+    def stopped(self, target: str, state: RunState, cfg) -> None:
+        """A search that stalled before its last iteration: its iterations left are not
+        counted in the time left, and one line says so."""
+        self.total -= cfg.iterations - state.iteration
+        self.say(
+            f"  {target:6s} stopped after iteration {state.iteration}: the last "
+            f"{cfg.stall_iterations} lowered its training error by less than "
+            f"{100 * cfg.stall_gain:g} %"
+        )
+
     def say(self, text: str) -> None:
         if self.enabled:
             print(text, file=self.stream, flush=True)
@@ -95,6 +105,8 @@ def identify(
     )
     try:
         evolve(co, state, ev.iterations, history, checkpoint_path, on_iteration=report)
+        if progress is not None and state.iteration < ev.iterations:
+            progress.stopped(target, state, ev)
     except KeyboardInterrupt as exc:
         tree, train, val = co.best(state)
         exc.partial = (  # type: ignore[attr-defined]

@@ -29,6 +29,8 @@ class RunState:
     inserted: int
     rng_state: dict
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
+    #: The best climber's training error after each iteration (the stall rule reads it).
+    best_errors: list[float] = field(default_factory=list)
 
 
 #: Steps of data each short-horizon fit flies: windows are spread over the training data up
@@ -90,4 +92,5 @@ def clone_state(state: RunState) -> RunState:
         suite_age=state.suite_age.copy(),
         rng_state=dict(state.rng_state),
         history=list(state.history),
+        best_errors=list(state.best_errors),
     )

@@ -1,0 +1,41 @@
+"""When a search stops gaining: the stall rule of the run loop (gpquad.study.loop).
+
+After every iteration the run loop records the best climber's error over the whole
+training data (`RunState.best_errors`). The search stops early when `patience`
+iterations in a row did not lower the best error recorded so far by at least the
+fraction `gain` of it. The climbers are scored on a co-evolving suite, so the best
+training error is not monotone; the rule compares with the lowest error reached, and an
+iteration that does not beat it by `gain` counts as stalled. Measured on median-noisy and
+px4-s250 (docs/decisions/2026-11-26-finish-speed.md): after the third stalled iteration the
+training error fell by at most a few per cent in the remaining iterations, and the
+validation error of those later climbers was as often worse as better.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def stalled(best_errors: list[float], patience: int, gain: float) -> bool:
+    """True when the last `patience` entries of best_errors did not lower the lowest earlier
+    one by the fraction `gain`; False for patience 0 (the rule is off) or a short record."""
+    if patience <= 0 or len(best_errors) <= patience:
+        return False
+    lowest = math.inf
+    since = 0
+    for error in best_errors:
+        if not math.isfinite(error):
+            since += 1
+            continue
+        if error < lowest * (1.0 - gain):
+            lowest, since = error, 0
+        else:
+            since += 1
+            lowest = min(lowest, error)
+    return since >= patience
+
+
+def best_error(train_errors) -> float:
+    """The lowest finite climber error (inf when none is finite)."""
+    finite = [float(e) for e in train_errors if math.isfinite(float(e))]
+    return min(finite) if finite else math.inf

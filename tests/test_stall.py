@@ -1,0 +1,66 @@
+"""The stall rule: a search stops when it stops gaining, resumes where it stopped, and the
+paper preset runs every iteration."""
+
+import dataclasses
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from test_engine import TINY
+
+from gpquad.engine.evolve.coevolution import Coevolution
+from gpquad.engine.evolve.stall import best_error, stalled
+from gpquad.errors import GpquadError
+from gpquad.study import checkpoint
+from gpquad.study.config import config_from_dict
+from gpquad.study.loop import evolve
+
+
+def test_three_iterations_without_one_percent_stop_the_search():
+    assert not stalled([1.0, 0.9, 0.8, 0.7, 0.6], 3, 0.01)
+    assert stalled([1.0, 0.995, 0.999, 0.996], 3, 0.01)
+    # a gain of 1 % or more starts the count again
+    assert not stalled([1.0, 0.999, 0.98, 0.979, 0.978], 3, 0.01)
+    assert stalled([1.0, 0.999, 0.98, 0.979, 0.978, 0.977], 3, 0.01)
+    # a worse iteration is stalled; the record is too short to judge; 0 turns it off
+    assert stalled([1.0, 2.0, 3.0, float("inf")], 3, 0.01)
+    assert not stalled([1.0, 1.0, 1.0], 3, 0.01)
+    assert not stalled([1.0] * 20, 0, 0.01)
+    assert best_error([float("nan"), 2.0, 1.5]) == 1.5 and best_error([float("nan")]) == float(
+        "inf"
+    )
+
+
+@given(st.lists(st.floats(0.01, 10.0), min_size=1, max_size=12), st.integers(1, 4))
+def test_a_stall_is_patience_iterations_without_the_gain(errors, patience):
+    """Against a plain reading of the rule: the last `patience` entries none below
+    (1 - gain) x the lowest entry before each of them."""
+    gain = 0.01
+    expected = len(errors) > patience and all(
+        errors[k] >= (1 - gain) * min(errors[:k])
+        for k in range(len(errors) - patience, len(errors))
+    )
+    assert stalled(errors, patience, gain) == expected
+
+
+def test_a_stalled_search_stops_and_resumes_stopped(short_dataset, tmp_path):
+    ev = dataclasses.replace(TINY, iterations=6, stall_iterations=1, stall_gain=0.5)
+    co = Coevolution(short_dataset, "p_dot", ev)
+    state = evolve(co, co.init_state(3), ev.iterations, checkpoint_path=tmp_path / "c.ckpt")
+    assert 2 <= state.iteration < 6 and len(state.best_errors) == state.iteration
+    saved, _ = checkpoint.load(tmp_path / "c.ckpt")
+    assert saved.best_errors == state.best_errors
+    resumed = evolve(co, saved, ev.iterations)
+    assert resumed.iteration == state.iteration  # nothing left to gain: no more iterations
+    never = dataclasses.replace(ev, stall_iterations=0)
+    full = evolve(Coevolution(short_dataset, "p_dot", never), co.init_state(3), 6)
+    assert full.iteration == 6 and full.best_errors == []
+
+
+def test_stall_settings_are_checked_and_the_paper_runs_every_iteration():
+    with pytest.raises(GpquadError, match="evolution.stall_gain"):
+        config_from_dict({"evolution": {"stall_gain": 1.5}})
+    with pytest.raises(GpquadError, match="evolution.stall_iterations"):
+        config_from_dict({"evolution": {"stall_iterations": -1}})
+    assert config_from_dict({"preset": "paper"}).evolution.stall_iterations == 0
+    assert config_from_dict({}).evolution.stall_iterations == 3
