@@ -63,6 +63,27 @@ def test_perturbed_constants_come_back_to_the_truth(raw_dataset):
         )
 
 
+def test_the_refit_is_judged_as_a_readers_simulator_flies_it(raw_dataset):
+    """A continuous-time model is judged flown by RK4 with FIDELITY_SUBSTEPS steps per
+    sample: on a stiff roll loop (60 / s, one RK4 step per sample near its limit) the
+    judged error is that of the fine flight, not the model's own one step per sample."""
+    from gpquad.data.score import FIDELITY_SUBSTEPS
+
+    stiff = dict(TRUTH, p_dot="10.3*u_R(t-1) - 60.0*p")
+    model = dataclasses.replace(model_of(stiff, raw_dataset), integrator="rk4", substeps=1)
+    fine = joint_fit.as_flown_by_readers(model)
+    assert (fine.integrator, fine.substeps) == ("rk4", FIDELITY_SUBSTEPS)
+    euler = model_of(stiff, raw_dataset)
+    assert joint_fit.as_flown_by_readers(euler) is euler
+    _, report = joint_fit.joint_refit(model, raw_dataset, horizons_s=(1.0,))
+    starts, steps, _ = joint_fit.judged_windows(raw_dataset, model, 1.0)
+    judge = joint_fit.FullModelError(
+        raw_dataset, starts, steps, joint_fit.measured_states(raw_dataset)
+    )
+    assert report["error_before"] == pytest.approx(judge.error(fine), rel=1e-12)
+    assert abs(judge.error(model) - judge.error(fine)) > 0.01 * judge.error(fine)
+
+
 def test_threads_give_the_same_refit(raw_dataset):
     """The Jacobian's rollouts in two threads: the same constants, bit for bit, and the same
     count of rollouts."""

@@ -10,7 +10,8 @@ from test_stability import model_of
 
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
-from gpquad.models.refine import RefineProblem, library, refine, refine_equation, refined_summary
+from gpquad.models.refine import library, refine, refine_equation, refined_summary
+from gpquad.models.refine_problem import RefineProblem
 from gpquad.study.config import SimulatorConfig, config_from_dict, preset_evolution
 
 TRUTH = dict(SimulatorConfig().equations)
@@ -183,3 +184,27 @@ def test_without_validation_windows_nothing_is_refined_and_the_run_says_why(data
     assert refined is found and report["no_validation"] and report["tried"] == 0
     assert report["validation_before"] is None  # model.json stays valid JSON
     assert "data.validation_fraction" in refined_summary({"r_dot": report})
+
+
+def test_validation_flights_are_flown_as_a_readers_simulator_flies_them(dataset):
+    """With the continuous-time engine the path is judged by RK4 with FIDELITY_SUBSTEPS
+    steps per sample (a stiff loop scores differently there than in one step per sample);
+    the training fits keep the engine's own scheme; an eq. 2 engine judges in eq. 2."""
+    from gpquad.data.score import FIDELITY_SUBSTEPS
+
+    stiff = model_of({"r_dot": "-7.8*u_Y(t-2) - 60.0*r"}, dataset).equations["r_dot"]
+    rk4 = dataclasses.replace(evolution(), integrator="rk4", substeps=1)
+    problem = RefineProblem(stiff, dataset, rk4)
+    assert (problem.ev.substeps, problem.judge.substeps) == (1, FIDELITY_SUBSTEPS)
+    tree = problem.tree(problem.canonical(stiff))
+    starts, steps = _validation_windows(problem, dataset)
+    own = problem.ev.window_errors([tree], starts, n_steps=steps).mean()
+    assert problem.error(tree, dataset.validation) != pytest.approx(own, rel=1e-3)
+    assert RefineProblem(stiff, dataset, evolution()).judge.substeps == 1
+
+
+def _validation_windows(problem, dataset):
+    from gpquad.engine.evolve.windows import tile
+
+    starts, steps = tile(dataset.validation, problem.window_steps, problem.max_delay)
+    return starts, steps

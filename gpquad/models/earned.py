@@ -33,7 +33,7 @@ def earn_terms(
     """(expr with the terms beyond FREE_TERMS that did not earn their place removed and its
     constants refitted, the removed monomials, its validation error).
 
-    problem: a gpquad.models.refine.RefineProblem (fit, error, tree); expr: the equation
+    problem: a gpquad.models.refine_problem.RefineProblem (fit, error, tree); expr: the equation
     expanded with taps; validation: the dataset's validation ranges; gain(error): the least
     validation improvement a term must bring.
     """

@@ -20,7 +20,10 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 40 % worse). Structures are not changed.
 
 The refit is kept only if it lowers the same error on the validation windows (or, with
-no validation data, on the training windows) at the longest horizon, by more than the
+no validation data, on the training windows) at the longest horizon, flown as a reader
+flies the printed ODEs (`as_flown_by_readers`: RK4 with FIDELITY_SUBSTEPS steps per sample
+for a continuous-time model, so that constants that fly only by one RK4 step's damping are
+not kept), by more than the
 windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors, or
 every window lower and the sum at most half), the report says which windows, with both
 errors. A marginal drop is not enough because the
@@ -44,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from gpquad.data.score import FIDELITY_SUBSTEPS
 from gpquad.engine.evolve.lm import forward_difference, trust_region
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
@@ -159,6 +163,14 @@ def model_history(model) -> int:
     return max(int(e.tree.delays.max()) for e in model.equations.values())
 
 
+def as_flown_by_readers(model):
+    """The model flown as a reader's simulator flies its printed ODEs: a continuous-time
+    model by RK4 with FIDELITY_SUBSTEPS steps per sample (an eq. 2 model as it is)."""
+    if model.integrator == "rk4" and model.substeps < FIDELITY_SUBSTEPS:
+        return dataclasses.replace(model, substeps=FIDELITY_SUBSTEPS)
+    return model
+
+
 def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str]:
     """Window starts and steps of `seconds` over the validation ranges, else the training
     ranges, and which ("validation" or "training"): where full models are judged."""
@@ -206,7 +218,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         )
         return model, report
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
-    before_w = judge.window_errors(model)
+    before_w = judge.window_errors(as_flown_by_readers(model))
     before = float(before_w.sum())
     x = x0.copy()
     objectives = []
@@ -226,7 +238,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL)
     report["rollouts"] = next(rollouts)
     refitted = with_constants(model, slots, x)
-    after_w = judge.window_errors(refitted)
+    after_w = judge.window_errors(as_flown_by_readers(refitted))
     after = float(after_w.sum())
     accepted = significant_drop(before_w, after_w)
     report.update(

@@ -21,7 +21,10 @@ of the roll and pitch set-points at several delays, filtered by the motors
    training error by more than term_min_gain. With `mirror_inputs`, terms of the wrong
    left-right parity are not offered (gpquad.models.symmetry);
 3. of the equations on that path (the found one first), the one with the lowest validation
-   error replaces the found one: early stopping on flights the fit did not see;
+   error replaces the found one: early stopping on flights the fit did not see. With the
+   continuous-time engine the validation flights are flown by RK4 with FIDELITY_SUBSTEPS
+   steps per sample, as a reader's simulator flies the printed ODE: a stiff loop that holds
+   only by the damping of one RK4 step per sample does not win there;
 4. with all six equations, the six are flown together on the stability repair's windows
    (and their mirror images), and refinements are undone one at a time while that makes
    the full model fly better (keep_what_flies): each equation was refined flown alone, and
@@ -40,144 +43,22 @@ import numpy as np
 import sympy as sp
 
 from gpquad.data.mirror import mirror_dataset
-from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.gradient_fit import continued_constants
-from gpquad.engine.evolve.lm import FTOL
-from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
-from gpquad.engine.evolve.windows import spread, tile
-from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.lag import LAG_GRID
-from gpquad.engine.taps import base_input, tap_name, with_taps
-from gpquad.engine.tree.encoding import Tree, shallow_sum
-from gpquad.engine.tree.export import from_sympy, round_constants, to_sympy
-from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES, target_index
+from gpquad.engine.taps import base_input
+from gpquad.engine.tree.export import round_constants
+from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.earned import earn_terms
 from gpquad.models.equation import Equation
 from gpquad.models.joint_fit import JOINT_HORIZONS_S, judged_windows
+from gpquad.models.refine_problem import RefineProblem
 from gpquad.models.stability import FullModelFlights
 from gpquad.models.symmetry import wrong_parity
 
 #: Candidates fitted through the integrator per step (the best by the one-step screen).
 SCREENED = 6
-#: Levenberg-Marquardt evaluations per fit (each flies every training window once).
-FIT_STEPS = 40
-#: Training samples of the one-step screen and the least-squares starts (evenly spread):
-#: the library's columns then take at most 560 x 20000 numbers whatever the log's length.
-SCREEN_SAMPLES = 20000
 #: Errors below this fraction of the zero equation's count as flown exactly: a gain is
 #: term_min_gain of max(error, NEGLIGIBLE * zero error), so that round-off is not fitted.
 NEGLIGIBLE = 1e-6
-
-
-class RefineProblem:
-    """One equation's data for the refinement: the dataset with one tap per delay
-    0..max_delay, the search's evaluator on it, the training windows and samples."""
-
-    def __init__(self, equation, dataset, evolution):
-        cfg = evolution.for_target(equation.target)
-        self.target = equation.target
-        self.input_names = equation.input_names
-        n_taps = cfg.max_delay + 1
-        self.delays = {tap_name(n, d): d for d in range(n_taps) for n in self.input_names}
-        tapped = with_taps(dataset, n_taps)
-        self.arrays = tapped.arrays
-        window_steps = cfg.window_steps(dataset.dt)
-        self.ev = Evaluator(
-            tapped,
-            equation.target,
-            window_steps,
-            cfg.metric,
-            cfg.max_depth,
-            integrator=cfg.integrator,
-            substeps=cfg.substeps,
-        )
-        self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
-        self.short = [
-            (spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h), h)
-            for h in SEED_HORIZONS
-        ]
-        samples = np.unique((self.starts[:, None] + np.arange(self.steps)[None, :]).ravel())
-        self.samples = spread(samples[samples >= 1], SCREEN_SAMPLES)
-        self.acc = self.arrays.acc[:, target_index(equation.target)]
-        self.window_steps, self.max_delay = window_steps, cfg.max_delay
-
-    def canonical(self, equation) -> sp.Expr:
-        """The equation's expression with each delayed input written as the tap at its
-        delay (u_R at delay 3 -> u_R__tap3)."""
-        reps = {
-            sp.Symbol(n, real=True): sp.Symbol(tap_name(base_input(n), d), real=True)
-            for n, d in equation.delays.items()
-        }
-        return sp.expand(equation.sympy().xreplace(reps))
-
-    def tree(self, expr: sp.Expr) -> Tree:
-        """The tree of an expanded expression: its terms as a shallow sum."""
-        prefixes = []
-        for term in sp.Add.make_args(expr):
-            t = from_sympy(term, self.delays, self.input_names)
-            prefixes.append(list(zip(t.codes.tolist(), t.values.tolist(), strict=True)))
-        prefix = shallow_sum(prefixes)
-        return Tree.from_lists(
-            [c for c, _ in prefix],
-            [v for _, v in prefix],
-            from_sympy(sp.Float(0.0), self.delays, self.input_names).delays,
-        )
-
-    def expr(self, tree: Tree) -> sp.Expr:
-        """The expanded expression of a tree of this problem."""
-        return sp.expand(to_sympy(tree, tuple(self.delays)))
-
-    def values(self, expr: sp.Expr) -> np.ndarray:
-        """One-step values of an expression on the training samples."""
-        t = self.tree(expr)
-        return eval_on_samples(
-            t.codes,
-            t.values,
-            t.size,
-            t.delays,
-            self.arrays.states,
-            self.arrays.inputs,
-            self.samples,
-        )
-
-    def commanded(self) -> np.ndarray:
-        """The one-step target of the expression under the evaluator's lag: the data's
-        acceleration inverse-filtered, (a_k - (1 - alpha) a_{k-1}) / alpha."""
-        alpha = self.ev.alpha
-        return (self.acc[self.samples] - (1.0 - alpha) * self.acc[self.samples - 1]) / alpha
-
-    def residual(self, expr: sp.Expr) -> np.ndarray:
-        """What the expression leaves of the one-step target on the training samples."""
-        return self.commanded() - self.values(expr)
-
-    def error(self, tree: Tree, ranges=None) -> float:
-        """Mean window error flown alone (the search's metric) over the training windows, or
-        over `ranges` tiled."""
-        if ranges is None:
-            starts, steps = self.starts, self.steps
-        else:
-            starts, steps = tile(ranges, self.window_steps, self.max_delay)
-            if len(starts) == 0:
-                return float("nan")
-        with np.errstate(all="ignore"):
-            return float(self.ev.window_errors([tree], starts, n_steps=steps).mean())
-
-    def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
-        """(expr with its constants fitted through the integrator, training error)."""
-        tree = self.tree(expr)
-        start = self.error(tree)
-        fitted, error = continued_constants(
-            self.ev,
-            tree,
-            start if np.isfinite(start) else np.inf,
-            self.starts,
-            self.steps,
-            self.error,
-            FIT_STEPS,
-            self.short,
-            FTOL,
-        )
-        return self.expr(fitted), float(error)
 
 
 class Step(NamedTuple):
