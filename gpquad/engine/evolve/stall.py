@@ -5,10 +5,8 @@ training data (`RunState.best_errors`). The search stops early when `patience`
 iterations in a row did not lower the best error recorded so far by at least the
 fraction `gain` of it. The climbers are scored on a co-evolving suite, so the best
 training error is not monotone; the rule compares with the lowest error reached, and an
-iteration that does not beat it by `gain` counts as stalled. Measured on median-noisy and
-px4-s250 (docs/decisions/2026-11-26-finish-speed.md): after the third stalled iteration the
-training error fell by at most a few per cent in the remaining iterations, and the
-validation error of those later climbers was as often worse as better.
+iteration that does not beat it by `gain` counts as stalled. The measurements behind the
+defaults are in docs/decisions/2026-11-26-finish-speed.md.
 """
 
 from __future__ import annotations
