@@ -75,6 +75,8 @@ def test_the_refit_is_judged_as_a_readers_simulator_flies_it(raw_dataset):
     assert (fine.integrator, fine.substeps) == ("rk4", FIDELITY_SUBSTEPS)
     euler = model_of(stiff, raw_dataset)
     assert joint_fit.as_flown_by_readers(euler) is euler
+    finer = dataclasses.replace(model, substeps=16)  # already finer: flown as it is
+    assert joint_fit.as_flown_by_readers(finer) is finer
     _, report = joint_fit.joint_refit(model, raw_dataset, horizons_s=(1.0,))
     starts, steps, _ = joint_fit.judged_windows(raw_dataset, model, 1.0)
     judge = joint_fit.FullModelError(

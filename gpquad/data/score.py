@@ -32,6 +32,15 @@ INTEGRATORS = ("own", "rk4")
 FIDELITY_SUBSTEPS = 8
 
 
+def readers_scheme(integrator: str, substeps: int) -> tuple[str, int]:
+    """The scheme a reader's simulator flies a model's printed equations with: ODEs
+    (integrator "rk4") by RK4 with at least FIDELITY_SUBSTEPS steps per sample; eq. 2
+    models, which are discrete-time, by eq. 2."""
+    if integrator == "rk4":
+        return "rk4", max(substeps, FIDELITY_SUBSTEPS)
+    return integrator, substeps
+
+
 def _part(cfg, path: Path, part: str) -> str:
     """Which windows to score: the whole log, or the held-out part of a training log."""
     from gpquad.data.io import held_out_paths

@@ -21,8 +21,8 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 
 The refit is kept only if it lowers the same error on the validation windows (or, with
 no validation data, on the training windows) at the longest horizon, flown as a reader
-flies the printed ODEs (`as_flown_by_readers`: RK4 with FIDELITY_SUBSTEPS steps per sample
-for a continuous-time model, so that constants that fly only by one RK4 step's damping are
+flies the printed ODEs (`as_flown_by_readers`: RK4 with 8 steps per sample for a
+continuous-time model, so that constants that fly only by one RK4 step's damping are
 not kept), by more than the
 windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors, or
 every window lower and the sum at most half), the report says which windows, with both
@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from gpquad.data.score import FIDELITY_SUBSTEPS
+from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.lm import forward_difference, trust_region
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
@@ -164,11 +164,12 @@ def model_history(model) -> int:
 
 
 def as_flown_by_readers(model):
-    """The model flown as a reader's simulator flies its printed ODEs: a continuous-time
-    model by RK4 with FIDELITY_SUBSTEPS steps per sample (an eq. 2 model as it is)."""
-    if model.integrator == "rk4" and model.substeps < FIDELITY_SUBSTEPS:
-        return dataclasses.replace(model, substeps=FIDELITY_SUBSTEPS)
-    return model
+    """The model flown as a reader's simulator flies its printed equations
+    (gpquad.data.score.readers_scheme)."""
+    integrator, substeps = readers_scheme(model.integrator, model.substeps)
+    if (integrator, substeps) == (model.integrator, model.substeps):
+        return model
+    return dataclasses.replace(model, integrator=integrator, substeps=substeps)
 
 
 def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str]:

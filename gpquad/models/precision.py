@@ -143,8 +143,9 @@ def with_printed_digits(model, dataset):
     rows = _model_rows(model, dataset)
     if len(rows) == 0:
         return model
-    equations = {}
-    for t, e in model.equations.items():
-        e = without_negligible_terms(e, dataset.arrays, rows)
-        equations[t] = dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
+    model = without_negligible(model, dataset)
+    equations = {
+        t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
+        for t, e in model.equations.items()
+    }
     return dataclasses.replace(model, equations=equations)

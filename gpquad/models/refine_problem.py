@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from gpquad.data.score import FIDELITY_SUBSTEPS
+from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
 from gpquad.engine.evolve.lm import FTOL
@@ -28,8 +28,8 @@ SCREEN_SAMPLES = 20000
 class RefineProblem:
     """One equation's data for the refinement: the dataset with one tap per delay
     0..max_delay, the search's evaluator on it (`ev`, which fits), the evaluator that
-    judges validation flights (`judge`: RK4 with FIDELITY_SUBSTEPS steps per sample for a
-    continuous-time engine), the training windows and samples."""
+    judges validation flights (`judge`: the scheme a reader flies the printed equations
+    with, gpquad.data.score.readers_scheme), the training windows and samples."""
 
     def __init__(self, equation, dataset, evolution):
         cfg = evolution.for_target(equation.target)
@@ -51,16 +51,17 @@ class RefineProblem:
         )
         # validation flies the printed ODE as a reader's simulator does (fine RK4): a loop
         # that holds only by one RK4 step's damping does not win on validation
+        judged = readers_scheme(cfg.integrator, cfg.substeps)
         self.judge = self.ev
-        if cfg.integrator == "rk4" and cfg.substeps < FIDELITY_SUBSTEPS:
+        if judged != (cfg.integrator, cfg.substeps):
             self.judge = Evaluator(
                 tapped,
                 equation.target,
                 window_steps,
                 cfg.metric,
                 cfg.max_depth,
-                integrator="rk4",
-                substeps=FIDELITY_SUBSTEPS,
+                integrator=judged[0],
+                substeps=judged[1],
             )
         self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
         self.short = [
