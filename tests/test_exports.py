@@ -60,10 +60,8 @@ def test_python_and_c_exports_fly_as_fly_states(name, tmp_path):
     assert model.integrator == "euler"
     module, lib = python_and_c(model, tmp_path)
     assert module.INTEGRATOR == "euler" and "accel" in dir(module)
-    assert_flies_like(module.fly(inputs, X0), reference)
     code, states = fly_c(lib, inputs, X0)
     assert code == 0
-    assert_flies_like(states, reference)
     # euler exports stay bit-identical to eq. 2's rollout (itself pinned by
     # tests/test_euler_bit_identical.py), as before the RK4 exports
     np.testing.assert_array_equal(module.fly(inputs, X0), reference)

@@ -1,5 +1,5 @@
 """Exports of continuous-time (RK4) models: python and C fly them as DiscoveredModel.fly_states
-(rk4_rollout) does to 1e-12 (here: the same bits); `rhs` is the continuous-time right-hand
+(rk4_rollout) does, to 1e-12; `rhs` is the continuous-time right-hand
 side with which another integrator flies the model; the comparison catches an RK4 model
 flown by eq. 2, with other substeps, or with a perturbed constant."""
 

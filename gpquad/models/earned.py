@@ -28,17 +28,17 @@ DROP_SCREENED = 3
 
 
 def earn_terms(
-    problem, expr: sp.Expr, validation, gain: Callable[[float], float]
+    problem, expr: sp.Expr, validation, gain: Callable[[float], float], current: float
 ) -> tuple[sp.Expr, list[sp.Expr], float]:
     """(expr with the terms beyond FREE_TERMS that did not earn their place removed and its
     constants refitted, the removed monomials, its validation error).
 
     problem: a gpquad.models.refine_problem.RefineProblem (fit, error, tree); expr: the equation
     expanded with taps; validation: the dataset's validation ranges; gain(error): the least
-    validation improvement a term must bring.
+    validation improvement a term must bring; current: expr's validation error (the caller
+    has flown it).
     """
     terms = list(sp.Add.make_args(sp.expand(expr)))
-    current = problem.error(problem.tree(expr), validation)
     dropped: list[sp.Expr] = []
     while len(terms) > FREE_TERMS and np.isfinite(current):
         rests = [sp.Add(*(terms[:i] + terms[i + 1 :])) for i in range(len(terms))]

@@ -176,7 +176,9 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
             "validation_after": path[0].validation,
             "tried": 0,
         }
-    expr, dropped, validation = earn_terms(problem, found, dataset.validation, gain)
+    expr, dropped, validation = earn_terms(
+        problem, found, dataset.validation, gain, path[0].validation
+    )
     error = problem.error(problem.tree(expr)) if dropped else found_error
     if dropped:  # the found equation is no longer a choice: its extra terms did not earn
         path.append(Step(0.0, expr, error, validation, [], tuple(dropped)))
