@@ -39,6 +39,7 @@ import sympy as sp
 
 from gpquad.benchmark.evaluate import score
 from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_names
+from gpquad.benchmark.runner import settings_fingerprint
 from gpquad.data.score import FIDELITY_SUBSTEPS
 from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.tree.export import from_sympy, parse_equation
@@ -217,8 +218,13 @@ def matches_stored(own: dict, stored: dict) -> bool:
     return True
 
 
-def _digest(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True).encode()).hexdigest()[:16]
+def _cell_key(cell: dict) -> dict:
+    """The part of a fidelity record's key that the cell alone fixes (what `load` can check
+    without the flights): its settings' fingerprint and its equations."""
+    return {
+        "fingerprint": cell.get("fingerprint"),
+        "equations": settings_fingerprint(cell["equations"]),
+    }
 
 
 def flights_hash(scenario) -> str:
@@ -243,8 +249,7 @@ def update(out, cells: list[dict], scenarios: dict, horizons_s, log=print) -> li
         if scenario is None:
             continue
         key = {
-            "fingerprint": cell.get("fingerprint"),
-            "equations": _digest(cell["equations"]),
+            **_cell_key(cell),
             "scheme": list(own_scheme(cell)),
             "flights": hashes[cell["scenario"]],
             "horizons_s": [float(h) for h in horizons_s],
@@ -284,9 +289,7 @@ def load(out, cells: list[dict]) -> list[dict]:
         except (OSError, ValueError):
             continue
         key = saved.get("key", {}) if isinstance(saved, dict) else {}
-        if key.get("fingerprint") == cell.get("fingerprint") and key.get("equations") == _digest(
-            cell["equations"]
-        ):
+        if {k: key.get(k) for k in ("fingerprint", "equations")} == _cell_key(cell):
             found.append(saved)
     return found
 

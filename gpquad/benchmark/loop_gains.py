@@ -96,9 +96,11 @@ def controller_gains(vehicle: str) -> dict:
     """rotorpy's attitude gains of a vehicle: rate kd_att, angle and set-point kp_att
     (rad/s^2 per rad/s and per rad) and its motor time constant (s)."""
     from gpquad.benchmark.rotorpy_flights import vehicle_params
+    from gpquad.benchmark.rotorpy_model import DEFAULT_KD_ATT, DEFAULT_KP_ATT
 
     params, _ = vehicle_params(vehicle)
-    kp, kd = float(params.get("kp_att", 3000.0)), float(params.get("kd_att", 360.0))
+    kp = float(params.get("kp_att", DEFAULT_KP_ATT))
+    kd = float(params.get("kd_att", DEFAULT_KD_ATT))
     return {"rate": kd, "angle": kp, "setpoint": kp, "motor_tau_s": float(params["tau_m"])}
 
 

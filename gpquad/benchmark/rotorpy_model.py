@@ -52,6 +52,8 @@ CTATT, CTBR = 0, 1
 SE3_KP_POS = np.array([6.5, 6.5, 15.0])
 SE3_KD_POS = np.array([4.0, 4.0, 9.0])
 GRAVITY = 9.81  # rotorpy's g, m/s^2
+#: SE3Control's attitude gains when a vehicle's parameters give none (rotorpy 3.0.0).
+DEFAULT_KP_ATT, DEFAULT_KD_ATT = 3000.0, 360.0
 
 
 def vehicle_arrays(params: dict, k_w: float | None = None) -> tuple:
@@ -79,8 +81,8 @@ def vehicle_arrays(params: dict, k_w: float | None = None) -> tuple:
             p["rotor_speed_min"],
             p["rotor_speed_max"],
             p.get("k_w", 1.0) if k_w is None else k_w,
-            p.get("kp_att", 3000.0),
-            p.get("kd_att", 360.0),
+            p.get("kp_att", DEFAULT_KP_ATT),
+            p.get("kd_att", DEFAULT_KD_ATT),
         ],
         dtype=float,
     )
