@@ -7,6 +7,7 @@ Timings and memory are kept under "cost" so that the compared content excludes t
 
 from __future__ import annotations
 
+import hashlib
 import json
 import threading
 import time
@@ -18,6 +19,13 @@ from gpquad.benchmark import evaluate, peers
 from gpquad.benchmark.rollout import fly
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.study.store import write_json
+
+
+def settings_fingerprint(settings) -> str:
+    """16 hex digits of the SHA-256 of `settings` as sorted JSON (a cell's settings, a
+    cell's equations)."""
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
+
 
 METHODS = ("gpquad",) + peers.PEERS
 

@@ -37,9 +37,9 @@ from pathlib import Path
 import numpy as np
 import sympy as sp
 
+from gpquad.benchmark.cells import settings_fingerprint
 from gpquad.benchmark.evaluate import score
 from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_names
-from gpquad.benchmark.runner import settings_fingerprint
 from gpquad.data.score import FIDELITY_SUBSTEPS
 from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.tree.export import from_sympy, parse_equation

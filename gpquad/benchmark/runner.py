@@ -42,10 +42,6 @@ def seeds_of(method: str, n_seeds: int) -> list[int]:
     return [0] if method in peers.DETERMINISTIC else list(range(1, n_seeds + 1))
 
 
-def settings_fingerprint(settings: dict) -> str:
-    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
-
-
 def source_hash() -> str:
     """Hash of the gpquad sources that a gpquad cell's result depends on (engine, data,
     models, study): a changed engine recomputes gpquad's cells, whatever the version says."""
@@ -93,7 +89,7 @@ def check_folder(out: Path, settings: dict) -> None:
             saved = json.loads(path.read_text()).get("fingerprint")
         except ValueError:
             saved = None  # damaged: rewritten below; the cells carry their own fingerprints
-        if saved is not None and saved != settings_fingerprint(settings):
+        if saved is not None and saved != cells.settings_fingerprint(settings):
             raise GpquadError(
                 "the folder holds a benchmark scored at other horizons; give another --out",
                 source=str(out),
@@ -152,7 +148,7 @@ def run_benchmark(
     # a cell is reused only if made with the same method settings on the same flights
     fingerprints = {
         n: {
-            m: settings_fingerprint(
+            m: cells.settings_fingerprint(
                 {"method": method_settings(m, engine_cfg), "scenario": sc.source}
             )
             for m in methods
@@ -168,7 +164,7 @@ def run_benchmark(
     from gpquad.benchmark.evaluate import figure_data
 
     info = {
-        "fingerprint": settings_fingerprint(settings),
+        "fingerprint": cells.settings_fingerprint(settings),
         "settings": settings,
         "scenarios": {n: sc.source for n, sc in built.items()},
         "scenario_arguments": made_from,
