@@ -7,7 +7,8 @@ criterion of the integrated target state,
     BIC = n log(MSE) + k log(n),
 
 with n the number of window-steps scored and k the tree's size (one symbol per node, so
-a term costs its nodes). Terms are removed while BIC does not grow (training windows,
+a term costs its nodes). The smallest terms are first tried gone together
+(SMALL_TERM_SHARES), then terms are removed one by one while BIC does not grow (training windows,
 constants re-fitted by least squares, which is exactly what minimises MSE), and the final
 equation is the candidate (pruned best, then every climber of the size/error front) with
 the lowest BIC on the validation windows.
@@ -20,19 +21,39 @@ import math
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.term_search import with_term_coefficients
+from gpquad.engine.evolve.term_search import with_term_coefficients, without_small_terms
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
 
 #: MSE floor of the criterion (an exact model on noise-free data scores ~1e-20).
 MSE_FLOOR = 1e-18
+#: The criterion's resolution: integrated-state errors below this share of the state's
+#: standard deviation (RSE) count as zero, so that on noise-free data a term that lowers an
+#: error already below it (a compensation of the scheme's discretisation) does not pay.
+RSE_RESOLUTION = 1e-3
+#: Before term-by-term pruning, the smallest terms summing to these shares of the model's
+#: RMS value are tried gone at once (first share first): round-off terms go in one fit.
+SMALL_TERM_SHARES = (1e-2, 1e-3)
 
 
-def bic(mse: float, n: int, k: int) -> float:
-    """n log(MSE) + k log(n); inf for a non-finite MSE."""
+def bic(mse: float, n: int, k: int, floor: float = MSE_FLOOR) -> float:
+    """n log(max(MSE, floor)) + k log(n); inf for a non-finite MSE."""
     if not np.isfinite(mse) or n < 1:
         return math.inf
-    return n * math.log(max(mse, MSE_FLOOR)) + k * math.log(n)
+    return n * math.log(max(mse, floor)) + k * math.log(n)
+
+
+def mse_floor(ev_mse: Evaluator, starts, n_steps: int) -> float:
+    """The MSE below which the criterion does not look: (RSE_RESOLUTION x the standard
+    deviation of the integrated target state over the windows' samples)^2, at least
+    MSE_FLOOR."""
+    if len(starts) == 0:
+        return MSE_FLOOR
+    samples = (np.asarray(starts)[:, None] + np.arange(1, n_steps + 1)[None, :]).ravel()
+    states = ev_mse.arrays.states
+    samples = samples[samples < len(states)]
+    spread = float(np.std(states[samples, 3 + ev_mse.target])) if len(samples) else 0.0
+    return max(MSE_FLOOR, (RSE_RESOLUTION * spread) ** 2)
 
 
 def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
@@ -48,9 +69,10 @@ def prune_by_bic(
     """Replace subtrees by constants (largest first, constants re-fitted by
     fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow."""
     n = len(starts) * n_steps
+    floor = mse_floor(ev_mse, starts, n_steps)
     model = fold_constants(model)
     model, err = fit(model, mse_of(ev_mse, model, starts, n_steps), starts, n_steps)
-    score = bic(err, n, model.size)
+    score = bic(err, n, model.size, floor)
     # One gain per additive term first: a coupling written p*r (truth 0.9 p r) next to a
     # substitute term gets its coefficient, and the substitute's can fall to zero and go.
     per_term = with_term_coefficients(model)
@@ -58,16 +80,31 @@ def prune_by_bic(
         per_term, per_err = (regain_fit or fit)(
             per_term, mse_of(ev_mse, per_term, starts, n_steps), starts, n_steps
         )
-        if bic(per_err, n, per_term.size) < score:
-            model, score = per_term, bic(per_err, n, per_term.size)
+        if bic(per_err, n, per_term.size, floor) < score:
+            model, score = per_term, bic(per_err, n, per_term.size, floor)
+    samples = (np.asarray(starts)[:, None] + np.arange(n_steps)[None, :]).ravel()
+    tried = []
+    for share in SMALL_TERM_SHARES:
+        smaller = without_small_terms(model, ev_mse.arrays, samples, share)
+        if smaller is None or smaller.codes.tolist() in tried:
+            continue
+        tried.append(smaller.codes.tolist())
+        smaller, small_err = fit(smaller, mse_of(ev_mse, smaller, starts, n_steps), starts, n_steps)
+        if bic(small_err, n, smaller.size, floor) <= score:
+            model, score = smaller, bic(small_err, n, smaller.size, floor)
+            break
+    # a leaf folded into its term's gain repeats the term as a constant: one fit per structure
+    fitted: dict[tuple, tuple[Tree, float]] = {}
     changed = True
     while changed and model.size > 1:
         changed = False
         for candidate in subtrees_as_constants(model, constant_of):
-            candidate, cand_err = fit(
-                candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps
-            )
-            cand_score = bic(cand_err, n, candidate.size)
+            key = tuple(candidate.codes.tolist())
+            if key not in fitted:
+                mse = mse_of(ev_mse, candidate, starts, n_steps)
+                fitted[key] = fit(candidate, mse, starts, n_steps)
+            candidate, cand_err = fitted[key]
+            cand_score = bic(cand_err, n, candidate.size, floor)
             if cand_score <= score:
                 model, score, changed = candidate, cand_score, True
                 break
@@ -79,5 +116,6 @@ def select_by_bic(
 ) -> tuple[Tree, list[float]]:
     """The candidate with the lowest BIC on the windows (first one on ties), and all BICs."""
     n = len(starts) * n_steps
-    scores = [bic(mse_of(ev_mse, t, starts, n_steps), n, t.size) for t in candidates]
+    floor = mse_floor(ev_mse, starts, n_steps)
+    scores = [bic(mse_of(ev_mse, t, starts, n_steps), n, t.size, floor) for t in candidates]
     return candidates[int(np.argmin(scores))], scores

@@ -204,20 +204,54 @@ def improve_terms(
     return best, float(best_error)
 
 
+def _term_values(model: Tree, terms, arrays, samples) -> list[np.ndarray]:
+    """Each term's (prefix (code, value) list) values at `samples`."""
+    out = []
+    for term in terms:
+        tree = Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
+        codes, values, delays = tree.codes, tree.values, tree.delays
+        out.append(
+            eval_on_samples(codes, values, tree.size, delays, arrays.states, arrays.inputs, samples)
+        )
+    return out
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(values**2))) if np.all(np.isfinite(values)) else np.inf
+
+
 def term_contributions(ev: Evaluator, model: Tree, suite) -> np.ndarray:
     """RMS value of each additive term of model_terms(model) over the suite's samples."""
     samples = np.ascontiguousarray(
         (np.asarray(suite)[:, None] + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64
     )
-    arrays = ev.arrays
-    out = []
-    for term in model_terms(model):
-        tree = Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
-        values = eval_on_samples(
-            tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
-        )
-        out.append(float(np.sqrt(np.mean(values**2))) if np.all(np.isfinite(values)) else np.inf)
-    return np.array(out)
+    return np.array([_rms(v) for v in _term_values(model, model_terms(model), ev.arrays, samples)])
+
+
+def without_small_terms(model: Tree, arrays, samples, share: float) -> Tree | None:
+    """The model as a sum of its terms (model_terms) without its smallest ones, those whose
+    RMS values at `samples` sum to at most `share` of the model's RMS value (by the triangle
+    inequality they move it by no more); None when no term or every term would go."""
+    samples = np.ascontiguousarray(samples, dtype=np.int64)
+    terms = model_terms(model)
+    if len(terms) < 2:
+        return None
+    values = _term_values(model, terms, arrays, samples)
+    budget = share * _rms(np.sum(values, axis=0))
+    if not np.isfinite(budget):
+        return None
+    sizes = [_rms(v) for v in values]
+    kept = list(range(len(terms)))
+    moved = 0.0
+    for k in sorted(kept, key=lambda k: sizes[k]):
+        if moved + sizes[k] > budget or len(kept) == 1:
+            break
+        kept.remove(k)
+        moved += sizes[k]
+    if len(kept) == len(terms):
+        return None
+    prefix = shallow_sum([terms[k] for k in kept])
+    return Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], model.delays)
 
 
 def best_index(errors: np.ndarray) -> int:
