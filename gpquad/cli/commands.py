@@ -15,6 +15,7 @@ from gpquad.errors import GpquadError
 
 def _cmd_run(args) -> int:
     from gpquad.study.config import load_config, override
+    from gpquad.study.fit import default_jobs
     from gpquad.study.runner import default_run_dir, run_experiment
 
     cfg = override(
@@ -33,14 +34,15 @@ def _cmd_run(args) -> int:
 
         figures.extend(make_run_report(run_dir, formats=("png",), dataset=dataset))
 
-    if args.jobs < 1:
+    if args.jobs is not None and args.jobs < 1:
         raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
+    jobs = default_jobs(len(cfg.evolution.targets)) if args.jobs is None else args.jobs
     try:
         model = run_experiment(
             cfg,
             run_dir,
             progress=not args.quiet,
-            jobs=args.jobs,
+            jobs=jobs,
             after=None if args.no_figures else draw,
         )
     except KeyboardInterrupt:
@@ -247,9 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--jobs",
         type=int,
-        default=1,
-        help="search the equations in this many processes (same results; default 1, which "
-        "also checkpoints every iteration)",
+        help="search the equations in this many processes (the same results for any value; "
+        "default one per core; 1 also checkpoints within an equation, every iteration)",
     )
     run.add_argument(
         "--no-figures",
