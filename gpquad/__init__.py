@@ -12,11 +12,31 @@ quaternion integrator over data windows, while test windows co-evolve.
 See `fit`, `read_log`, `load` and `Model`.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from gpquad._version import __version__
-from gpquad.api import fit, load, read_log, reference_flight
 from gpquad.errors import GpquadError
-from gpquad.model import EquationForms, Model
-from gpquad.study.config import Config, load_config
+
+if TYPE_CHECKING:
+    from gpquad.api import fit, load, read_log, reference_flight
+    from gpquad.model import EquationForms, Model
+    from gpquad.study.config import Config, load_config
+
+#: Where each public name lives: imported on first use, so that the command line and the
+#: worker processes do not pay for what they never touch (pandas, sympy, the readers).
+_HOMES = {
+    "fit": "gpquad.api",
+    "load": "gpquad.api",
+    "read_log": "gpquad.api",
+    "reference_flight": "gpquad.api",
+    "EquationForms": "gpquad.model",
+    "Model": "gpquad.model",
+    "Config": "gpquad.study.config",
+    "load_config": "gpquad.study.config",
+}
 
 __all__ = [
     "Config",
@@ -30,3 +50,15 @@ __all__ = [
     "read_log",
     "reference_flight",
 ]
+
+
+def __getattr__(name: str):
+    if name in _HOMES:
+        value = getattr(importlib.import_module(_HOMES[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'gpquad' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
