@@ -16,8 +16,8 @@ from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.precision import (
     MIN_DIGITS,
     TOLERANCE,
-    _columns,
-    _values,
+    sample_columns,
+    expression_values,
     faithful,
     printed_digits,
     sample_rows,
@@ -59,8 +59,8 @@ def test_a_cancelling_filter_gets_the_digits_it_needs_and_its_text_is_the_model(
     rows = sample_rows(ds.train, 5)
     digits = printed_digits(eq, ds.arrays, rows)
     assert digits > MIN_DIGITS
-    columns = _columns(eq, ds.arrays, rows, raw=False)
-    own = _values(eq.sympy(), columns, len(rows))
+    columns = sample_columns(eq, ds.arrays, rows, raw=False)
+    own = expression_values(eq.sympy(), columns, len(rows))
     assert faithful(eq.sympy(), own, columns, digits)
     assert not faithful(eq.sympy(), own, columns, digits - 1)  # the check can fail
     # the printed line, parsed back, evaluates like the model (and the 3-digit one does not)

@@ -54,6 +54,7 @@ from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
+from gpquad.models.stiffness import model_substeps
 
 #: Window lengths of the growing horizon (s); the last one also decides acceptance.
 JOINT_HORIZONS_S = (1.0, 10.0)
@@ -188,10 +189,13 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     was when that does not lower the full-model error at the longest horizon. workers:
     threads for the Jacobian's rollouts (the same result for any number).
 
+    The fit flies the model with the RK4 steps per sample its stiffest loop needs
+    (gpquad.models.stiffness.model_substeps); the model keeps its own scheme.
+
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
     "constants", "rollouts" (full-model flights over the training windows, Jacobians
-    included), "time_s"}.
+    included), "substeps" (of the fit's flights), "time_s"}.
     """
     t0 = time.perf_counter()
     states = measured_states(dataset)
@@ -224,6 +228,9 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     x = x0.copy()
     objectives = []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
+    # flown with as many RK4 steps per sample as its stiffest loop needs to be its ODE
+    flown = dataclasses.replace(model, substeps=model_substeps(model, dataset))
+    report["substeps"] = flown.substeps
     for seconds in horizons_s:
         starts, steps = horizon_starts(dataset, dataset.train, seconds, history, MAX_WINDOWS)
         if len(starts) == 0:
@@ -232,7 +239,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
 
         def residuals(v, objectives=tuple(objectives)):
             next(rollouts)
-            m = with_constants(model, slots, v)
+            m = with_constants(flown, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
         value, jacobian = forward_difference(residuals, workers)

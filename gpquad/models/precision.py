@@ -43,7 +43,7 @@ def sample_rows(ranges, max_delay: int, count: int = SAMPLES) -> np.ndarray:
     return rows.astype(np.int64)
 
 
-def _columns(equation, arrays, rows, raw: bool) -> dict[str, np.ndarray]:
+def sample_columns(equation, arrays, rows, raw: bool) -> dict[str, np.ndarray]:
     """Each variable of the equation at `rows`: states, and inputs at their delays (raw:
     with the trim added back)."""
     out = {n: arrays.states[rows, k] for k, n in enumerate(STATE_NAMES)}
@@ -54,7 +54,7 @@ def _columns(equation, arrays, rows, raw: bool) -> dict[str, np.ndarray]:
     return out
 
 
-def _values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
+def expression_values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray:
     symbols = sorted(expr.free_symbols, key=lambda s: s.name)
     func = sp.lambdify(symbols, expr, "numpy")
     with np.errstate(all="ignore"):
@@ -63,11 +63,11 @@ def _values(expr: sp.Expr, columns: dict[str, np.ndarray], n: int) -> np.ndarray
 
 def faithful(expr: sp.Expr, exact: np.ndarray, columns: dict[str, np.ndarray], digits: int) -> bool:
     """Whether `expr` rounded to `digits` stays within TOLERANCE x RMS of its own values
-    `exact` (= _values(expr, columns))."""
+    `exact` (= expression_values(expr, columns))."""
     finite = np.isfinite(exact)
     if not finite.any():
         return True
-    rounded = _values(round_constants(expr, digits), columns, len(exact))
+    rounded = expression_values(round_constants(expr, digits), columns, len(exact))
     scale = float(np.sqrt(np.mean(exact[finite] ** 2)))
     return bool(np.max(np.abs(rounded[finite] - exact[finite])) <= TOLERANCE * max(scale, 1e-12))
 
@@ -80,8 +80,8 @@ def printed_digits(equation, arrays, rows) -> int:
         forms.append((equation.sympy_raw(), True))
     checks = []
     for expr, raw in forms:
-        columns = _columns(equation, arrays, rows, raw)
-        checks.append((expr, _values(expr, columns, len(rows)), columns))
+        columns = sample_columns(equation, arrays, rows, raw)
+        checks.append((expr, expression_values(expr, columns, len(rows)), columns))
     for digits in range(MIN_DIGITS, MAX_DIGITS + 1):
         if all(faithful(expr, exact, columns, digits) for expr, exact, columns in checks):
             return digits
@@ -97,8 +97,8 @@ def without_negligible_terms(equation, arrays, rows):
     terms = sp.Add.make_args(expr)
     if len(terms) < 2:
         return equation
-    columns = _columns(equation, arrays, rows, raw=False)
-    values = [_values(term, columns, len(rows)) for term in terms]
+    columns = sample_columns(equation, arrays, rows, raw=False)
+    values = [expression_values(term, columns, len(rows)) for term in terms]
     total = np.sum(values, axis=0)
     finite = np.isfinite(total)
     if not finite.any():
@@ -119,7 +119,7 @@ def without_negligible_terms(equation, arrays, rows):
     return dataclasses.replace(equation, tree=tree)
 
 
-def _model_rows(model, dataset) -> np.ndarray:
+def model_rows(model, dataset) -> np.ndarray:
     """The training samples (else validation) on which a model's equations are compared."""
     max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
     return sample_rows(dataset.train or dataset.validation, max_delay)
@@ -128,7 +128,7 @@ def _model_rows(model, dataset) -> np.ndarray:
 def without_negligible(model, dataset):
     """The model with each equation without its negligible terms (without_negligible_terms);
     the finishing steps start from it, so that they fit the terms that will be printed."""
-    rows = _model_rows(model, dataset)
+    rows = model_rows(model, dataset)
     if len(rows) == 0:
         return model
     equations = {
@@ -140,7 +140,7 @@ def without_negligible(model, dataset):
 def with_printed_digits(model, dataset):
     """The model without negligible terms (without_negligible_terms) and with each
     equation's `digits` set from the dataset's training samples."""
-    rows = _model_rows(model, dataset)
+    rows = model_rows(model, dataset)
     if len(rows) == 0:
         return model
     model = without_negligible(model, dataset)

@@ -182,6 +182,14 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
     error = problem.error(problem.tree(expr)) if dropped else found_error
     if dropped:  # the found equation is no longer a choice: its extra terms did not earn
         path.append(Step(0.0, expr, error, validation, [], tuple(dropped)))
+    if problem.fitting(expr).substeps != problem.ev.substeps:
+        # a stiff loop: its constants refitted with the steps per sample that fly it as the
+        # ODE it prints (gpquad.models.stiffness)
+        refit, refit_error = problem.fit(expr)
+        if np.isfinite(refit_error):
+            val = problem.error(problem.tree(refit), dataset.validation)
+            path.append(Step(0.0, refit, refit_error, val, [], tuple(dropped)))
+            expr, error = refit, refit_error
     tau, expr, error = choose_lag(problem, expr, error, gain(error))
     if tau > 0:
         val = problem.error(problem.tree(expr), dataset.validation)
@@ -218,6 +226,7 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
         "validation_before": path[0].validation,
         "validation_after": chosen.validation,
         "tried": len(path) - 1,
+        "substeps": problem.fitting(chosen.expr).substeps,
     }
     if chosen is path[0]:
         return equation, report
@@ -324,9 +333,12 @@ def refined_summary(report: dict) -> str:
         elif entry.get("dropped") or entry["validation_after"] < entry["validation_before"]:
             lag = f"lag {1000 * entry['lag']:.0f} ms, " if entry["lag"] > 0 else ""
             cut = f"-{len(entry['dropped'])} unearned " if entry.get("dropped") else ""
+            fine = entry.get("substeps", 1)
             parts.append(
-                f"{target}: {lag}{cut}+{len(entry['added'])} terms, validation error "
-                f"{entry['validation_before']:.4g} -> {entry['validation_after']:.4g}"
+                f"{target}: {lag}{cut}+{len(entry['added'])} terms"
+                + (f" (fitted at {fine} RK4 steps per sample)" if fine > 1 else "")
+                + f", validation error {entry['validation_before']:.4g} -> "
+                f"{entry['validation_after']:.4g}"
             )
         else:
             parts.append(f"{target}: kept as found")

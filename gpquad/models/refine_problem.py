@@ -17,6 +17,7 @@ from gpquad.engine.taps import base_input, tap_name, with_taps
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.export import from_sympy, to_sympy
 from gpquad.engine.variables import target_index
+from gpquad.models.stiffness import equation_substeps
 
 #: Levenberg-Marquardt evaluations per fit (each flies every training window once).
 FIT_STEPS = 40
@@ -40,29 +41,28 @@ class RefineProblem:
         tapped = with_taps(dataset, n_taps)
         self.arrays = tapped.arrays
         window_steps = cfg.window_steps(dataset.dt)
-        self.ev = Evaluator(
-            tapped,
-            equation.target,
-            window_steps,
-            cfg.metric,
-            cfg.max_depth,
-            integrator=cfg.integrator,
-            substeps=cfg.substeps,
-        )
-        # validation flies the printed ODE as a reader's simulator does (fine RK4): a loop
-        # that holds only by one RK4 step's damping does not win on validation
-        judged = readers_scheme(cfg.integrator, cfg.substeps)
-        self.judge = self.ev
-        if judged != (cfg.integrator, cfg.substeps):
-            self.judge = Evaluator(
+
+        def evaluator(integrator: str, substeps: int) -> Evaluator:
+            return Evaluator(
                 tapped,
                 equation.target,
                 window_steps,
                 cfg.metric,
                 cfg.max_depth,
-                integrator=judged[0],
-                substeps=judged[1],
+                integrator=integrator,
+                substeps=substeps,
             )
+
+        self._evaluator = evaluator
+        self.ev = evaluator(cfg.integrator, cfg.substeps)
+        self._fitting = {cfg.substeps: self.ev}
+        # validation flies the printed ODE as a reader's simulator does (fine RK4): a loop
+        # that holds only by one RK4 step's damping does not win on validation
+        judged = readers_scheme(cfg.integrator, cfg.substeps)
+        self.judge = self.ev
+        if judged != (cfg.integrator, cfg.substeps):
+            self.judge = evaluator(*judged)
+        self.dt = dataset.dt
         self.starts, self.steps = tile(dataset.train, window_steps, cfg.max_delay)
         self.short = [
             (spread(tile(dataset.train, h, cfg.max_delay)[0], SHORT_WINDOW_STEPS // h), h)
@@ -122,33 +122,62 @@ class RefineProblem:
         """What the expression leaves of the one-step target on the training samples."""
         return self.commanded() - self.values(expr)
 
-    def error(self, tree: Tree, ranges=None) -> float:
-        """Mean window error flown alone (the search's metric) over the training windows, or
-        over `ranges` tiled (validation: flown by the judge, fine RK4 for an RK4 engine)."""
-        ev = self.ev
-        if ranges is None:
-            starts, steps = self.starts, self.steps
-        else:
-            ev = self.judge
-            starts, steps = tile(ranges, self.window_steps, self.max_delay)
-            if len(starts) == 0:
-                return float("nan")
+    def fitting(self, expr: sp.Expr) -> Evaluator:
+        """The evaluator that fits `expr`: the search's scheme, with an RK4 engine at as many
+        steps per sample as its loop needs to fly as its ODE (gpquad.models.stiffness), the
+        current lag set."""
+        if self.ev.integrator != "rk4":
+            return self.ev
+        substeps = equation_substeps(
+            self.target, expr, self.ev.lag, self.values, self.dt, self.ev.substeps
+        )
+        if substeps not in self._fitting:
+            self._fitting[substeps] = self._evaluator("rk4", substeps)
+        ev = self._fitting[substeps]
+        ev.set_lag(self.ev.lag)
+        return ev
+
+    def _window_error(self, ev: Evaluator, tree: Tree, starts, steps) -> float:
+        if len(starts) == 0:
+            return float("nan")
         with np.errstate(all="ignore"):
             return float(ev.window_errors([tree], starts, n_steps=steps).mean())
 
+    def error(self, tree: Tree, ranges=None) -> float:
+        """Mean window error flown alone (the search's metric) over the training windows, in
+        the scheme that fits it (`fitting`), or over `ranges` tiled (validation: flown by the
+        judge, fine RK4 for an RK4 engine)."""
+        if ranges is None:
+            ev = self.fitting(self.expr(tree)) if self.ev.integrator == "rk4" else self.ev
+            return self._window_error(ev, tree, self.starts, self.steps)
+        starts, steps = tile(ranges, self.window_steps, self.max_delay)
+        return self._window_error(self.judge, tree, starts, steps)
+
     def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
-        """(expr with its constants fitted through the integrator, training error)."""
-        tree = self.tree(expr)
-        start = self.error(tree)
-        fitted, error = continued_constants(
-            self.ev,
-            tree,
-            start if np.isfinite(start) else np.inf,
-            self.starts,
-            self.steps,
-            self.error,
-            FIT_STEPS,
-            self.short,
-            FTOL,
-        )
-        return self.expr(fitted), float(error)
+        """(expr with its constants fitted through the integrator, training error), flown
+        with the steps per sample its loop needs (`fitting`); fitted again, finer, when the
+        fitted loop needs more than the start did."""
+        ev = self.fitting(expr)
+        while True:
+            tree = self.tree(expr)
+
+            def error_of(t: Tree, ev=ev) -> float:
+                return self._window_error(ev, t, self.starts, self.steps)
+
+            start = error_of(tree)
+            fitted, error = continued_constants(
+                ev,
+                tree,
+                start if np.isfinite(start) else np.inf,
+                self.starts,
+                self.steps,
+                error_of,
+                FIT_STEPS,
+                self.short,
+                FTOL,
+            )
+            expr = self.expr(fitted)
+            finer = self.fitting(expr)
+            if finer.substeps <= ev.substeps:
+                return expr, float(error)
+            ev = finer
