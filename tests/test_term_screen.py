@@ -11,10 +11,10 @@ from hypothesis.extra.numpy import arrays
 
 from gpquad.data.dataset import build_dataset
 from gpquad.data.simulator import simulate
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
 from gpquad.engine.evolve.term_screen import SCREENED, explained, insertions, screened
 from gpquad.engine.evolve.term_search import model_terms, term_candidates
-from gpquad.engine.kernels.tree_eval import eval_on_samples
-from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
 from gpquad.engine.variables import N_STATE
 from gpquad.study.config import load_config
@@ -57,50 +57,44 @@ class _Names:
     arrays(np.float64, (40, 2), elements=st.floats(-10, 10)),
 )
 def test_explained_is_the_drop_of_a_least_squares_fit(r, x):
-    design = np.column_stack([np.ones(40), x])
-    coef, *_ = np.linalg.lstsq(design, r, rcond=None)
-    rest = r - design @ coef
-    expected = float(((r - r.mean()) ** 2).sum() - (rest**2).sum())
-    got = explained(r, [x[:, 0], x[:, 1]])
+    coef, *_ = np.linalg.lstsq(x, r, rcond=None)
+    expected = float((r**2).sum() - ((r - x @ coef) ** 2).sum())
+    got = explained(r, x)
     assert got == pytest.approx(expected, rel=1e-6, abs=1e-6 * (1 + (r**2).sum()))
     assert got >= -1e-6 * (1 + (r**2).sum())
+    assert explained(r, np.full((40, 1), np.nan)) == 0.0
 
 
-def _screen(ds, text, samples, candidates, count=SCREENED):
+def _screen(ds, text, candidates, count=SCREENED):
+    ev = Evaluator(ds, "p_dot", 250, "mse")
     model = _tree(text, ds)
-    base = [
-        eval_on_samples(
-            t.codes, t.values, t.size, t.delays, ds.arrays.states, ds.arrays.inputs, samples
-        )
-        for t in (_term_tree(term, model) for term in model_terms(model))
-    ]
-    acc = ds.arrays.acc[samples, 3]
-    return screened(base, acc, ds.arrays, model.delays, samples, candidates, count)
+
+    def flown(tree):
+        return residuals_and_jacobian(ev, tree, STARTS, 250)[:2]
+
+    return screened(model_terms(model), model.delays, candidates, flown, count)
 
 
-def _term_tree(term, model):
-    return Tree.from_lists([c for c, _ in term], [v for _, v in term], model.delays)
+STARTS = np.array([10, 260, 510], dtype=np.int64)
 
 
 @pytest.mark.parametrize("model", ["9.0*u_R(t-2) - 4.0*p", "8.0*u_R(t-2) - 3.0*p"])
 def test_the_missing_coupling_passes_the_screen(rigid, model):
     """The truth without -0.9 q r, with its gains right or wrong (the screen re-fits them)."""
-    ds = rigid
-    samples = np.arange(20, 700, dtype=np.int64)
     every = insertions(list(range(13)), {})
-    kept = _screen(ds, model, samples, every)
+    kept = _screen(rigid, model, every)
     assert len(kept) == SCREENED and kept == [i for i in every if i in kept]
     q, r = 7, 8
-    assert _screen(ds, model, samples, every, count=1) == [((q, r),)]
+    assert _screen(rigid, model, every, count=1) == [((q, r),)]
 
 
-def test_few_candidates_or_a_non_finite_value_keep_all(rigid):
-    ds = rigid
-    samples = np.arange(20, 80, dtype=np.int64)
+def test_few_candidates_or_a_non_finite_flight_keep_all(rigid):
     few = insertions(list(range(3)), {})
-    assert _screen(ds, "9.0*u_R(t-2) - 4.0*p", samples, few) == few
+    assert _screen(rigid, "9.0*u_R(t-2) - 4.0*p", few) == few
     every = insertions(list(range(13)), {})
-    acc = ds.arrays.acc[samples, 3]
-    broken = [np.full(len(samples), np.inf)]
-    assert screened(broken, acc, ds.arrays, np.zeros(4, np.int64), samples, every) == every
-    assert len(screened([], acc, ds.arrays, np.zeros(4, np.int64), samples, every)) == SCREENED
+    model = _tree("9.0*u_R(t-2) - 4.0*p", rigid)
+
+    def broken(tree):
+        return np.full(10, np.nan), np.zeros((10, 200))
+
+    assert screened(model_terms(model), model.delays, every, broken) == every

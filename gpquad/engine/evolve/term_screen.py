@@ -2,21 +2,23 @@
 
 Term insertion (gpquad.engine.evolve.term_search) offers every variable, product and pair
 of variables: 182 candidates with 13 variables, each re-fitted through the integrator.
-Most of them explain nothing the model misses. The screen ranks them by how much of the
-target's one-step acceleration (the data's, at the suite's samples) a least-squares fit of
-the model's terms, the new ones and an intercept explains beyond the model's terms alone
-(every gain re-fitted, as the integrated fit will), and only the best SCREENED are fitted.
-The choice among those is still made on the integrated error: the one-step fit only orders
-the candidates.
+Most of them explain nothing the model misses. The screen predicts each insertion's drop
+of the integrated error by one Gauss-Newton step from its new gains at 0: one flight of
+the model with every candidate term added at gain 0 gives the residuals and their
+sensitivities to every gain (gpquad.engine.kernels.sensitivity); an insertion's predicted
+drop is the part of the residuals its terms' sensitivities explain beyond the model's own
+gains' (every gain re-fitted, to first order). Only the SCREENED best are fitted. A
+one-step regression on the data's accelerations ranked them worse on a real log
+(docs/decisions/2026-11-26-search-speed.md): what one sample's noisy acceleration
+correlates with is not what an integrated state needs.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree
-from gpquad.engine.tree.operators import VAR_BASE
+from gpquad.engine.tree.operators import ADD, CONST, MUL, VAR_BASE
 
 #: Term insertions fitted through the integrator per term search.
 SCREENED = 16
@@ -41,63 +43,67 @@ def insertions(variables: list[int], taps: dict[int, int]) -> list[Insertion]:
     return out
 
 
-def _column(arrays, delays, samples, variable: int) -> np.ndarray:
-    tree = Tree.from_lists([VAR_BASE + variable], [0.0], delays)
-    return eval_on_samples(
-        tree.codes, tree.values, 1, tree.delays, arrays.states, arrays.inputs, samples
-    )
+def zero_term(variables: tuple[int, ...]) -> list[tuple[int, float]]:
+    """Prefix of 0 * x_i (* x_j)."""
+    if len(variables) == 1:
+        return [(MUL, 0.0), (CONST, 0.0), (VAR_BASE + variables[0], 0.0)]
+    return [
+        (MUL, 0.0),
+        (CONST, 0.0),
+        (MUL, 0.0),
+        (VAR_BASE + variables[0], 0.0),
+        (VAR_BASE + variables[1], 0.0),
+    ]
 
 
-def explained(residual: np.ndarray, columns: list[np.ndarray]) -> float:
-    """Sum of squares of `residual` that a least-squares fit on `columns` and an intercept
-    removes (0 for a column that is constant or not finite)."""
-    x = np.column_stack(columns)
-    if not np.all(np.isfinite(x)):
+def _balanced_sum(terms: list[list[tuple[int, float]]]) -> list[tuple[int, float]]:
+    """Prefix of the sum of `terms` as a balanced tree, the terms in their order."""
+    if len(terms) == 1:
+        return terms[0]
+    half = len(terms) // 2
+    return [(ADD, 0.0)] + _balanced_sum(terms[:half]) + _balanced_sum(terms[half:])
+
+
+def explained(residual: np.ndarray, columns: np.ndarray) -> float:
+    """Sum of squares of `residual` that a least-squares fit on the columns (n, k) removes
+    (0 when a value is not finite)."""
+    if not (np.all(np.isfinite(columns)) and np.all(np.isfinite(residual))):
         return 0.0
-    x = x - x.mean(axis=0)
-    r = residual - residual.mean()
-    coef, *_ = np.linalg.lstsq(x, r, rcond=None)
-    fitted = x @ coef
-    return float(r @ r - (r - fitted) @ (r - fitted))
-
-
-def _residual_maker(base: list[np.ndarray]):
-    """x -> x minus its least-squares projection on the base columns and an intercept."""
-    design = np.column_stack([np.ones(len(base[0]) if base else 0)] + base) if base else None
-    if design is None or not np.all(np.isfinite(design)):
-        return lambda x: x - x.mean()
-    q, _ = np.linalg.qr(design)
-    return lambda x: x - q @ (q.T @ x)
+    coef, *_ = np.linalg.lstsq(columns, residual, rcond=None)
+    rest = residual - columns @ coef
+    return float(residual @ residual - rest @ rest)
 
 
 def screened(
-    base: list[np.ndarray],
-    acc: np.ndarray,
-    arrays,
-    delays,
-    samples,
+    base: list[list[tuple[int, float]]],
+    delays: np.ndarray,
     candidates: list[Insertion],
+    residuals_and_jacobian,
     count: int = SCREENED,
 ) -> list[Insertion]:
-    """The `count` insertions of `candidates` that explain most of the target's one-step
-    acceleration `acc` at `samples` beyond what the model's terms explain, all gains
-    re-fitted (base: each term's values at the samples), in their original order (ties: the
-    earlier); all of them when they are not more than `count` or a value is not finite."""
+    """The `count` insertions of `candidates` with the largest predicted drops (module
+    notes), in their original order (ties: the earlier); all of them when they are not
+    more than `count` or the flight does not give finite sensitivities.
+
+    base: the model's terms (prefix lists, gpquad.engine.evolve.term_search.model_terms);
+    residuals_and_jacobian(tree) -> (residuals, Jacobian): one flight with sensitivities."""
     if len(candidates) <= count:
         return list(candidates)
-    samples = np.ascontiguousarray(samples, dtype=np.int64)
-    if not np.all(np.isfinite(acc)) or not all(np.all(np.isfinite(b)) for b in base):
+    new = sorted({term for insertion in candidates for term in insertion})
+    prefix = _balanced_sum(base + [zero_term(t) for t in new])
+    tree = Tree.from_lists([c for c, _ in prefix], [v for _, v in prefix], delays)
+    residual, jac = residuals_and_jacobian(tree)
+    n_new = len(new)
+    if jac.shape[1] < n_new or not (np.all(np.isfinite(jac)) and np.all(np.isfinite(residual))):
         return list(candidates)
-    project_out = _residual_maker(base)
-    residual = project_out(acc)
-    variables = sorted({v for new in candidates for term in new for v in term})
-    column = {v: _column(arrays, delays, samples, v) for v in variables}
-    products: dict[tuple[int, ...], np.ndarray] = {}
-    for new in candidates:
-        for term in new:
-            if term not in products:
-                values = np.prod([column[v] for v in term], axis=0)
-                products[term] = project_out(values) if np.all(np.isfinite(values)) else values
-    scores = [explained(residual, [products[term] for term in new]) for new in candidates]
+    own, added = jac[:, : jac.shape[1] - n_new], jac[:, jac.shape[1] - n_new :]
+    if own.shape[1]:  # the model's own gains re-fitted: their span projected out
+        q, _ = np.linalg.qr(own)
+        residual = residual - q @ (q.T @ residual)
+        added = added - q @ (q.T @ added)
+    column = {term: k for k, term in enumerate(new)}
+    scores = [
+        explained(residual, added[:, [column[t] for t in insertion]]) for insertion in candidates
+    ]
     best = np.argsort(-np.asarray(scores), kind="stable")[:count]
     return [candidates[k] for k in sorted(best.tolist())]

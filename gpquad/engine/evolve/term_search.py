@@ -13,10 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.term_screen import Insertion, insertions, screened
+from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
+from gpquad.engine.evolve.term_screen import Insertion, insertions, screened, zero_term
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
-from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
+from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB
 from gpquad.engine.tree.polynomial import expand, monomial_terms
 
 
@@ -129,17 +130,6 @@ def term_candidates(
     if additions is None:
         additions = insertions(variables, taps or {})
 
-    def term(names):
-        if len(names) == 1:
-            return [(MUL, 0.0), (CONST, 0.0), (VAR_BASE + names[0], 0.0)]
-        return [
-            (MUL, 0.0),
-            (CONST, 0.0),
-            (MUL, 0.0),
-            (VAR_BASE + names[0], 0.0),
-            (VAR_BASE + names[1], 0.0),
-        ]
-
     out = []
     base = model_terms(model)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
@@ -149,7 +139,7 @@ def term_candidates(
         else np.zeros(0, dtype=np.int64)
     )
     for insertion in additions:
-        new = [term(names) for names in insertion]
+        new = [zero_term(names) for names in insertion]
         prefix = shallow_sum(base + new)
         dropped = 0
         while tree_depth([c for c, _ in prefix]) > max_depth and dropped < len(order) - 1:
@@ -192,12 +182,11 @@ def improve_terms(
         )
         if allows is None or allows(tree.codes)
     ]
-    samples = np.ascontiguousarray(
-        (np.asarray(suite)[:, None] + np.arange(ev.n_steps)[None, :]).ravel(), dtype=np.int64
-    )
-    base = _term_values(model, model_terms(model), ev.arrays, samples)
-    acc = ev.arrays.acc[samples, ev.target]
-    chosen = set(screened(base, acc, ev.arrays, model.delays, samples, [i for i, _ in pairs]))
+
+    def flown(tree: Tree):
+        return residuals_and_jacobian(ev, tree, suite, ev.n_steps)[:2]
+
+    chosen = set(screened(model_terms(model), model.delays, [i for i, _ in pairs], flown))
     candidates = regain + [tree for insertion, tree in pairs if insertion in chosen]
     if not candidates:
         return model, error
