@@ -111,3 +111,16 @@ def test_the_model_is_flown_as_finely_as_its_stiffest_loop(stiff_problem):
     lagged = dataclasses.replace(_equation("q_dot", "-4.0*q + 4.0*u_P"), lag=0.01)
     assert model_substeps(new_model({"q_dot": lagged}, ds, Config()), ds) == 4  # 100/s
     assert model_substeps(dataclasses.replace(model, integrator="euler"), ds) == 1
+
+
+def test_a_finished_model_flies_with_its_stiffest_loops_steps(stiff_problem):
+    from gpquad.models.finish import finish_model
+    from gpquad.study.fit import new_model
+
+    _, _, ds = stiff_problem
+    evolution = dataclasses.replace(Config().evolution, finish=("symmetrize",))
+    stiff = _equation("q_dot", "-60.0*q + 60.0*u_P")
+    finished = finish_model(new_model({"q_dot": stiff}, ds, Config()), ds, evolution)
+    assert finished.integrator == "rk4" and finished.substeps == 4
+    slow = _equation("q_dot", "-6.0*q + 6.0*u_P")
+    assert finish_model(new_model({"q_dot": slow}, ds, Config()), ds, evolution).substeps == 1

@@ -14,6 +14,7 @@ from gpquad.models.joint_fit import joint_refit
 from gpquad.models.precision import with_printed_digits, without_negligible
 from gpquad.models.refine import refine
 from gpquad.models.stability import repair_stability
+from gpquad.models.stiffness import model_substeps
 from gpquad.models.symmetrize import symmetrize
 
 
@@ -55,7 +56,8 @@ def finish_model(model, dataset, evolution, vehicle=None, on_step=None, workers:
     mirror) says which inputs a left-right mirror flips; "repair" and "joint_fit" need
     all six equations and leave a partial model as it is. `on_step(name)` is called
     before each step (progress). workers: threads a step may use (the joint refit's
-    Jacobian); the result is the same for any number."""
+    Jacobian); the result is the same for any number. After each step an RK4 model flies
+    with as many steps per sample as its stiffest loop needs (never fewer than before)."""
     flipped = () if vehicle is None else vehicle.flipped(dataset.input_names)
     if evolution.finish:
         model = without_negligible(model, dataset)
@@ -63,4 +65,7 @@ def finish_model(model, dataset, evolution, vehicle=None, on_step=None, workers:
         if on_step is not None:
             on_step(name)
         model = STEPS[name](model, dataset, evolution, flipped, workers)
+        # a refit stiff loop is flown, from here on and by the model's users, with the RK4
+        # steps per sample it was fitted with (gpquad.models.stiffness)
+        model = dataclasses.replace(model, substeps=model_substeps(model, dataset))
     return with_printed_digits(model, dataset)
