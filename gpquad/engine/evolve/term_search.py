@@ -13,8 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
-from gpquad.engine.evolve.term_screen import Insertion, insertions, screened, zero_term
+from gpquad.engine.evolve.term_screen import Insertion, insertions, zero_term
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB
@@ -110,8 +109,7 @@ def term_candidates(
     contributions=None,
     taps: dict[int, int] | None = None,
     additions: list[Insertion] | None = None,
-    with_insertions: bool = False,
-) -> list:
+) -> list[Tree]:
     """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
     (an int n: the first n) and pair, within max_depth (or only `additions`, insertions of
     gpquad.engine.evolve.term_screen). A model too deep
@@ -124,8 +122,7 @@ def term_candidates(
     difference of two delays), never in a product or beside another variable: with 8
     states and 4 inputs at 4 taps that is 192 candidates instead of 600 (one tap: 156).
     Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error
-    only with both of its terms, so one-term insertion alone never finds it.
-    with_insertions: (insertion, tree) pairs."""
+    only with both of its terms, so one-term insertion alone never finds it."""
     variables = list(range(variables)) if isinstance(variables, int) else list(variables)
     if additions is None:
         additions = insertions(variables, taps or {})
@@ -150,8 +147,8 @@ def term_candidates(
             prefix = head + (new[0] if len(new) == 1 else [(ADD, 0.0)] + new[0] + new[1])
         codes = [c for c, _ in prefix]
         if tree_depth(codes) <= max_depth:
-            out.append((insertion, Tree.from_lists(codes, [v for _, v in prefix], model.delays)))
-    return out if with_insertions else [tree for _, tree in out]
+            out.append(Tree.from_lists(codes, [v for _, v in prefix], model.delays))
+    return out
 
 
 def improve_terms(
@@ -167,27 +164,19 @@ def improve_terms(
     taps: dict[int, int] | None = None,
     allows=None,
 ) -> tuple[Tree, float]:
-    """Best of the regain candidates and the term insertions that pass the screen
-    (gpquad.engine.evolve.term_screen; constants fitted by fit(tree, error, starts, n_steps));
+    """Best of the regain candidates and the term insertions (constants fitted by
+    fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves.
     allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
     contributions = term_contributions(ev, model, suite)
-    pairs = [
-        (insertion, tree)
-        for insertion, tree in term_candidates(
-            model, n_variables, max_depth, contributions, taps, with_insertions=True
-        )
+    candidates = regain + [
+        tree
+        for tree in term_candidates(model, n_variables, max_depth, contributions, taps)
         if allows is None or allows(tree.codes)
     ]
-
-    def flown(tree: Tree):
-        return residuals_and_jacobian(ev, tree, suite, ev.n_steps)[:2]
-
-    chosen = set(screened(model_terms(model), model.delays, [i for i, _ in pairs], flown))
-    candidates = regain + [tree for insertion, tree in pairs if insertion in chosen]
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)
