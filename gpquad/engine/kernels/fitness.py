@@ -31,12 +31,7 @@ import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
 from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
-from gpquad.engine.kernels.quaternion import (
-    euler_angle,
-    euler_phi,
-    euler_psi,
-    euler_theta,
-)
+from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
 from gpquad.engine.kernels.step import (
     RK4,
     euler_lanes_step,
@@ -44,7 +39,7 @@ from gpquad.engine.kernels.step import (
     euler_velocity_step,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.kernels.tree_eval import compile_program, run_program
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import VAR_BASE
 
@@ -143,10 +138,7 @@ def euler_tree_window_errors(
     n = starts.shape[0]
     n_in = inputs.shape[1]
     linear = target < 3
-    uses_phi = uses_leaves(codes, size, 0, 0)
-    uses_theta = uses_leaves(codes, size, 1, 1)
-    uses_psi = uses_leaves(codes, size, 2, 2)
-    uses_euler = uses_phi or uses_theta or uses_psi
+    uses_euler = uses_leaves(codes, size, 0, 2)
     uses_vel = uses_leaves(codes, size, 3, 5)
     need_vel = linear or uses_vel
     att_err = (not linear) and att_weight > 0.0
@@ -154,9 +146,13 @@ def euler_tree_window_errors(
     budget = bound * n * n_steps
     body_step = (not linear) and (need_vel or need_att)  # an angular target's full eq. 2 step
 
-    features = np.zeros((9 + n_in, n))
-    stack = np.empty((STACK_ROWS, n))
+    # the leaves, then one row per node (tree_eval.compile_program)
+    features = np.zeros((9 + n_in + size, n))
+    prog = np.empty((size, 4), dtype=np.int64)
+    n_ops, root = compile_program(codes, values, size, 9 + n_in, features, prog)
     pred = np.empty(n)
+    angle_err = np.zeros(n)
+    track = budget < np.inf  # else no sum can exceed it: the sum is skipped
     quat = np.empty((4, n))
     vel = np.empty((3, n))
     rates = np.empty((3, n))
@@ -212,11 +208,11 @@ def euler_tree_window_errors(
                 if not alive[lane]:
                     continue
                 q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
-                if uses_phi:
+                if used[0]:
                     features[0, lane] = euler_phi(q0, q1, q2, q3)
-                if uses_theta:
+                if used[1]:
                     features[1, lane] = euler_theta(q0, q1, q2, q3)
-                if uses_psi:
+                if used[2]:
                     features[2, lane] = euler_psi(q0, q1, q2, q3)
         for c in range(n_rate):
             col = rate_cols[c]
@@ -231,7 +227,9 @@ def euler_tree_window_errors(
             shift = k - delays[j]
             for lane in range(n):
                 features[9 + j, lane] = inputs[starts[lane] + shift, j]
-        eval_lanes(codes, values, size, features, stack, pred, n)
+        run_program(prog, n_ops, features, n)
+        for lane in range(n):
+            pred[lane] = features[root, lane]
         if lagged:
             for lane in range(n):
                 applied[lane] += alpha * (pred[lane] - applied[lane])
@@ -273,29 +271,30 @@ def euler_tree_window_errors(
                         rates[i, lane] = euler_rate_step(
                             rates[i, lane], acc[starts[lane] + k, 3 + i], dt
                         )
-        total = 0.0
-        for lane in range(n):
-            if not alive[lane]:
-                total += err[lane]
-                continue
-            idx = starts[lane] + k
+        if att_err:  # the angle's error, added to the rate's below
+            a = target - 3
+            for lane in range(n):
+                if alive[lane]:
+                    da = euler_angle(a, quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
+                    da = wrap_angle(da - states[starts[lane] + k + 1, a]) * att_weight
+                    angle_err[lane] = da * da if squared else abs(da)
+        lost = 0
+        for lane in range(n):  # a dead lane's error stays; a loop without branches
             x = vel[target, lane] if linear else rates[target - 3, lane]
-            e = x - states[idx + 1, 3 + target]
-            if squared:
-                e = e * e
-            else:
-                e = abs(e)
+            e = x - states[starts[lane] + k + 1, 3 + target]
+            e = e * e if squared else abs(e)
             if att_err:
-                a = target - 3
-                da = euler_angle(a, quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
-                da = wrap_angle(da - states[idx + 1, a]) * att_weight
-                e += da * da if squared else abs(da)
-            if not abs(x) < STATE_LIMIT:  # also catches NaN
-                e = DIVERGED
-                alive[lane] = False
-                n_alive -= 1
-            err[lane] += e
-            total += err[lane]
+                e += angle_err[lane]
+            ok = abs(x) < STATE_LIMIT  # also False for NaN
+            live = alive[lane]
+            err[lane] = (err[lane] + (e if ok else DIVERGED)) if live else err[lane]
+            lost += live and not ok
+            alive[lane] = live and ok
+        n_alive -= lost
+        total = 0.0
+        if track:  # in lane order, as the bound was always summed
+            for lane in range(n):
+                total += err[lane]
         if total > budget or n_alive == 0:
             for lane in range(n):
                 out[lane] = DIVERGED
