@@ -19,7 +19,9 @@ not an approximation:
   FlightArrays.rot and Euler angles from the data;
 - angular targets: the attitude is integrated only when the tree reads Euler
   angles or att_weight > 0, and the velocity only when it reads u, v or w.
-`rollout` integrates everything and is the reference these paths are tested on.
+`rollout` integrates everything and is the reference these paths are tested on. The euler
+kernel's Euler angles are gpquad.engine.kernels.arctrig's atan2 and asin, vectorised over
+lanes: within 1 ulp of the rollout's (libm's), not always its bits.
 
 Not in the paper: an equation may have a first-order lag (gpquad.engine.lag): the
 acceleration it applies follows the tree's value f as a_k = a_{k-1} + alpha (f_k - a_{k-1}),
@@ -31,7 +33,7 @@ import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
 from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
-from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
+from gpquad.engine.kernels.quaternion import euler_angle_lanes
 from gpquad.engine.kernels.step import (
     RK4,
     euler_lanes_step,
@@ -152,6 +154,7 @@ def euler_tree_window_errors(
     n_ops, root = compile_program(codes, values, size, 9 + n_in, features, prog)
     pred = np.empty(n)
     angle_err = np.zeros(n)
+    work = np.empty((3, n))
     track = budget < np.inf  # else no sum can exceed it: the sum is skipped
     quat = np.empty((4, n))
     vel = np.empty((3, n))
@@ -203,17 +206,10 @@ def euler_tree_window_errors(
             col = data_cols[c]
             for lane in range(n):
                 features[col, lane] = states[starts[lane] + k, col]
-        if need_att:
-            for lane in range(n):
-                if not alive[lane]:
-                    continue
-                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
-                if used[0]:
-                    features[0, lane] = euler_phi(q0, q1, q2, q3)
-                if used[1]:
-                    features[1, lane] = euler_theta(q0, q1, q2, q3)
-                if used[2]:
-                    features[2, lane] = euler_psi(q0, q1, q2, q3)
+        if need_att:  # every lane's (vectorised; a dead lane's are not read)
+            for a in range(3):
+                if used[a]:
+                    euler_angle_lanes(a, quat, features[a], n, work[0], work[1])
         for c in range(n_rate):
             col = rate_cols[c]
             for lane in range(n):
@@ -273,10 +269,10 @@ def euler_tree_window_errors(
                         )
         if att_err:  # the angle's error, added to the rate's below
             a = target - 3
+            euler_angle_lanes(a, quat, work[2], n, work[0], work[1])
             for lane in range(n):
                 if alive[lane]:
-                    da = euler_angle(a, quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
-                    da = wrap_angle(da - states[starts[lane] + k + 1, a]) * att_weight
+                    da = wrap_angle(work[2, lane] - states[starts[lane] + k + 1, a]) * att_weight
                     angle_err[lane] = da * da if squared else abs(da)
         lost = 0
         for lane in range(n):  # a dead lane's error stays; a loop without branches
