@@ -1,10 +1,8 @@
 """Eq. 2 through the shared step (gpquad.engine.kernels.step) gives the same bits as the
 kernels that coded it each on their own: the fitness, sensitivity, rollout, integrate, PID
 and peer-rollout outputs of fixed random trees and flights, hashed (SHA-256) when recorded at
-5a4c96c and now (two fitness cases re-recorded when the euler fitness kernel's Euler angles
-and fast-spin increments moved from libm to gpquad.engine.kernels.arctrig and .sincos, within
-1 ulp of libm's). IEEE doubles without fastmath are reproducible on one platform; on another
-libm a hash may differ where atan2 / asin / sin / cos round differently (then re-record)."""
+5a4c96c and now. IEEE doubles without fastmath are reproducible on one platform; on another
+libm a hash may differ where atan2 / asin round differently (then re-record there)."""
 
 import dataclasses
 import hashlib

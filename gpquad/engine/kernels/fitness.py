@@ -160,8 +160,7 @@ def euler_tree_window_errors(
     vel = np.empty((3, n))
     rates = np.empty((3, n))
     err = np.zeros(n)
-    inc = np.empty((13, n))
-    lanes = np.empty(n, dtype=np.int64)
+    inc = np.empty((5, n))
     alive = np.ones(n, dtype=np.bool_)
     n_alive = n
     lagged = alpha < 1.0
@@ -248,7 +247,6 @@ def euler_tree_window_errors(
                 need_vel,
                 need_att,
                 inc,
-                lanes,
             )
         elif linear:
             for lane in range(n):

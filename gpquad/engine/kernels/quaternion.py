@@ -12,7 +12,6 @@ import math
 import numpy as np
 
 from gpquad.engine.kernels.arctrig import asin, atan2_lanes
-from gpquad.engine.kernels.sincos import H_MAX, sincos
 from gpquad.engine.numba_config import njit
 
 
@@ -93,39 +92,6 @@ def rate_increment(p, q, r, dt):
     h = math.sqrt(h2)
     s = 0.5 * dt * (math.sin(h) / h)
     return math.cos(h), p * s, q * s, r * s
-
-
-@njit
-def increments_beyond_series(rates, inc, alive, dt, n, lanes):
-    """inc[:4, lane] = rate_increment of rates[:, lane] for every alive lane whose
-    h2 = inc[4, lane] is beyond the series, with gpquad.engine.kernels.sincos's sin and cos
-    (within 1 ulp; libm's for h beyond its H_MAX or NaN). Those lanes' h2 and rates are
-    gathered first (lanes (n,) int64, inc rows 5-8), so that the loop over them is over
-    contiguous rows and vectorises (its results in inc rows 9-12)."""
-    m = 0
-    for lane in range(n):
-        if alive[lane] and not (inc[4, lane] < SERIES_LIMIT * SERIES_LIMIT):
-            lanes[m] = lane
-            inc[5, m] = inc[4, lane]
-            inc[6, m], inc[7, m], inc[8, m] = rates[0, lane], rates[1, lane], rates[2, lane]
-            m += 1
-    for j in range(m):
-        h = math.sqrt(min(inc[5, j], H_MAX * H_MAX))
-        sn, cs = sincos(h)
-        s = 0.5 * dt * (sn / h)
-        inc[9, j] = cs
-        inc[10, j] = inc[6, j] * s
-        inc[11, j] = inc[7, j] * s
-        inc[12, j] = inc[8, j] * s
-    for j in range(m):
-        lane = lanes[j]
-        if inc[5, j] <= H_MAX * H_MAX:
-            for i in range(4):
-                inc[i, lane] = inc[9 + i, j]
-        else:
-            inc[0, lane], inc[1, lane], inc[2, lane], inc[3, lane] = rate_increment(
-                inc[6, j], inc[7, j], inc[8, j], dt
-            )
 
 
 @njit

@@ -44,7 +44,6 @@ import numpy as np
 from gpquad.engine.kernels.quaternion import (
     SERIES_LIMIT,
     increment_series,
-    increments_beyond_series,
     quat_mul,
     rate_increment,
     renormalize,
@@ -125,18 +124,17 @@ def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, 
 
 @njit
 def euler_lanes_step(
-    quat, vel, rates, acc, starts, k, axis, pred, alive, dt, move_vel, move_att, inc, lanes
+    quat, vel, rates, acc, starts, k, axis, pred, alive, dt, move_vel, move_att, inc
 ):
     """euler_step of every alive lane at step k of windows `starts` for an angular target,
     in place on quat (4, n), vel (3, n), rates (3, n): the velocity when move_vel, the
     attitude when move_att; rate `axis` driven by pred (n,), the others by the data's acc.
-    inc (13, n) and lanes (n,) int64 are work buffers.
+    inc (5, n) is a work buffer.
 
-    euler_step lane by lane, in loops over lanes without branches (which vectorise): the rate
-    increments by their series, then the velocity, attitude and rates; the same bits except
-    for a lane beyond SERIES_LIMIT (a fast spin), whose increment is redone with sin and cos
-    within 1 ulp of libm's (quaternion.increments_beyond_series, vectorised too). A dead
-    lane's state is stepped too, to no purpose: nothing reads it again.
+    The same bits as euler_step lane by lane, in loops over lanes without branches (which
+    vectorise): the rate increments by their series (the rare lane beyond SERIES_LIMIT is
+    redone by rate_increment), then the velocity, attitude and rates. A dead lane's state is
+    stepped too, to no purpose: nothing reads it again.
     """
     n = starts.shape[0]
     big = 0
@@ -146,7 +144,11 @@ def euler_lanes_step(
         inc[4, lane] = h2
         big += not (h2 < SERIES_LIMIT * SERIES_LIMIT)
     if big > 0:
-        increments_beyond_series(rates, inc, alive, dt, n, lanes)
+        for lane in range(n):
+            if alive[lane] and not (inc[4, lane] < SERIES_LIMIT * SERIES_LIMIT):
+                inc[0, lane], inc[1, lane], inc[2, lane], inc[3, lane] = rate_increment(
+                    rates[0, lane], rates[1, lane], rates[2, lane], dt
+                )
     if move_vel:
         for lane in range(n):
             idx = starts[lane] + k
