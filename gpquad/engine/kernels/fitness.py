@@ -153,9 +153,7 @@ def euler_tree_window_errors(
     prog = np.empty((size, 4), dtype=np.int64)
     n_ops, root = compile_program(codes, values, size, 9 + n_in, features, prog)
     pred = np.empty(n)
-    angle_err = np.zeros(n)
     work = np.empty((3, n))
-    track = budget < np.inf  # else no sum can exceed it: the sum is skipped
     quat = np.empty((4, n))
     vel = np.empty((3, n))
     rates = np.empty((3, n))
@@ -267,30 +265,29 @@ def euler_tree_window_errors(
                         rates[i, lane] = euler_rate_step(
                             rates[i, lane], acc[starts[lane] + k, 3 + i], dt
                         )
-        if att_err:  # the angle's error, added to the rate's below
-            a = target - 3
-            euler_angle_lanes(a, quat, work[2], n, work[0], work[1])
-            for lane in range(n):
-                if alive[lane]:
-                    da = wrap_angle(work[2, lane] - states[starts[lane] + k + 1, a]) * att_weight
-                    angle_err[lane] = da * da if squared else abs(da)
-        lost = 0
-        for lane in range(n):  # a dead lane's error stays; a loop without branches
-            x = vel[target, lane] if linear else rates[target - 3, lane]
-            e = x - states[starts[lane] + k + 1, 3 + target]
-            e = e * e if squared else abs(e)
-            if att_err:
-                e += angle_err[lane]
-            ok = abs(x) < STATE_LIMIT  # also False for NaN
-            live = alive[lane]
-            err[lane] = (err[lane] + (e if ok else DIVERGED)) if live else err[lane]
-            lost += live and not ok
-            alive[lane] = live and ok
-        n_alive -= lost
+        if att_err:  # the integrated Euler angle of the target's rate
+            euler_angle_lanes(target - 3, quat, work[2], n, work[0], work[1])
         total = 0.0
-        if track:  # in lane order, as the bound was always summed
-            for lane in range(n):
+        for lane in range(n):
+            if not alive[lane]:
                 total += err[lane]
+                continue
+            idx = starts[lane] + k
+            x = vel[target, lane] if linear else rates[target - 3, lane]
+            e = x - states[idx + 1, 3 + target]
+            if squared:
+                e = e * e
+            else:
+                e = abs(e)
+            if att_err:
+                da = wrap_angle(work[2, lane] - states[idx + 1, target - 3]) * att_weight
+                e += da * da if squared else abs(da)
+            if not abs(x) < STATE_LIMIT:  # also catches NaN
+                e = DIVERGED
+                alive[lane] = False
+                n_alive -= 1
+            err[lane] += e
+            total += err[lane]
         if total > budget or n_alive == 0:
             for lane in range(n):
                 out[lane] = DIVERGED
