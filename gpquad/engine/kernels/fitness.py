@@ -19,7 +19,9 @@ not an approximation:
   FlightArrays.rot and Euler angles from the data;
 - angular targets: the attitude is integrated only when the tree reads Euler
   angles or att_weight > 0, and the velocity only when it reads u, v or w.
-`rollout` integrates everything and is the reference these paths are tested on.
+`rollout` integrates everything and is the reference these paths are tested on. The euler
+kernel's Euler angles are gpquad.engine.kernels.arctrig's atan2 and asin, vectorised over
+lanes: within 1 ulp of the rollout's (libm's), not always its bits.
 
 Not in the paper: an equation may have a first-order lag (gpquad.engine.lag): the
 acceleration it applies follows the tree's value f as a_k = a_{k-1} + alpha (f_k - a_{k-1}),
@@ -31,12 +33,7 @@ import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
 from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
-from gpquad.engine.kernels.quaternion import (
-    euler_angle,
-    euler_phi,
-    euler_psi,
-    euler_theta,
-)
+from gpquad.engine.kernels.quaternion import euler_angle_lanes
 from gpquad.engine.kernels.step import (
     RK4,
     euler_lanes_step,
@@ -44,7 +41,7 @@ from gpquad.engine.kernels.step import (
     euler_velocity_step,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.kernels.tree_eval import compile_program, run_program
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import VAR_BASE
 
@@ -143,10 +140,7 @@ def euler_tree_window_errors(
     n = starts.shape[0]
     n_in = inputs.shape[1]
     linear = target < 3
-    uses_phi = uses_leaves(codes, size, 0, 0)
-    uses_theta = uses_leaves(codes, size, 1, 1)
-    uses_psi = uses_leaves(codes, size, 2, 2)
-    uses_euler = uses_phi or uses_theta or uses_psi
+    uses_euler = uses_leaves(codes, size, 0, 2)
     uses_vel = uses_leaves(codes, size, 3, 5)
     need_vel = linear or uses_vel
     att_err = (not linear) and att_weight > 0.0
@@ -154,9 +148,12 @@ def euler_tree_window_errors(
     budget = bound * n * n_steps
     body_step = (not linear) and (need_vel or need_att)  # an angular target's full eq. 2 step
 
-    features = np.zeros((9 + n_in, n))
-    stack = np.empty((STACK_ROWS, n))
+    # the leaves, then one row per node (tree_eval.compile_program)
+    features = np.zeros((9 + n_in + size, n))
+    prog = np.empty((size, 4), dtype=np.int64)
+    n_ops, root = compile_program(codes, values, size, 9 + n_in, features, prog)
     pred = np.empty(n)
+    work = np.empty((3, n))
     quat = np.empty((4, n))
     vel = np.empty((3, n))
     rates = np.empty((3, n))
@@ -207,17 +204,10 @@ def euler_tree_window_errors(
             col = data_cols[c]
             for lane in range(n):
                 features[col, lane] = states[starts[lane] + k, col]
-        if need_att:
-            for lane in range(n):
-                if not alive[lane]:
-                    continue
-                q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
-                if uses_phi:
-                    features[0, lane] = euler_phi(q0, q1, q2, q3)
-                if uses_theta:
-                    features[1, lane] = euler_theta(q0, q1, q2, q3)
-                if uses_psi:
-                    features[2, lane] = euler_psi(q0, q1, q2, q3)
+        if need_att:  # every lane's (vectorised; a dead lane's are not read)
+            for a in range(3):
+                if used[a]:
+                    euler_angle_lanes(a, quat, features[a], n, work[0], work[1])
         for c in range(n_rate):
             col = rate_cols[c]
             for lane in range(n):
@@ -231,7 +221,9 @@ def euler_tree_window_errors(
             shift = k - delays[j]
             for lane in range(n):
                 features[9 + j, lane] = inputs[starts[lane] + shift, j]
-        eval_lanes(codes, values, size, features, stack, pred, n)
+        run_program(prog, n_ops, features, n)
+        for lane in range(n):
+            pred[lane] = features[root, lane]
         if lagged:
             for lane in range(n):
                 applied[lane] += alpha * (pred[lane] - applied[lane])
@@ -273,6 +265,8 @@ def euler_tree_window_errors(
                         rates[i, lane] = euler_rate_step(
                             rates[i, lane], acc[starts[lane] + k, 3 + i], dt
                         )
+        if att_err:  # the integrated Euler angle of the target's rate
+            euler_angle_lanes(target - 3, quat, work[2], n, work[0], work[1])
         total = 0.0
         for lane in range(n):
             if not alive[lane]:
@@ -286,9 +280,7 @@ def euler_tree_window_errors(
             else:
                 e = abs(e)
             if att_err:
-                a = target - 3
-                da = euler_angle(a, quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane])
-                da = wrap_angle(da - states[idx + 1, a]) * att_weight
+                da = wrap_angle(work[2, lane] - states[idx + 1, target - 3]) * att_weight
                 e += da * da if squared else abs(da)
             if not abs(x) < STATE_LIMIT:  # also catches NaN
                 e = DIVERGED

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from gpquad.engine.kernels.arctrig import asin, atan2_lanes
 from gpquad.engine.numba_config import njit
 
 
@@ -171,6 +172,27 @@ def euler_angle(axis, q0, q1, q2, q3):
     if axis == 1:
         return euler_theta(q0, q1, q2, q3)
     return euler_psi(q0, q1, q2, q3)
+
+
+@njit
+def euler_angle_lanes(axis, quat, out, n, y, x):
+    """out[:n] = euler_angle(axis) of the attitudes quat (4, n) within 1 ulp, in loops that
+    vectorise: gpquad.engine.kernels.arctrig's atan2 and asin (not libm's bits, which
+    euler_angle keeps for the rollouts and exports). y, x (n,) are work buffers."""
+    if axis == 1:
+        for lane in range(n):
+            s = 2.0 * (quat[0, lane] * quat[2, lane] - quat[3, lane] * quat[1, lane])
+            out[lane] = asin(min(1.0, max(-1.0, s)))  # as euler_theta
+        return
+    for lane in range(n):
+        q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+        if axis == 0:
+            y[lane] = 2.0 * (q0 * q1 + q2 * q3)
+            x[lane] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+        else:
+            y[lane] = 2.0 * (q0 * q3 + q1 * q2)
+            x[lane] = 1.0 - 2.0 * (q2 * q2 + q3 * q3)
+    atan2_lanes(y, x, out, n)
 
 
 @njit

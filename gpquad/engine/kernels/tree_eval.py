@@ -95,6 +95,59 @@ def eval_lanes(codes, values, size, features, stack, out, n_lanes):
 
 
 @njit
+def compile_program(codes, values, size, n_features, regs, prog):
+    """The prefix tree as a register program over regs (n_features + size, n_lanes), whose
+    first n_features rows are the leaves: node i's value goes to row n_features + i, and a
+    constant's row is filled here, once. prog (size, 4) gets one row (op, out, left, right)
+    per binary node, in the order of eval_lanes' right-to-left evaluation (the same
+    operations on the same values: the same bits). Returns (n_ops, row of the root)."""
+    rows = np.empty(size, dtype=np.int64)  # the row of each evaluated subtree, a stack
+    sp = 0
+    n_ops = 0
+    for i in range(size - 1, -1, -1):
+        c = codes[i]
+        if c >= VAR_BASE:
+            rows[sp] = c - VAR_BASE
+            sp += 1
+        elif c == CONST:
+            regs[n_features + i, :] = values[i]
+            rows[sp] = n_features + i
+            sp += 1
+        else:
+            prog[n_ops, 0] = c
+            prog[n_ops, 1] = n_features + i
+            prog[n_ops, 2] = rows[sp - 1]  # left operand
+            prog[n_ops, 3] = rows[sp - 2]
+            n_ops += 1
+            sp -= 1
+            rows[sp - 1] = n_features + i
+    return n_ops, rows[0]
+
+
+@njit
+def run_program(prog, n_ops, regs, n_lanes):
+    """Evaluate a compile_program program on the current leaves (rows of regs)."""
+    for j in range(n_ops):
+        c = prog[j, 0]
+        out = regs[prog[j, 1]]
+        left = regs[prog[j, 2]]
+        right = regs[prog[j, 3]]
+        if c == ADD:
+            for lane in range(n_lanes):
+                out[lane] = left[lane] + right[lane]
+        elif c == SUB:
+            for lane in range(n_lanes):
+                out[lane] = left[lane] - right[lane]
+        elif c == MUL:
+            for lane in range(n_lanes):
+                out[lane] = left[lane] * right[lane]
+        else:
+            for lane in range(n_lanes):
+                den = right[lane]
+                out[lane] = 1.0 if abs(den) < DIV_EPS else left[lane] / den
+
+
+@njit
 def eval_on_samples(codes, values, size, delays, states, inputs, indices):
     """One-step tree values at data samples `indices` (no integration), shape (len(indices),)."""
     n = indices.shape[0]
