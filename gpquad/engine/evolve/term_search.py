@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.term_screen import Insertion, insertions, zero_term
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
-from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB
+from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
 from gpquad.engine.tree.polynomial import expand, monomial_terms
 
 
@@ -103,16 +102,10 @@ def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
 
 
 def term_candidates(
-    model: Tree,
-    variables,
-    max_depth: int,
-    contributions=None,
-    taps: dict[int, int] | None = None,
-    additions: list[Insertion] | None = None,
+    model: Tree, variables, max_depth: int, contributions=None, taps: dict[int, int] | None = None
 ) -> list[Tree]:
     """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
-    (an int n: the first n) and pair, within max_depth (or only `additions`, insertions of
-    gpquad.engine.evolve.term_screen). A model too deep
+    (an int n: the first n) and pair, within max_depth. A model too deep
     to take a new term makes room: with `contributions` (one per additive term of
     model_terms(model)), its least contributing terms are dropped until the new one fits,
     so that a substitute can be exchanged for the right term.
@@ -120,13 +113,33 @@ def term_candidates(
     taps: the extra taps of the inputs (gpquad.engine.taps), variable -> its input's
     variable. A tap enters alone (c u_R(t-k)) or beside another tap of its input (a
     difference of two delays), never in a product or beside another variable: with 8
-    states and 4 inputs at 4 taps that is 192 candidates instead of 600 (one tap: 156).
-    Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error
-    only with both of its terms, so one-term insertion alone never finds it."""
+    states and 4 inputs at 4 taps that is 192 candidates instead of 600 (one tap: 156)."""
     variables = list(range(variables)) if isinstance(variables, int) else list(variables)
-    if additions is None:
-        additions = insertions(variables, taps or {})
+    taps = taps or {}
+    plain = [v for v in variables if v not in taps]
 
+    def term(*names):
+        if len(names) == 1:
+            return [(MUL, 0.0), (CONST, 0.0), (VAR_BASE + names[0], 0.0)]
+        return [
+            (MUL, 0.0),
+            (CONST, 0.0),
+            (MUL, 0.0),
+            (VAR_BASE + names[0], 0.0),
+            (VAR_BASE + names[1], 0.0),
+        ]
+
+    additions = [[term(i)] for i in variables]
+    additions += [[term(i, j)] for k, i in enumerate(plain) for j in plain[k:]]
+    # Two terms at once, c1 x_i + c2 x_j: a stiff loop k (u - x) - c x improves the error only
+    # with both of its terms, so one-term insertion alone never finds it.
+    additions += [[term(i), term(j)] for k, i in enumerate(plain) for j in plain[k + 1 :]]
+    additions += [
+        [term(i), term(j)]
+        for k, i in enumerate(variables)
+        for j in variables[k + 1 :]
+        if j in taps and taps[j] == taps.get(i, i)
+    ]
     out = []
     base = model_terms(model)
     head = [(ADD, 0.0)] + list(zip(model.codes.tolist(), model.values.tolist(), strict=True))
@@ -135,8 +148,7 @@ def term_candidates(
         if contributions is not None
         else np.zeros(0, dtype=np.int64)
     )
-    for insertion in additions:
-        new = [zero_term(names) for names in insertion]
+    for new in additions:
         prefix = shallow_sum(base + new)
         dropped = 0
         while tree_depth([c for c, _ in prefix]) > max_depth and dropped < len(order) - 1:
@@ -164,18 +176,19 @@ def improve_terms(
     taps: dict[int, int] | None = None,
     allows=None,
 ) -> tuple[Tree, float]:
-    """Best of the regain candidates and the term insertions (constants fitted by
+    """Best of the regain candidates and the single-term insertions (constants fitted by
     fit(tree, error, starts, n_steps));
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves.
     allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
-    contributions = term_contributions(ev, model, suite)
     candidates = regain + [
-        tree
-        for tree in term_candidates(model, n_variables, max_depth, contributions, taps)
-        if allows is None or allows(tree.codes)
+        t
+        for t in term_candidates(
+            model, n_variables, max_depth, term_contributions(ev, model, suite), taps
+        )
+        if allows is None or allows(t.codes)
     ]
     if not candidates:
         return model, error
