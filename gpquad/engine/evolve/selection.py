@@ -7,11 +7,11 @@ criterion of the integrated target state,
     BIC = n log(MSE) + k log(n),
 
 with n the number of window-steps scored and k the tree's size (one symbol per node, so
-a term costs its nodes). The smallest terms are first tried gone together
-(SMALL_TERM_SHARES), then terms are removed one by one while BIC does not grow (training windows,
-constants re-fitted by least squares, which is exactly what minimises MSE), and the final
-equation is the candidate (pruned best, then every climber of the size/error front) with
-the lowest BIC on the validation windows.
+a term costs its nodes). Below the resolution the smallest terms are first tried gone
+together (SMALL_TERM_SHARES), then terms are removed one by one while BIC does not grow
+(training windows, constants re-fitted by least squares, which is exactly what minimises
+MSE), and the final equation is the candidate (pruned best, then every climber of the
+size/error front) with the lowest BIC on the validation windows.
 """
 
 from __future__ import annotations
@@ -31,8 +31,9 @@ MSE_FLOOR = 1e-18
 #: standard deviation (RSE) count as zero, so that on noise-free data a term that lowers an
 #: error already below it (a compensation of the scheme's discretisation) does not pay.
 RSE_RESOLUTION = 1e-3
-#: Before term-by-term pruning, the smallest terms summing to these shares of the model's
-#: RMS value are tried gone at once (first share first): round-off terms go in one fit.
+#: Before term-by-term pruning of a model already below the resolution (its MSE under the
+#: floor), the smallest terms summing to these shares of its RMS value are tried gone at
+#: once (first share first): the terms that only compensate a scheme go in one fit.
 SMALL_TERM_SHARES = (1e-2, 1e-3)
 
 
@@ -81,10 +82,11 @@ def prune_by_bic(
             per_term, mse_of(ev_mse, per_term, starts, n_steps), starts, n_steps
         )
         if bic(per_err, n, per_term.size, floor) < score:
-            model, score = per_term, bic(per_err, n, per_term.size, floor)
+            model, err, score = per_term, per_err, bic(per_err, n, per_term.size, floor)
     samples = (np.asarray(starts)[:, None] + np.arange(n_steps)[None, :]).ravel()
     tried = []
-    for share in SMALL_TERM_SHARES:
+    # only below the resolution: on noisy data small terms go one by one, as they always did
+    for share in SMALL_TERM_SHARES if err < floor else ():
         smaller = without_small_terms(model, ev_mse.arrays, samples, share)
         if smaller is None or smaller.codes.tolist() in tried:
             continue
