@@ -147,6 +147,9 @@ def test_own_scheme_is_the_cells_integrator():
         1,
     )
     assert fidelity.own_scheme({"method": "sindy"}) == ("euler", 1)
+    # the finished model's scheme wins: a stiff loop raised its steps per sample
+    cell["scheme"] = {"integrator": "rk4", "substeps": 8}
+    assert fidelity.own_scheme(cell) == ("rk4", 8)
 
 
 def test_update_caches_and_recomputes_a_changed_cell(continuous, tmp_path, monkeypatch):

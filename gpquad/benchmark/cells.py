@@ -118,6 +118,8 @@ def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
                 "evolution": cfg.to_dict()["evolution"],
                 "vehicle": cfg.to_dict()["vehicle"],
             },
+            # the finished model's own scheme: a stiff loop raises its steps per sample
+            "scheme": {"integrator": model.integrator, "substeps": model.substeps},
             "recovery": recovery_gpquad(model, scenario),
             "joint_fit": model.joint_fit,
             "n_parameters": model.n_parameters,

@@ -6,8 +6,10 @@ each sample. A cell's equations are re-read from its stored text (`equations`: g
 in the model's trim-subtracted inputs, a peer's expression in the features of
 `gpquad.benchmark.peers`) and flown over the same test windows twice:
 
-- "own": by the method's own scheme: gpquad's `evolution.integrator` / `substeps` of the
-  cell's settings (eq. 2, one step per sample, when the cell records none); a peer's
+- "own": by the method's own scheme: gpquad's finished model's integrator and steps per
+  sample (the cell's `scheme`; a stiff loop raises them, gpquad.models.stiffness), else
+  `evolution.integrator` / `substeps` of the cell's settings (eq. 2, one step per sample,
+  when the cell records none); a peer's
   one-step map (its accelerations are forward differences, eq. 2's inverse);
 - "rk4": by RK4 with FIDELITY_SUBSTEPS steps per sample (gpquad.engine.kernels.step).
 
@@ -114,6 +116,8 @@ def own_scheme(cell: dict) -> tuple[str, int]:
     """The scheme a cell's method flies its equations with (module notes)."""
     if cell["method"] != "gpquad":
         return "euler", 1
+    if cell.get("scheme"):  # the finished model's (cells written before: the settings')
+        return str(cell["scheme"]["integrator"]), int(cell["scheme"]["substeps"])
     evolution = (cell.get("settings") or {}).get("evolution") or {}
     return str(evolution.get("integrator", "euler")), int(evolution.get("substeps", 1))
 
