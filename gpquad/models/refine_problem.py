@@ -154,10 +154,10 @@ class RefineProblem:
         return self._window_error(self.judge, tree, starts, steps)
 
     def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
-        """(expr with its constants fitted through the integrator, training error), flown
-        with the steps per sample its loop needs (`fitting`); fitted again, finer, when the
-        fitted loop needs more than the start did."""
-        ev = self.fitting(expr)
+        """(expr with its constants fitted through the integrator, training error): fitted in
+        the search's scheme, then, while the fitted loop needs more steps per sample
+        (`fitting`), polished in the finer scheme from there."""
+        ev, short = self.ev, self.short
         while True:
             tree = self.tree(expr)
 
@@ -173,11 +173,13 @@ class RefineProblem:
                 self.steps,
                 error_of,
                 FIT_STEPS,
-                self.short,
+                short,
                 FTOL,
             )
             expr = self.expr(fitted)
             finer = self.fitting(expr)
             if finer.substeps <= ev.substeps:
                 return expr, float(error)
-            ev = finer
+            # polished in the finer scheme from the coarse fit: already in the loop's basin,
+            # it needs no growing horizon
+            ev, short = finer, []
