@@ -16,10 +16,10 @@ from gpquad.models.equations import DiscoveredModel, Equation
 from gpquad.models.precision import (
     MIN_DIGITS,
     TOLERANCE,
-    sample_columns,
     expression_values,
     faithful,
     printed_digits,
+    sample_columns,
     sample_rows,
     with_printed_digits,
 )
