@@ -150,6 +150,10 @@ def test_own_scheme_is_the_cells_integrator():
     # the finished model's scheme wins: a stiff loop raised its steps per sample
     cell["scheme"] = {"integrator": "rk4", "substeps": 8}
     assert fidelity.own_scheme(cell) == ("rk4", 8)
+    # a cell fitted per vehicle records each group's model's scheme
+    cell["scheme"] = {"a": {"integrator": "rk4", "substeps": 2}, "b": cell["scheme"]}
+    assert fidelity.own_scheme(cell, "a") == ("rk4", 2)
+    assert fidelity.own_scheme(cell, "b") == ("rk4", 8)
 
 
 def test_update_caches_and_recomputes_a_changed_cell(continuous, tmp_path, monkeypatch):

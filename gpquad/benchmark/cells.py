@@ -73,7 +73,7 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
         g: _fit_one(method, sub, seed, engine, fit_jobs) for g, sub in scenario.groups.items()
     }
     simulate = grouped_simulate(scenario, {g: f[0] for g, f in fitted.items()})
-    keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit")
+    keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit", "scheme")
     record = {
         k: {g: f[2][k] for g, f in fitted.items()}
         for k in keys

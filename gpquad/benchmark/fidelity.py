@@ -112,12 +112,16 @@ def peer_predictor(equations: dict, input_names):
     return predict
 
 
-def own_scheme(cell: dict) -> tuple[str, int]:
-    """The scheme a cell's method flies its equations with (module notes)."""
+def own_scheme(cell: dict, group: str | None = None) -> tuple[str, int]:
+    """The scheme a cell's method flies its equations with (module notes); of `group`'s
+    model for a cell fitted per vehicle (each records its own)."""
     if cell["method"] != "gpquad":
         return "euler", 1
-    if cell.get("scheme"):  # the finished model's (cells written before: the settings')
-        return str(cell["scheme"]["integrator"]), int(cell["scheme"]["substeps"])
+    scheme = cell.get("scheme") or {}
+    if group is not None and group in scheme:
+        scheme = scheme[group]
+    if "integrator" in scheme:  # the finished model's (cells written before: the settings')
+        return str(scheme["integrator"]), int(scheme["substeps"])
     evolution = (cell.get("settings") or {}).get("evolution") or {}
     return str(evolution.get("integrator", "euler")), int(evolution.get("substeps", 1))
 
@@ -133,18 +137,19 @@ def text_simulator(method: str, equations: dict, test, integrator: str, substeps
     )
 
 
-def cell_simulator(cell: dict, scenario, integrator: str, substeps: int):
+def cell_simulator(cell: dict, scenario, scheme_of):
     """simulate(starts, steps) on scenario.test of a cell's stored equations (per group
-    when the cell was fitted per vehicle)."""
+    when the cell was fitted per vehicle), each flown by scheme_of(group or None) ->
+    (integrator, substeps)."""
     from gpquad.benchmark.cells import grouped_simulate
 
     method = cell["method"]
     if not scenario.groups:
-        return text_simulator(method, cell["equations"], scenario.test, integrator, substeps)
+        return text_simulator(method, cell["equations"], scenario.test, *scheme_of(None))
     return grouped_simulate(
         scenario,
         {
-            g: text_simulator(method, cell["equations"][g], sub.test, integrator, substeps)
+            g: text_simulator(method, cell["equations"][g], sub.test, *scheme_of(g))
             for g, sub in scenario.groups.items()
         },
     )
@@ -161,8 +166,12 @@ def _metrics(simulate, scenario, horizons_s) -> dict:
 def cell_fidelity(cell: dict, scenario, horizons_s) -> dict:
     """{"own_scheme", "own", "rk4", "substeps", "ratio", "text_matches_stored"} of a cell."""
     integrator, substeps = own_scheme(cell)
-    own = _metrics(cell_simulator(cell, scenario, integrator, substeps), scenario, horizons_s)
-    rk4 = _metrics(cell_simulator(cell, scenario, "rk4", FIDELITY_SUBSTEPS), scenario, horizons_s)
+    own = _metrics(
+        cell_simulator(cell, scenario, lambda g: own_scheme(cell, g)), scenario, horizons_s
+    )
+    rk4 = _metrics(
+        cell_simulator(cell, scenario, lambda g: ("rk4", FIDELITY_SUBSTEPS)), scenario, horizons_s
+    )
     return {
         "own_scheme": {"integrator": integrator, "substeps": substeps},
         "substeps": FIDELITY_SUBSTEPS,
