@@ -148,8 +148,7 @@ class RefineProblem:
         the scheme that fits it (`fitting`), or over `ranges` tiled (validation: flown by the
         judge, fine RK4 for an RK4 engine)."""
         if ranges is None:
-            ev = self.fitting(self.expr(tree)) if self.ev.integrator == "rk4" else self.ev
-            return self._window_error(ev, tree, self.starts, self.steps)
+            return self._window_error(self.fitting(self.expr(tree)), tree, self.starts, self.steps)
         starts, steps = tile(ranges, self.window_steps, self.max_delay)
         return self._window_error(self.judge, tree, starts, steps)
 

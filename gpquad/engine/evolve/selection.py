@@ -83,10 +83,10 @@ def prune_by_bic(
         )
         if bic(per_err, n, per_term.size, floor) < score:
             model, err, score = per_term, per_err, bic(per_err, n, per_term.size, floor)
-    samples = (np.asarray(starts)[:, None] + np.arange(n_steps)[None, :]).ravel()
     tried = []
     # only below the resolution: on noisy data small terms go one by one, as they always did
     for share in SMALL_TERM_SHARES if err < floor else ():
+        samples = (np.asarray(starts)[:, None] + np.arange(n_steps)[None, :]).ravel()
         smaller = without_small_terms(model, ev_mse.arrays, samples, share)
         if smaller is None or smaller.codes.tolist() in tried:
             continue
