@@ -556,3 +556,22 @@ def test_rk4_evaluator_flies_the_rk4_data_accelerations(short_dataset):
     assert ev.arrays is short_dataset.scheme_arrays("rk4", 2)
     assert not np.array_equal(ev.arrays.acc[:, :3], short_dataset.arrays.acc[:, :3])
     assert Evaluator(short_dataset, "a_x", 50).arrays is short_dataset.arrays
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31))
+def test_solve3_agrees_with_numpy_solve(seed):
+    """The 3 x 3 solve of rk4_body_accelerations against numpy.linalg.solve, on random
+    well-conditioned matrices and on one whose first pivot is zero (no pivoting fails it)."""
+    from gpquad.engine.kernels.integrator import solve3
+
+    rng = np.random.default_rng(seed)
+    m = rng.normal(size=(3, 3)) + 3.0 * np.eye(3)
+    b = rng.normal(size=3)
+    x = b.copy()
+    solve3(m.copy(), x)
+    np.testing.assert_allclose(x, np.linalg.solve(m, b), rtol=1e-10, atol=1e-12)
+    m[0, 0] = 0.0
+    x = b.copy()
+    solve3(m.copy(), x)
+    np.testing.assert_allclose(m @ x, b, rtol=1e-9, atol=1e-10)

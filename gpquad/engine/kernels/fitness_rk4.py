@@ -136,7 +136,9 @@ def rk4_tree_window_errors(
         first = V
     else:
         first = W
-    ys[:, :] = y
+    for i in range(n_rows):  # element by element: a broadcast copy compiles shape checks
+        for lane in range(n):
+            ys[i, lane] = y[i, lane]
 
     for k in range(n_steps):
         for lane in range(n):  # inputs held over the sample

@@ -121,6 +121,8 @@ def rk4_body_accelerations(vel, rates, dt, substeps):
     ys = np.empty((3, 6))
     k = np.zeros((3, 6))
     total = np.empty((3, 6))
+    gamma = np.empty((3, 3))
+    rhs = np.empty(3)
     for t in range(n - 1):
         alpha = np.empty(3)
         for i in range(3):
@@ -153,15 +155,43 @@ def rk4_body_accelerations(vel, rates, dt, substeps):
             for j in range(6):
                 for i in range(3):
                     y[i, j] += h * total[i, j]
-        rhs = np.empty(3)
         for i in range(3):
             rhs[i] = vel[t + 1, i] - (
                 y[i, 0] * vel[t, 0] + y[i, 1] * vel[t, 1] + y[i, 2] * vel[t, 2]
             )
-        a = np.linalg.solve(np.ascontiguousarray(y[:, 3:]), rhs)
         for i in range(3):
-            acc[t, i] = a[i]
+            for j in range(3):
+                gamma[i, j] = y[i, 3 + j]
+        solve3(gamma, rhs)
+        for i in range(3):
+            acc[t, i] = rhs[i]
     return acc
+
+
+@njit
+def solve3(m, b):
+    """b <- m^-1 b for a 3 x 3 m, by Gaussian elimination with partial pivoting (m is
+    overwritten). numpy.linalg.solve's LAPACK path costs seconds of compilation per kernel
+    that uses it, for the same arithmetic."""
+    for c in range(3):
+        p = c
+        for r in range(c + 1, 3):
+            if abs(m[r, c]) > abs(m[p, c]):
+                p = r
+        if p != c:
+            for j in range(3):
+                m[c, j], m[p, j] = m[p, j], m[c, j]
+            b[c], b[p] = b[p], b[c]
+        for r in range(c + 1, 3):
+            f = m[r, c] / m[c, c]
+            for j in range(c, 3):
+                m[r, j] -= f * m[c, j]
+            b[r] -= f * b[c]
+    for c in range(2, -1, -1):
+        s = b[c]
+        for j in range(c + 1, 3):
+            s -= m[c, j] * b[j]
+        b[c] = s / m[c, c]
 
 
 @njit
