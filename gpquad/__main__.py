@@ -1,5 +1,3 @@
-import sys
+from gpquad.cli.commands import entry
 
-from gpquad.cli.commands import main
-
-sys.exit(main())
+entry()

@@ -200,7 +200,9 @@ def _search_in_workers(
     report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)
-    with Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered") as run:
+    with Parallel(
+        n_jobs=jobs, backend="loky", return_as="generator_unordered", max_nbytes=None
+    ) as run:
         for target, equation, rows, seconds in run(
             delayed(_identify_in_worker)(dataset, t, cfg, run_dir is not None) for t in pending
         ):
@@ -212,6 +214,16 @@ def _search_in_workers(
                 _record(equation, done, history, rows, report, seconds)
                 equations[name], timings[name] = equation, seconds
                 report.done += cfg.evolution.iterations
+
+
+def release_workers(wait: bool = False) -> None:
+    """Shut the search's worker processes down (in the background unless `wait`): a run's
+    finishing steps need none, and the next search starts new ones."""
+    from joblib.externals.loky import reusable_executor
+
+    executor = getattr(reusable_executor, "_executor", None)
+    if executor is not None:
+        executor.shutdown(wait=wait)
 
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:

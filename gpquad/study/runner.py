@@ -13,7 +13,13 @@ from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
-from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasured
+from gpquad.study.fit import (
+    finish,
+    new_model,
+    release_workers,
+    search_equations,
+    warn_unmeasured,
+)
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -149,6 +155,7 @@ def run_experiment(
     dataset=None,
     jobs: int = 1,
     after=None,
+    release: bool = False,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -195,6 +202,8 @@ def run_experiment(
             file=sys.stderr,
         )
         raise
+    if release:
+        release_workers()
     finish_seconds: dict[str, float] = {}
     model = finish(
         new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs
