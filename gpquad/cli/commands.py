@@ -37,6 +37,10 @@ def _cmd_run(args) -> int:
     if args.jobs is not None and args.jobs < 1:
         raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
     jobs = default_jobs(len(cfg.evolution.targets)) if args.jobs is None else args.jobs
+    if jobs > 1 and len(cfg.evolution.targets) > 1:  # workers warm up while the data loads
+        from gpquad.study import workers
+
+        workers.start(jobs)
     try:
         model = run_experiment(
             cfg,

@@ -195,35 +195,23 @@ def _search_in_workers(
 ) -> None:
     """The `pending` targets searched in `jobs` worker processes, each recorded in target
     order as soon as every target before it is (search_equations' notes)."""
-    from joblib import Parallel, delayed
+    from gpquad.study import workers
 
     report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)
-    with Parallel(
-        n_jobs=jobs, backend="loky", return_as="generator_unordered", max_nbytes=None
-    ) as run:
-        for target, equation, rows, seconds in run(
-            delayed(_identify_in_worker)(dataset, t, cfg, run_dir is not None) for t in pending
-        ):
-            ready[target] = (equation, rows, seconds)
-            while order and order[0] in ready:
-                name = order.pop(0)
-                equation, rows, seconds = ready.pop(name)
-                done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
-                _record(equation, done, history, rows, report, seconds)
-                equations[name], timings[name] = equation, seconds
-                report.done += cfg.evolution.iterations
-
-
-def release_workers(wait: bool = False) -> None:
-    """Shut the search's worker processes down (in the background unless `wait`): a run's
-    finishing steps need none, and the next search starts new ones."""
-    from joblib.externals.loky import reusable_executor
-
-    executor = getattr(reusable_executor, "_executor", None)
-    if executor is not None:
-        executor.shutdown(wait=wait)
+    futures = workers.submit_all(
+        jobs, _identify_in_worker, [(dataset, t, cfg, run_dir is not None) for t in pending]
+    )
+    for target, equation, rows, seconds in workers.completed(futures):
+        ready[target] = (equation, rows, seconds)
+        while order and order[0] in ready:
+            name = order.pop(0)
+            equation, rows, seconds = ready.pop(name)
+            done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
+            _record(equation, done, history, rows, report, seconds)
+            equations[name], timings[name] = equation, seconds
+            report.done += cfg.evolution.iterations
 
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:

@@ -16,10 +16,10 @@ from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.fit import (
     finish,
     new_model,
-    release_workers,
     search_equations,
     warn_unmeasured,
 )
+from gpquad.study import workers
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -203,7 +203,7 @@ def run_experiment(
         )
         raise
     if release:
-        release_workers()
+        workers.release()
     finish_seconds: dict[str, float] = {}
     model = finish(
         new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs

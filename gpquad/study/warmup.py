@@ -1,0 +1,100 @@
+"""Compile once: the search's kernels split between worker processes before the searches.
+
+numba compiles a kernel in the first process that calls it and writes it to its cache; a
+process that calls it later loads it instead. Searches started in two fresh workers would
+both compile every kernel at once (about 20 s each on a cold cache). Instead each worker
+first compiles one group (`GROUPS`): the eq. 2 kernels in one, the RK4 kernels in the other,
+by fitting a small tree's constants on a synthetic flight through the same Python paths as a
+search. Once both are done the searches find every kernel in the cache. With a warm cache a
+group only loads its kernels (what the searches would do anyway).
+
+tests/test_warmup.py checks that after both groups a search and the finishing steps compile
+nothing more.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+#: The kernel groups, one per worker: each compiles its scheme's fitness, sensitivity, LM
+#: and full-model rollout kernels.
+GROUPS = ("euler", "rk4")
+
+#: The synthetic flight: length (s), sample period (s), window length (samples).
+SECONDS, DT, STEPS = 8.0, 0.04, 12
+
+
+def synthetic_dataset(seed: int = 0):
+    """A short smooth flight with the paper's four inputs, built by the data layer's own
+    build_dataset so that its arrays have the layouts of any log's."""
+    from gpquad.data.dataset import build_dataset
+    from gpquad.data.flight import Flight
+
+    rng = np.random.default_rng(seed)
+    n = int(SECONDS / DT)
+    t = np.arange(n) * DT
+
+    def smooth(scale: float, cols: int) -> np.ndarray:
+        f = rng.uniform(0.2, 1.0, cols)
+        phase = rng.uniform(0.0, 2 * np.pi, cols)
+        return scale * np.sin(np.outer(t, f) + phase)
+
+    phi, theta, psi = smooth(0.2, 3).T
+    cr, sr = np.cos(phi / 2), np.sin(phi / 2)
+    cp, sp = np.cos(theta / 2), np.sin(theta / 2)
+    cy, sy = np.cos(psi / 2), np.sin(psi / 2)
+    quat = np.column_stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+    flight = Flight(
+        name="warm-up",
+        t=t,
+        quat=quat,
+        vel=smooth(1.0, 3),
+        rates=smooth(0.5, 3),
+        inputs=smooth(0.3, 4),
+        input_names=("u_R", "u_P", "u_Y", "u_T"),
+    )
+    return build_dataset([flight], validation_fraction=0.25)
+
+
+def warm(group: str) -> float:
+    """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
+    seconds it took."""
+    from gpquad.engine.evolve.evaluator import Evaluator
+    from gpquad.engine.evolve.gradient_fit import continued_constants
+    from gpquad.engine.kernels.tree_eval import eval_on_samples
+    from gpquad.models.reference_models import setpoint_model
+
+    if group not in GROUPS:
+        raise ValueError(f"unknown kernel group {group!r}; one of {GROUPS}")
+    t0 = time.perf_counter()
+    dataset = synthetic_dataset()
+    integrator, substeps = ("rk4", 2) if group == "rk4" else ("euler", 1)
+    model = setpoint_model(dataset.input_names, dataset.dt)
+    model = dataclasses.replace(model, integrator=integrator, substeps=substeps)
+    starts = np.array([1, STEPS + 2], dtype=np.int64)
+    for target in ("a_x", "p_dot"):
+        tree = model.equations["p_dot"].tree
+        ev = Evaluator(dataset, target, STEPS, integrator=integrator, substeps=substeps)
+        errors = ev.window_errors([tree, tree], starts).mean(axis=1)
+
+        def error_of(t, ev=ev):
+            return float(ev.window_errors([t], starts).mean())
+
+        continued_constants(ev, tree, float(errors[0]), starts, STEPS, error_of, 2, [])
+    samples = np.arange(1, STEPS, dtype=np.int64)
+    arrays = dataset.arrays
+    eval_on_samples(
+        tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
+    )
+    model.simulate(dataset, starts, STEPS)
+    return time.perf_counter() - t0

@@ -1,0 +1,63 @@
+"""The worker processes of the equations' searches (loky's reusable executor).
+
+A run may start them before it loads its data (`start`), so that their start-up and the
+kernels' compilation (gpquad.study.warmup: one group per worker) overlap the loading;
+`search_in_workers` waits for the warm-up before it hands out the searches. `release` lets
+them exit once the searches are done.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
+
+from gpquad.study.warmup import GROUPS, warm
+
+#: The executor of the last start() and its warm-up futures.
+_pool: dict = {}
+
+
+def _executor(jobs: int):
+    from joblib.externals.loky import get_reusable_executor
+
+    return get_reusable_executor(max_workers=jobs)
+
+
+def start(jobs: int) -> None:
+    """Start `jobs` worker processes and their warm-up (returns at once)."""
+    executor = _executor(jobs)
+    if _pool.get("executor") is not executor:
+        _pool.clear()
+        _pool.update(executor=executor, warm=[executor.submit(warm, g) for g in GROUPS])
+
+
+def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
+    """func(*args) for each of `arguments` in the warmed workers (started now if they were
+    not); the futures, in the order of `arguments`."""
+    start(jobs)
+    done, _ = wait(_pool["warm"], return_when=FIRST_EXCEPTION)
+    for future in done:
+        future.result()  # a failed warm-up raises here, before any search
+    executor = _pool["executor"]
+    return [executor.submit(func, *args) for args in arguments]
+
+
+def completed(futures: list[Future]):
+    """The futures' results as they finish; on an interruption or an error the rest are
+    cancelled and the workers stopped."""
+    try:
+        for future in as_completed(futures):
+            yield future.result()
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        release(kill=True)
+        raise
+
+
+def release(wait: bool = False, kill: bool = False) -> None:
+    """Shut the worker processes down (in the background unless `wait`): a run's finishing
+    steps need none, and the next search starts new ones."""
+    executor = _pool.pop("executor", None)
+    _pool.clear()
+    if executor is not None:
+        executor.shutdown(wait=wait, kill_workers=kill)

@@ -1,0 +1,97 @@
+"""The warm-up groups compile every kernel that a search and the finishing steps call, with
+the same types: afterwards a fit adds no signature to any of gpquad's kernels."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from gpquad.study.warmup import GROUPS, warm
+
+PROBE = textwrap.dedent(
+    """
+    import json, sys
+    import numba
+    from numba.core.registry import CPUDispatcher
+
+    def signatures():
+        out = {}
+        for name, mod in list(sys.modules.items()):
+            if not name.startswith("gpquad"):
+                continue
+            for attr, obj in vars(mod).items():
+                if isinstance(obj, CPUDispatcher):
+                    key = obj.py_func.__module__ + "." + obj.py_func.__qualname__
+                    out.setdefault(key, set()).update(str(s) for s in obj.signatures)
+        return out
+
+    from gpquad.study.warmup import GROUPS, warm
+    import gpquad.study.fit, gpquad.models.finish  # every kernel module imported
+    for group in sys.argv[1].split(","):
+        if group:
+            warm(group)
+    from gpquad.data.io import load_dataset
+    from gpquad.study.config import load_config
+    from gpquad.study.fit import fit_dataset
+
+    cfg = load_config(sys.argv[2])
+    dataset = load_dataset(cfg)  # the data kernels: the main process's
+    before = signatures()
+    fit_dataset(dataset, cfg, jobs=1)
+    after = signatures()
+    new = {k: sorted(v - before.get(k, set())) for k, v in after.items()}
+    print(json.dumps({k: v for k, v in new.items() if v}))
+    """
+)
+
+
+CONFIG = """
+seed = 1
+[data]
+trim = "mean"
+[simulator]
+duration_s = 60.0
+[evolution]
+targets = ["a_x", "p_dot"]
+iterations = 1
+model_generations = 15
+input_taps = 1
+"""
+
+
+def _new_signatures(tmp_path: Path, groups: str) -> dict:
+    config = tmp_path / "tiny.toml"
+    config.write_text(CONFIG)
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    proc = subprocess.run(
+        [sys.executable, "-c", PROBE, groups, str(config)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_after_the_warm_up_a_fit_compiles_nothing(tmp_path):
+    """Every kernel that a fit calls on loaded data (the main process loads it) was compiled
+    by a warm-up group with the fit's own types. Without the warm-up (the bad
+    case) the same fit adds the search's kernels."""
+    new = _new_signatures(tmp_path, ",".join(GROUPS))
+    assert new == {}
+    cold = _new_signatures(tmp_path, "")
+    assert "gpquad.engine.kernels.fitness.euler_population_window_errors" in cold
+    assert "gpquad.engine.kernels.sensitivity_rk4.rk4_window_residuals" in cold
+
+
+def test_an_unknown_group_is_refused():
+    with pytest.raises(ValueError, match="euler"):
+        warm("gpu")
