@@ -12,6 +12,7 @@ from pathlib import Path
 from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
+from gpquad.study import workers
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.fit import (
     finish,
@@ -19,7 +20,6 @@ from gpquad.study.fit import (
     search_equations,
     warn_unmeasured,
 )
-from gpquad.study import workers
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
