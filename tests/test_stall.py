@@ -6,14 +6,15 @@ import dataclasses
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from conftest import truth_dataset
 from test_engine import TINY
 
 from gpquad.engine.evolve.coevolution import Coevolution
-from gpquad.engine.evolve.stall import best_error, stalled
+from gpquad.engine.evolve.stall import EXACT_RSE, best_error, exact, stalled
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import config_from_dict
-from gpquad.study.loop import evolve
+from gpquad.study.loop import evolve, target_spread
 
 
 def test_three_iterations_without_one_percent_stop_the_search():
@@ -64,3 +65,32 @@ def test_stall_settings_are_checked_and_the_paper_runs_every_iteration():
         config_from_dict({"evolution": {"stall_iterations": -1}})
     assert config_from_dict({"preset": "paper"}).evolution.stall_iterations == 0
     assert config_from_dict({}).evolution.stall_iterations == 3
+
+
+def test_an_exact_error_is_below_a_millionth_of_the_state():
+    assert exact(0.5e-6, 1.0, False) and not exact(2e-6, 1.0, False)
+    assert exact(0.5e-12, 1.0, True) and not exact(2e-12, 1.0, True)  # squared metric
+    assert exact(1e-5, 20.0, False) and not exact(1e-5, 1.0, False)
+    assert not exact(float("inf"), 1.0, False) and not exact(float("nan"), 1.0, False)
+    assert EXACT_RSE == 1e-6
+
+
+def test_a_search_that_is_exact_stops_and_the_paper_goes_on():
+    """On eq. 2 data of the truth p_dot = -4.15 p + 10.3 u_R(t-1) the search reaches the
+    truth's error (rounding) and stops at once; with the rule off (the bad case) it runs
+    every iteration."""
+    dataset = truth_dataset({}, 60.0, seed=2)
+    ev = dataclasses.replace(
+        config_from_dict({}).evolution,
+        targets=("p_dot",),
+        iterations=6,
+        model_generations=30,
+        input_taps=1,
+    )
+    co = Coevolution(dataset, "p_dot", ev)
+    state = evolve(co, co.init_state(1), ev.iterations)
+    assert state.iteration < 4
+    assert exact(state.best_errors[-1], target_spread(co), False)
+    never = dataclasses.replace(ev, stall_iterations=0)
+    full = evolve(Coevolution(dataset, "p_dot", never), co.init_state(1), ev.iterations)
+    assert full.iteration == 6

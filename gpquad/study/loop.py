@@ -13,9 +13,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.coevolution import Coevolution
-from gpquad.engine.evolve.stall import best_error, stalled
+from gpquad.engine.evolve.stall import best_error, exact, stalled
 from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
@@ -54,8 +56,19 @@ def evolve(
 
 def search_stalled(co: Coevolution, state: RunState) -> bool:
     """Whether the search stopped gaining (gpquad.engine.evolve.stall, the config's
-    stall_iterations and stall_gain)."""
-    return stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain)
+    stall_iterations and stall_gain) or its best climber is exact."""
+    if not state.best_errors:
+        return False
+    return stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain) or exact(
+        state.best_errors[-1], target_spread(co), co.evaluator.squared
+    )
+
+
+def target_spread(co: Coevolution) -> float:
+    """Standard deviation of the search's target state over the training samples."""
+    states = co.dataset.arrays.states
+    rows = np.concatenate([np.arange(a, b) for a, b in co.dataset.train])
+    return float(np.std(states[rows, 3 + co.evaluator.target])) if len(rows) else 0.0
 
 
 def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:

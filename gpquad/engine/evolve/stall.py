@@ -3,7 +3,9 @@
 After every iteration the run loop records the best climber's error over the whole
 training data (`RunState.best_errors`). The search stops early when `patience`
 iterations in a row did not lower the best error recorded so far by at least the
-fraction `gain` of it. The climbers are scored on a co-evolving suite, so the best
+fraction `gain` of it, or at once when the best error is `exact`: below EXACT_RSE of the
+target state's spread, where the data are the equation's own up to rounding and no later
+iteration can gain (the final selection still prunes the climber). The climbers are scored on a co-evolving suite, so the best
 training error is not monotone; the rule compares with the lowest error reached, and an
 iteration that does not beat it by `gain` counts as stalled. The measurements behind the
 defaults are in docs/decisions/2026-11-26-finish-speed.md.
@@ -12,6 +14,9 @@ defaults are in docs/decisions/2026-11-26-finish-speed.md.
 from __future__ import annotations
 
 import math
+
+#: A best error below this fraction of the target state's standard deviation is exact.
+EXACT_RSE = 1e-6
 
 
 def stalled(best_errors: list[float], patience: int, gain: float) -> bool:
@@ -37,3 +42,10 @@ def best_error(train_errors) -> float:
     """The lowest finite climber error (inf when none is finite)."""
     finite = [float(e) for e in train_errors if math.isfinite(float(e))]
     return min(finite) if finite else math.inf
+
+
+def exact(error: float, spread: float, squared: bool) -> bool:
+    """Whether `error` (the engine's metric: mean absolute, or squared if `squared`, state
+    error) is below EXACT_RSE of a state whose standard deviation is `spread`."""
+    floor = EXACT_RSE * spread
+    return math.isfinite(error) and error <= (floor * floor if squared else floor)
