@@ -4,9 +4,9 @@ paper preset runs every iteration."""
 import dataclasses
 
 import pytest
+from conftest import truth_dataset
 from hypothesis import given
 from hypothesis import strategies as st
-from conftest import truth_dataset
 from test_engine import TINY
 
 from gpquad.engine.evolve.coevolution import Coevolution
