@@ -6,9 +6,9 @@ iterations in a row did not lower the best error recorded so far by at least the
 fraction `gain` of it, or at once when the best error is `exact`: below EXACT_RSE of the
 target state's spread, where the data are the equation's own up to rounding and no later
 iteration can gain (the final selection still prunes the climber). The climbers are scored
-on a co-evolving suite, so the best training error is not monotone; the rule compares with the lowest error reached, and an
-iteration that does not beat it by `gain` counts as stalled. The measurements behind the
-defaults are in docs/decisions/2026-11-26-finish-speed.md.
+on a co-evolving suite, so the best training error is not monotone; the rule compares with
+the lowest error reached, and an iteration that does not beat it by `gain` counts as
+stalled. The measurements behind the defaults are in docs/decisions/2026-11-26-finish-speed.md.
 """
 
 from __future__ import annotations
