@@ -177,9 +177,10 @@ def fit(
         Bad data or settings, in one line naming the field, before any long work.
     """
     from gpquad.data.io import dataset_of, load_dataset
-    from gpquad.study.fit import default_jobs, fit_dataset, warn_unmeasured
+    from gpquad.study.fit import fit_dataset, warn_unmeasured
     from gpquad.study.runner import run_experiment
     from gpquad.study.search import Progress
+    from gpquad.study.workers import default_jobs
 
     cfg = _with_overrides(_config(config), seed, overrides)
     flights, cfg, source = _flights_and_config(data, cfg)

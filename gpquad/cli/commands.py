@@ -14,9 +14,8 @@ from gpquad.errors import GpquadError
 
 
 def _cmd_run(args) -> int:
+    from gpquad.study import workers
     from gpquad.study.config import load_config, override
-    from gpquad.study.fit import default_jobs
-    from gpquad.study.runner import default_run_dir, run_experiment
 
     cfg = override(
         load_config(args.config),
@@ -26,6 +25,13 @@ def _cmd_run(args) -> int:
         seed=args.seed,
         out=None,
     )
+    if args.jobs is not None and args.jobs < 1:
+        raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
+    jobs = workers.default_jobs(len(cfg.evolution.targets)) if args.jobs is None else args.jobs
+    if jobs > 1 and len(cfg.evolution.targets) > 1:  # they warm up while the rest loads
+        workers.start(jobs)
+    from gpquad.study.runner import default_run_dir, run_experiment
+
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     figures: list[Path] = []
 
@@ -34,13 +40,6 @@ def _cmd_run(args) -> int:
 
         figures.extend(make_run_report(run_dir, formats=("png",), dataset=dataset))
 
-    if args.jobs is not None and args.jobs < 1:
-        raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
-    jobs = default_jobs(len(cfg.evolution.targets)) if args.jobs is None else args.jobs
-    if jobs > 1 and len(cfg.evolution.targets) > 1:  # workers warm up while the data loads
-        from gpquad.study import workers
-
-        workers.start(jobs)
     try:
         model = run_experiment(
             cfg,

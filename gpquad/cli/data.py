@@ -14,8 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from gpquad.data.io import guess_format
-from gpquad.data.pipeline import is_measured
 from gpquad.errors import GpquadError
 
 #: Formats whose readers give a LogTable (signals, segments) before the pipeline.
@@ -43,6 +41,8 @@ def _log_tables(path: Path, fmt: str, data) -> list:
 
 def describe_log(log) -> str:
     """Signals, measured states and in-flight time of a LogTable, as text."""
+    from gpquad.data.pipeline import is_measured
+
     t = log.table["t"].to_numpy()
     lines = [
         f"log {log.name}: {t[-1] - t[0]:.1f} s ({t[0]:.2f}..{t[-1]:.2f} s on the log clock),"
@@ -264,6 +264,7 @@ def run_align(
 ) -> int:
     """The `data align` command: clock offset of log B relative to log A, and residual RMSE."""
     from gpquad.data.align import estimate_offset
+    from gpquad.data.io import guess_format
     from gpquad.study.config import Config, load_config
 
     cfg = load_config(config) if config else Config()

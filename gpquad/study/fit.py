@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -222,11 +221,6 @@ def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
         if dataset.unmeasured(TARGET_STATE[t])
     }
     return notes or None
-
-
-def default_jobs(n_targets: int) -> int:
-    """Processes for the searches: one per core, at most one per target."""
-    return max(1, min(os.cpu_count() or 1, n_targets))
 
 
 def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> DiscoveredModel:

@@ -8,12 +8,18 @@ them exit once the searches are done.
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
 
 from gpquad.study.warmup import GROUPS, warm
 
 #: The executor of the last start() and its warm-up futures.
 _pool: dict = {}
+
+
+def default_jobs(n_targets: int) -> int:
+    """Processes for the searches: one per core, at most one per target."""
+    return max(1, min(os.cpu_count() or 1, n_targets))
 
 
 def _executor(jobs: int):
