@@ -22,6 +22,7 @@ from gpquad.models.refine import refined_summary
 from gpquad.models.stability import stability_summary
 from gpquad.models.symmetrize import symmetrized_summary
 from gpquad.models.symmetry import mirror_odd_terms, parity_summary
+from gpquad.study import workers
 from gpquad.study.config import Config
 from gpquad.study.search import Progress, identify
 from gpquad.study.store import HistoryWriter, write_json
@@ -120,7 +121,7 @@ def search_equations(
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
-    parallel = jobs > 1 and len(ev.targets) > 1
+    parallel = jobs > 1 and len(ev.targets) > 1 and not workers.inside_worker()
     try:
         history_end = _history_start(run_dir) if run_dir is not None else 0
         pending: list[str] = []
@@ -194,8 +195,6 @@ def _search_in_workers(
 ) -> None:
     """The `pending` targets searched in `jobs` worker processes, each recorded in target
     order as soon as every target before it is (search_equations' notes)."""
-    from gpquad.study import workers
-
     report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)

@@ -1,9 +1,11 @@
-"""The worker processes of the equations' searches (loky's reusable executor).
+"""The worker processes of the equations' searches (a loky process pool of their own, apart
+from the one joblib shares between a benchmark's or a sweep's cells).
 
 A run may start them before it loads its data (`start`), so that their start-up and the
 kernels' compilation (gpquad.study.warmup: one group per worker) overlap the loading;
-`search_in_workers` waits for the warm-up before it hands out the searches. `release` lets
-them exit once the searches are done.
+`submit_all` waits for the warm-up before it hands out the searches. `release` lets them
+exit once the searches are done. A fit inside a worker process (a benchmark's cells run in
+parallel, say) searches in its own process: `inside_worker`.
 """
 
 from __future__ import annotations
@@ -22,18 +24,23 @@ def default_jobs(n_targets: int) -> int:
     return max(1, min(os.cpu_count() or 1, n_targets))
 
 
-def _executor(jobs: int):
-    from joblib.externals.loky import get_reusable_executor
+def inside_worker() -> bool:
+    """Whether this process is a worker of another (its fits search in-process)."""
+    import multiprocessing
 
-    return get_reusable_executor(max_workers=jobs)
+    return multiprocessing.parent_process() is not None
 
 
 def start(jobs: int) -> None:
-    """Start `jobs` worker processes and their warm-up (returns at once)."""
-    executor = _executor(jobs)
-    if _pool.get("executor") is not executor:
-        _pool.clear()
-        _pool.update(executor=executor, warm=[executor.submit(warm, g) for g in GROUPS])
+    """Start `jobs` worker processes and their warm-up (returns at once); a pool of another
+    size is shut down first."""
+    from joblib.externals.loky import ProcessPoolExecutor
+
+    if _pool.get("jobs") == jobs:
+        return
+    release()
+    executor = ProcessPoolExecutor(max_workers=jobs)
+    _pool.update(jobs=jobs, executor=executor, warm=[executor.submit(warm, g) for g in GROUPS])
 
 
 def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
