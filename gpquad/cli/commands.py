@@ -341,12 +341,16 @@ def _extensions():
 
 
 def entry() -> None:
-    """The `gpquad` command: main(), its exit handlers (the search workers' shutdown and
-    their temporary files), then out of the process without the interpreter's teardown of
-    numba, matplotlib and pandas (about half a second); every file is closed by then."""
+    """The `gpquad` command: main(), then the interpreter's own exit sequence up to the
+    teardown of the modules, which it skips (numba, matplotlib and pandas: about half a
+    second). First, as at any exit, the thread-level exit callbacks (the process pools' shut
+    down and their worker processes joined), then the atexit handlers (joblib's temporary
+    folders); every file is closed by then."""
     import atexit
+    import threading
 
     code = main()
+    threading._shutdown()
     atexit._run_exitfuncs()
     sys.stdout.flush()
     sys.stderr.flush()
