@@ -208,3 +208,17 @@ def _validation_windows(problem, dataset):
 
     starts, steps = tile(dataset.validation, problem.window_steps, problem.max_delay)
     return starts, steps
+
+
+def test_equations_refined_in_threads_are_those_refined_one_by_one(dataset):
+    """Two equations refined side by side in two threads: the same equations, constants to
+    the bit, and the same report as one after the other."""
+    model = model_of({"r_dot": TRUTH["r_dot"], "q_dot": TRUTH["q_dot"]}, dataset)
+    evo = dataclasses.replace(evolution(2), refine_terms={"r_dot": 2, "q_dot": 1})
+    one, report_one = refine(model, dataset, evo, FLIP)
+    two, report_two = refine(model, dataset, evo, FLIP, workers=2)
+    assert list(report_two) == list(report_one) and set(report_one) == {"q_dot", "r_dot"}
+    assert report_two == report_one
+    for target in ("q_dot", "r_dot"):
+        a, b = one.equations[target].tree, two.equations[target].tree
+        assert a.codes.tolist() == b.codes.tolist() and a.values.tolist() == b.values.tolist()

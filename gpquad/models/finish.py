@@ -28,7 +28,7 @@ def _symmetrize(model, dataset, evolution, flipped, workers):
 def _refine(model, dataset, evolution, flipped, workers):
     if not any(evolution.refine_for(t) for t in model.equations):
         return model
-    model, report = refine(model, dataset, evolution, flipped)
+    model, report = refine(model, dataset, evolution, flipped, workers)
     return dataclasses.replace(model, refined=report)
 
 
@@ -55,9 +55,10 @@ def finish_model(model, dataset, evolution, vehicle=None, on_step=None, workers:
     digits its printed equations need. `vehicle` (the config's [vehicle], or None: no
     mirror) says which inputs a left-right mirror flips; "repair" and "joint_fit" need
     all six equations and leave a partial model as it is. `on_step(name)` is called
-    before each step (progress). workers: threads a step may use (the joint refit's
-    Jacobian); the result is the same for any number. After each step an RK4 model flies
-    with as many steps per sample as its stiffest loop needs (never fewer than before)."""
+    before each step (progress). workers: threads a step may use (the refinement's
+    equations, the joint refit's Jacobian); the result is the same for any number. After
+    each step an RK4 model flies with as many steps per sample as its stiffest loop needs
+    (never fewer than before)."""
     flipped = () if vehicle is None else vehicle.flipped(dataset.input_names)
     if evolution.finish:
         model = without_negligible(model, dataset)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -258,15 +259,25 @@ def text(equation, term: sp.Expr) -> str:
     return str(round_constants(term, equation.digits).xreplace(reps))
 
 
-def refine(model, dataset, evolution, flipped=()) -> tuple[object, dict]:
+def refine(model, dataset, evolution, flipped=(), workers: int = 1) -> tuple[object, dict]:
     """(model, report): every equation with `refine_terms` > 0 refined (module notes),
     then refinements the full model flies worse with reverted (keep_what_flies);
-    report {target: refine_equation's report, with "reverted": true for those}."""
+    report {target: refine_equation's report, with "reverted": true for those}.
+    workers: threads that refine equations side by side (their fits release the GIL); each
+    equation's refinement is its own, so the result is the same for any number."""
+    targets = [t for t in model.equations if evolution.refine_for(t) > 0]
+
+    def one(target):
+        return refine_equation(model.equations[target], dataset, evolution, flipped)
+
+    if workers > 1 and len(targets) > 1:
+        with ThreadPoolExecutor(max_workers=min(workers, len(targets))) as pool:
+            results = list(pool.map(one, targets))
+    else:
+        results = [one(t) for t in targets]
     equations, report = dict(model.equations), {}
-    for target, equation in model.equations.items():
-        if evolution.refine_for(target) <= 0:
-            continue
-        equations[target], report[target] = refine_equation(equation, dataset, evolution, flipped)
+    for target, (equation, entry) in zip(targets, results, strict=True):
+        equations[target], report[target] = equation, entry
     refined, reverted = keep_what_flies(
         dataclasses.replace(model, equations=equations), model, dataset, flipped
     )
