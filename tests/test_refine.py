@@ -222,3 +222,22 @@ def test_equations_refined_in_threads_are_those_refined_one_by_one(dataset):
     for target in ("q_dot", "r_dot"):
         a, b = one.equations[target].tree, two.equations[target].tree
         assert a.codes.tolist() == b.codes.tolist() and a.values.tolist() == b.values.tolist()
+
+
+def test_a_lagged_equation_is_judged_with_its_lag(dataset):
+    """The validation flights of a lagged step fly the lag (tau da/dt + a = expr), also where
+    the judge is an evaluator of its own (RK4 with FIDELITY_SUBSTEPS steps per sample): the
+    same as flying the judge with the lag set, and not the unlagged error (the bad case)."""
+    eq = model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+    rk4 = dataclasses.replace(evolution(), integrator="rk4", substeps=1)
+    problem = RefineProblem(eq, dataset, rk4)
+    assert problem.judge is not problem.ev
+    tree = problem.tree(problem.canonical(eq))
+    unlagged = problem.error(tree, dataset.validation)
+    problem.ev.set_lag(0.1)
+    lagged = problem.error(tree, dataset.validation)
+    starts, steps = _validation_windows(problem, dataset)
+    problem.judge.set_lag(0.1)
+    want = float(problem.judge.window_errors([tree], starts, n_steps=steps).mean())
+    assert lagged == pytest.approx(want, rel=1e-12)
+    assert lagged != pytest.approx(unlagged, rel=1e-3)

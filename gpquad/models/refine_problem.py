@@ -146,10 +146,11 @@ class RefineProblem:
     def error(self, tree: Tree, ranges=None) -> float:
         """Mean window error flown alone (the search's metric) over the training windows, in
         the scheme that fits it (`fitting`), or over `ranges` tiled (validation: flown by the
-        judge, fine RK4 for an RK4 engine)."""
+        judge, fine RK4 for an RK4 engine), both with the current lag."""
         if ranges is None:
             return self._window_error(self.fitting(self.expr(tree)), tree, self.starts, self.steps)
         starts, steps = tile(ranges, self.window_steps, self.max_delay)
+        self.judge.set_lag(self.ev.lag)  # the equation's lag, whichever evaluator judges
         return self._window_error(self.judge, tree, starts, steps)
 
     def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
