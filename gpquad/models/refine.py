@@ -122,27 +122,42 @@ def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray, residual: np.nd
 
 
 def choose_lag(
-    problem: RefineProblem, expr: sp.Expr, error: float, gain: float
+    problem: RefineProblem, expr: sp.Expr, error: float, gain: float, workers: int = 1
 ) -> tuple[float, sp.Expr, float]:
     """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
-    the equation's own terms flies best, if it beats the found equation by `gain`."""
+    the equation's own terms flies best, if it beats the found equation by `gain`; the
+    time constants are fitted in up to `workers` threads, each on a problem of its own."""
     best = (0.0, expr, error)
     terms = monomials(expr)
     columns = np.column_stack([problem.values(m) for m in terms])  # the same for every lag
-    for tau in LAG_GRID[1:]:
-        problem.ev.set_lag(tau)  # the one-step target is the data inverse-filtered by it
-        coef, *_ = np.linalg.lstsq(columns, problem.commanded(), rcond=None)
+
+    def fitted(tau: float) -> tuple[sp.Expr, float]:
+        lagged = problem.with_lag(tau)  # the one-step target is the data inverse-filtered by it
+        coef, *_ = np.linalg.lstsq(columns, lagged.commanded(), rcond=None)
         start = sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, terms, strict=True)])
-        fitted, fitted_error = problem.fit(start)
-        if fitted_error < best[2] - gain:
-            best = (tau, fitted, fitted_error)
+        return lagged.fit(start)
+
+    taus = list(LAG_GRID[1:])
+    for tau, (fit, fit_error) in zip(taus, in_threads(fitted, taus, workers), strict=True):
+        if fit_error < best[2] - gain:
+            best = (tau, fit, fit_error)
     problem.ev.set_lag(best[0])
     return best
 
 
-def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, dict]:
+def in_threads(func, items: list, workers: int) -> list:
+    """[func(item) for item in items], in up to `workers` threads (the fits release the
+    GIL); in the items' order, so the same for any number."""
+    if workers > 1 and len(items) > 1:
+        with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
+            return list(pool.map(func, items))
+    return [func(item) for item in items]
+
+
+def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
     """(equation, report): the found equation's lag and added terms (module notes), or the
-    found equation itself when no refinement flies the validation windows better."""
+    found equation itself when no refinement flies the validation windows better. workers:
+    threads for the candidates of a step (the same result for any number)."""
     n_terms = evolution.refine_for(equation.target)
     min_gain = evolution.term_min_gain
     problem = RefineProblem(equation, dataset, evolution)
@@ -191,7 +206,7 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
             val = problem.error(problem.tree(refit), dataset.validation)
             path.append(Step(0.0, refit, refit_error, val, [], tuple(dropped)))
             expr, error = refit, refit_error
-    tau, expr, error = choose_lag(problem, expr, error, gain(error))
+    tau, expr, error = choose_lag(problem, expr, error, gain(error), workers)
     if tau > 0:
         val = problem.error(problem.tree(expr), dataset.validation)
         path.append(Step(tau, expr, error, val, [], tuple(dropped)))
@@ -203,10 +218,11 @@ def refine_equation(equation, dataset, evolution, flipped=()) -> tuple[object, d
         offered = np.array([c not in own for c in candidates])
         residual = problem.residual(expr)
         best = None
-        for k in screen(problem, expr, residual, columns, offered):
-            fitted, fitted_error = problem.fit(
-                warm_start(expr, candidates[k], columns[:, k], residual)
-            )
+        screened = screen(problem, expr, residual, columns, offered)
+        starts = [warm_start(expr, candidates[k], columns[:, k], residual) for k in screened]
+        for k, (fitted, fitted_error) in zip(
+            screened, in_threads(problem.fit, starts, workers), strict=True
+        ):
             if best is None or fitted_error < best[1]:
                 best = (fitted, fitted_error, candidates[k])
         if best is None or not best[1] < error - gain(error):
@@ -268,13 +284,9 @@ def refine(model, dataset, evolution, flipped=(), workers: int = 1) -> tuple[obj
     targets = [t for t in model.equations if evolution.refine_for(t) > 0]
 
     def one(target):
-        return refine_equation(model.equations[target], dataset, evolution, flipped)
+        return refine_equation(model.equations[target], dataset, evolution, flipped, workers)
 
-    if workers > 1 and len(targets) > 1:
-        with ThreadPoolExecutor(max_workers=min(workers, len(targets))) as pool:
-            results = list(pool.map(one, targets))
-    else:
-        results = [one(t) for t in targets]
+    results = in_threads(one, targets, workers)
     equations, report = dict(model.equations), {}
     for target, (equation, entry) in zip(targets, results, strict=True):
         equations[target], report[target] = equation, entry

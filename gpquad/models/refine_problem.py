@@ -3,6 +3,8 @@ delay, the evaluators that fit it and judge it, its training windows and samples
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import sympy as sp
 
@@ -72,6 +74,18 @@ class RefineProblem:
         self.samples = spread(samples[samples >= 1], SCREEN_SAMPLES)
         self.acc = self.arrays.acc[:, target_index(equation.target)]
         self.window_steps, self.max_delay = window_steps, cfg.max_delay
+
+    def with_lag(self, tau: float) -> RefineProblem:
+        """The same problem with evaluators of its own, lag tau set (for fits side by side:
+        an evaluator's lag is its state)."""
+        other = copy.copy(self)
+        other.ev = self._evaluator(self.ev.integrator, self.ev.substeps)
+        other.ev.set_lag(tau)
+        other._fitting = {other.ev.substeps: other.ev}
+        other.judge = other.ev
+        if self.judge is not self.ev:
+            other.judge = self._evaluator(self.judge.integrator, self.judge.substeps)
+        return other
 
     def canonical(self, equation) -> sp.Expr:
         """The equation's expression with each delayed input written as the tap at its
