@@ -69,3 +69,20 @@ def test_exit_code_of_a_user_mistake_survives_the_fast_exit(tmp_path):
     )
     assert proc.returncode == 2
     assert "iterations" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_figures_drawn_by_a_worker_or_the_run_are_the_same_files(tmp_path, jobs):
+    """With two processes a worker draws the convergence figure while the model is
+    finished; with one the run draws it. Either way both figures are written and listed."""
+    config = tmp_path / "exit.toml"
+    config.write_text(TINY)
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "gpquad", "run", str(config), "--jobs", jobs, "--out", str(run)]
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    figures = [run / "report" / "convergence.png", run / "report" / "prediction.png"]
+    assert all(f.stat().st_size > 1000 for f in figures)
+    assert f"Figures: {figures[0]}, {figures[1]}" in proc.stdout

@@ -34,11 +34,22 @@ def _cmd_run(args) -> int:
 
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     figures: list[Path] = []
+    drawing = []  # the convergence figure, drawn by a worker while the model is finished
+
+    def hand_over(folder) -> None:
+        from gpquad.report.builder import convergence_report
+
+        targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
+        future = workers.submit(convergence_report, folder, targets, metric, ("png",))
+        drawing.extend([] if future is None else [future])
 
     def draw(model, dataset) -> None:
         from gpquad.report.builder import make_run_report
 
-        figures.extend(make_run_report(run_dir, formats=("png",), dataset=dataset))
+        figures.extend(drawing[0].result() if drawing else [])
+        figures.extend(
+            make_run_report(run_dir, formats=("png",), dataset=dataset, convergence=not drawing)
+        )
 
     try:
         model = run_experiment(
@@ -48,6 +59,7 @@ def _cmd_run(args) -> int:
             jobs=jobs,
             after=None if args.no_figures else draw,
             release=True,
+            searched=None if args.no_figures else hand_over,
         )
     except KeyboardInterrupt:
         return 130

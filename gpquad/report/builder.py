@@ -300,15 +300,31 @@ def make_report(folder, reassemble: bool = False, formats=("png", "pdf")) -> lis
     return written
 
 
+def convergence_report(folder, targets, metric: str, formats=("png", "pdf")) -> list[Path]:
+    """The convergence figure of a `gpquad run` folder (FOLDER/report/convergence): best
+    suite error against generation for each of `targets`, from its history.csv, complete
+    once the searches are (so it may be drawn while the model is finished)."""
+    from gpquad.report import plotting
+
+    folder = Path(folder)
+    return plotting.convergence_figure(
+        {t: [folder / "history.csv"] for t in targets},
+        folder / "report" / "convergence",
+        metric,
+        formats,
+    )
+
+
 def make_run_report(
-    folder, formats=("png", "pdf"), window_s: float = 7.0, dataset=None
+    folder, formats=("png", "pdf"), window_s: float = 7.0, dataset=None, convergence=True
 ) -> list[Path]:
     """Figures of one `gpquad run` folder, written into FOLDER/report/; `dataset`: the run's
     data when the caller has it loaded (else it is loaded from the folder's config).
 
     prediction: the run's equations flown over the first validation window of `window_s`
     (states without an equation use the data's accelerations); convergence: best suite
-    error against generation for each equation.
+    error against generation for each equation (`convergence_report`; False: drawn
+    elsewhere).
     """
     import io
 
@@ -323,11 +339,10 @@ def make_run_report(
     cfg = load_folder_config(folder)
     model = DiscoveredModel.load(folder)
     out = folder / "report"
-    written = plotting.convergence_figure(
-        {t: [folder / "history.csv"] for t in model.equations},
-        out / "convergence",
-        cfg.evolution.metric,
-        formats,
+    written = (
+        convergence_report(folder, list(model.equations), cfg.evolution.metric, formats)
+        if convergence
+        else []
     )
     dataset = load_dataset(cfg) if dataset is None else dataset
     steps_wanted = max(1, int(round(window_s / dataset.dt)))

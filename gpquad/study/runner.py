@@ -156,6 +156,7 @@ def run_experiment(
     jobs: int = 1,
     after=None,
     release: bool = False,
+    searched=None,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -202,6 +203,8 @@ def run_experiment(
             file=sys.stderr,
         )
         raise
+    if searched is not None:
+        searched(run_dir)
     if release:
         workers.release()
     finish_seconds: dict[str, float] = {}
