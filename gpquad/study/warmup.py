@@ -68,9 +68,12 @@ def synthetic_dataset(seed: int = 0):
 
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
-    seconds it took."""
+    seconds it took. "euler": the eq. 2 fitness and sensitivity kernels and the LM's; "rk4":
+    the RK4 fitness, sensitivity and full-model rollout kernels and the one-step tree
+    evaluation (about the same compilation time each, and none compiled by both)."""
     from gpquad.engine.evolve.evaluator import Evaluator
-    from gpquad.engine.evolve.gradient_fit import continued_constants
+    from gpquad.engine.evolve.gradient_fit import continued_constants, residuals_and_jacobian
+    from gpquad.engine.kernels import least_squares
     from gpquad.engine.kernels.tree_eval import eval_on_samples
     from gpquad.models.reference_models import setpoint_model
 
@@ -81,20 +84,26 @@ def warm(group: str) -> float:
     integrator, substeps = ("rk4", 2) if group == "rk4" else ("euler", 1)
     model = setpoint_model(dataset.input_names, dataset.dt)
     model = dataclasses.replace(model, integrator=integrator, substeps=substeps)
+    tree = model.equations["p_dot"].tree
     starts = np.array([1, STEPS + 2], dtype=np.int64)
     for target in ("a_x", "p_dot"):
-        tree = model.equations["p_dot"].tree
         ev = Evaluator(dataset, target, STEPS, integrator=integrator, substeps=substeps)
         errors = ev.window_errors([tree, tree], starts).mean(axis=1)
+        if group == "rk4":
+            residuals_and_jacobian(ev, tree, starts, STEPS)
+            continue
 
         def error_of(t, ev=ev):
             return float(ev.window_errors([t], starts).mean())
 
         continued_constants(ev, tree, float(errors[0]), starts, STEPS, error_of, 2, [])
-    samples = np.arange(1, STEPS, dtype=np.int64)
-    arrays = dataset.arrays
-    eval_on_samples(
-        tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
-    )
-    model.simulate(dataset, starts, STEPS)
+    if group == "euler":  # the LM's trust-region branch, which a short fit may not reach
+        least_squares.gradient_norm(np.eye(2), np.zeros(2))
+    if group == "rk4":
+        samples = np.arange(1, STEPS, dtype=np.int64)
+        arrays = dataset.arrays
+        eval_on_samples(
+            tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
+        )
+        model.simulate(dataset, starts, STEPS)
     return time.perf_counter() - t0
