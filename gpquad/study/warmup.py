@@ -82,8 +82,9 @@ def warm(group: str) -> float:
     t0 = time.perf_counter()
     dataset = synthetic_dataset()
     integrator, substeps = ("rk4", 2) if group == "rk4" else ("euler", 1)
-    model = setpoint_model(dataset.input_names, dataset.dt)
-    model = dataclasses.replace(model, integrator=integrator, substeps=substeps)
+    setpoints = setpoint_model(dataset.input_names, dataset.dt)
+    assert setpoints is not None  # the synthetic flight has the paper's input names
+    model = dataclasses.replace(setpoints, integrator=integrator, substeps=substeps)
     tree = model.equations["p_dot"].tree
     starts = np.array([1, STEPS + 2], dtype=np.int64)
     for target in ("a_x", "p_dot"):
