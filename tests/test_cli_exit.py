@@ -86,3 +86,18 @@ def test_figures_drawn_by_a_worker_or_the_run_are_the_same_files(tmp_path, jobs)
     figures = [run / "report" / "convergence.png", run / "report" / "prediction.png"]
     assert all(f.stat().st_size > 1000 for f in figures)
     assert f"Figures: {figures[0]}, {figures[1]}" in proc.stdout
+
+
+def test_bad_data_after_the_workers_started_exits_with_its_line(tmp_path):
+    """The workers start before the data loads; a missing file still ends the run with its
+    one line and code 2 (the workers are stopped, not waited for)."""
+    config = tmp_path / "bad.toml"
+    config.write_text('name = "bad"\n[data]\nfiles = ["missing.ulg"]\n')
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    cmd = [sys.executable, "-m", "gpquad", "run", str(config), "--jobs", "2"]
+    proc = subprocess.run(
+        [*cmd, "--out", str(tmp_path / "r")], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 2
+    assert "missing.ulg" in proc.stderr and "Traceback" not in proc.stderr

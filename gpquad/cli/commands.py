@@ -62,7 +62,11 @@ def _cmd_run(args) -> int:
             searched=None if args.no_figures else hand_over,
         )
     except KeyboardInterrupt:
+        workers.release(kill=True)
         return 130
+    except BaseException:  # bad data, say: no waiting for the workers' warm-up at exit
+        workers.release(kill=True)
+        raise
     print(
         "\nDiscovered equations (inputs minus trim):"
         if any(model.trim.values())

@@ -48,8 +48,12 @@ def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
     not); the futures, in the order of `arguments`."""
     start(jobs)
     done, _ = wait(_pool["warm"], return_when=FIRST_EXCEPTION)
-    for future in done:
-        future.result()  # a failed warm-up raises here, before any search
+    try:
+        for future in done:
+            future.result()  # a failed warm-up raises here, before any search
+    except BaseException:
+        release(kill=True)  # a pool that failed is not kept for the next fit
+        raise
     executor = _pool["executor"]
     return [executor.submit(func, *args) for args in arguments]
 
