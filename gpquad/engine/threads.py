@@ -12,6 +12,7 @@ other core busy, on a 2-core machine).
 from __future__ import annotations
 
 import functools
+from concurrent.futures import ThreadPoolExecutor
 
 from threadpoolctl import threadpool_limits
 
@@ -25,3 +26,14 @@ def one_blas_thread(func):
             return func(*args, **kwargs)
 
     return wrapper
+
+
+def thread_map(func, items, workers: int) -> list:
+    """[func(item) for item in items], in up to `workers` threads when there are several
+    items (func must be thread-safe and release the GIL for its work, as the numba kernels
+    do); in the items' order, so the same for any number of workers."""
+    items = list(items)
+    if workers > 1 and len(items) > 1:
+        with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
+            return list(pool.map(func, items))
+    return [func(item) for item in items]

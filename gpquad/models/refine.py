@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -46,6 +45,7 @@ import sympy as sp
 from gpquad.data.mirror import mirror_dataset
 from gpquad.engine.lag import LAG_GRID
 from gpquad.engine.taps import base_input
+from gpquad.engine.threads import thread_map
 from gpquad.engine.tree.export import round_constants
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.earned import earn_terms
@@ -138,20 +138,11 @@ def choose_lag(
         return lagged.fit(start)
 
     taus = list(LAG_GRID[1:])
-    for tau, (fit, fit_error) in zip(taus, in_threads(fitted, taus, workers), strict=True):
+    for tau, (fit, fit_error) in zip(taus, thread_map(fitted, taus, workers), strict=True):
         if fit_error < best[2] - gain:
             best = (tau, fit, fit_error)
     problem.ev.set_lag(best[0])
     return best
-
-
-def in_threads(func, items: list, workers: int) -> list:
-    """[func(item) for item in items], in up to `workers` threads (the fits release the
-    GIL); in the items' order, so the same for any number."""
-    if workers > 1 and len(items) > 1:
-        with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
-            return list(pool.map(func, items))
-    return [func(item) for item in items]
 
 
 def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
@@ -221,7 +212,7 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
         screened = screen(problem, expr, residual, columns, offered)
         starts = [warm_start(expr, candidates[k], columns[:, k], residual) for k in screened]
         for k, (fitted, fitted_error) in zip(
-            screened, in_threads(problem.fit, starts, workers), strict=True
+            screened, thread_map(problem.fit, starts, workers), strict=True
         ):
             if best is None or fitted_error < best[1]:
                 best = (fitted, fitted_error, candidates[k])
@@ -286,7 +277,7 @@ def refine(model, dataset, evolution, flipped=(), workers: int = 1) -> tuple[obj
     def one(target):
         return refine_equation(model.equations[target], dataset, evolution, flipped, workers)
 
-    results = in_threads(one, targets, workers)
+    results = thread_map(one, targets, workers)
     equations, report = dict(model.equations), {}
     for target, (equation, entry) in zip(targets, results, strict=True):
         equations[target], report[target] = equation, entry

@@ -21,12 +21,11 @@ result is also a function of the inputs alone.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 from scipy.optimize import least_squares
 
 from gpquad.engine.kernels import least_squares as kernels
+from gpquad.engine.threads import thread_map
 
 #: Relative step of the forward differences: sqrt(machine epsilon), scipy's '2-point' step.
 FD_STEP = float(np.sqrt(np.finfo(float).eps))
@@ -199,9 +198,6 @@ def forward_difference(fun, workers: int = 1):
             shifted[j] += h[j]
             return (np.asarray(fun(shifted), dtype=float) - f0) / (shifted[j] - x[j])
 
-        if workers > 1 and x.size > 1:
-            with ThreadPoolExecutor(max_workers=min(workers, x.size)) as pool:
-                return np.column_stack(list(pool.map(column, range(x.size))))
-        return np.column_stack([column(j) for j in range(x.size)])
+        return np.column_stack(thread_map(column, range(x.size), workers))
 
     return value, (lambda x: remembered("jac", x, jacobian))
