@@ -14,9 +14,9 @@ See `fit`, `read_log`, `load` and `Model`.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
 
+from gpquad._lazy import lazy_attributes
 from gpquad._version import __version__
 from gpquad.errors import GpquadError
 
@@ -51,13 +51,7 @@ __all__ = [
     "reference_flight",
 ]
 
-
-def __getattr__(name: str):
-    if name in _HOMES:
-        value = getattr(importlib.import_module(_HOMES[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'gpquad' has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _HOMES)
 
 
 def __dir__() -> list[str]:

@@ -3,6 +3,8 @@
 The names below are resolved on first use (PEP 562), so that importing one of the package's
 modules (a command's option table, say) does not import pandas and every reader."""
 
+from gpquad._lazy import lazy_attributes
+
 _NAMES = {
     "Dataset": "gpquad.data.dataset",
     "build_dataset": "gpquad.data.dataset",
@@ -12,12 +14,4 @@ _NAMES = {
 
 __all__ = ["Flight", "read_flight_file", "Dataset", "build_dataset"]
 
-
-def __getattr__(name: str):
-    if name not in _NAMES:
-        raise AttributeError(f"module 'gpquad.data' has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_NAMES[name]), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_attributes(__name__, _NAMES)
