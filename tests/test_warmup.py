@@ -17,7 +17,6 @@ from gpquad.study.warmup import GROUPS, warm
 PROBE = textwrap.dedent(
     """
     import json, sys
-    import numba
     from numba.core.registry import CPUDispatcher
 
     def signatures():
@@ -25,13 +24,13 @@ PROBE = textwrap.dedent(
         for name, mod in list(sys.modules.items()):
             if not name.startswith("gpquad"):
                 continue
-            for attr, obj in vars(mod).items():
+            for obj in vars(mod).values():
                 if isinstance(obj, CPUDispatcher):
                     key = obj.py_func.__module__ + "." + obj.py_func.__qualname__
                     out.setdefault(key, set()).update(str(s) for s in obj.signatures)
         return out
 
-    from gpquad.study.warmup import GROUPS, warm
+    from gpquad.study.warmup import warm
     import gpquad.study.fit, gpquad.models.finish  # every kernel module imported
     for group in sys.argv[1].split(","):
         if group:

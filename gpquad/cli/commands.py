@@ -36,12 +36,14 @@ def _cmd_run(args) -> int:
     figures: list[Path] = []
     drawing = []  # the convergence figure, drawn by a worker while the model is finished
 
-    def hand_over(folder) -> None:
+    def searched(folder) -> None:
         from gpquad.report.builder import convergence_report
 
-        targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
-        future = workers.submit(convergence_report, folder, targets, metric, ("png",))
-        drawing.extend([] if future is None else [future])
+        if not args.no_figures:
+            targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
+            future = workers.submit(convergence_report, folder, targets, metric, ("png",))
+            drawing.extend([] if future is None else [future])
+        workers.release()  # they exit (after the figure) while the model is finished
 
     def draw(model, dataset) -> None:
         from gpquad.report.builder import make_run_report
@@ -58,15 +60,12 @@ def _cmd_run(args) -> int:
             progress=not args.quiet,
             jobs=jobs,
             after=None if args.no_figures else draw,
-            release=True,
-            searched=None if args.no_figures else hand_over,
+            searched=searched,
         )
     except KeyboardInterrupt:
-        workers.release(kill=True)
         return 130
-    except BaseException:  # bad data, say: no waiting for the workers' warm-up at exit
+    finally:  # on an error (bad data, say) no waiting for the workers' warm-up at exit
         workers.release(kill=True)
-        raise
     print(
         "\nDiscovered equations (inputs minus trim):"
         if any(model.trim.values())

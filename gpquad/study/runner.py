@@ -12,14 +12,8 @@ from pathlib import Path
 from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
-from gpquad.study import workers
 from gpquad.study.config import Config, folder_config_dict
-from gpquad.study.fit import (
-    finish,
-    new_model,
-    search_equations,
-    warn_unmeasured,
-)
+from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasured
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -155,7 +149,6 @@ def run_experiment(
     dataset=None,
     jobs: int = 1,
     after=None,
-    release: bool = False,
     searched=None,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
@@ -205,8 +198,6 @@ def run_experiment(
         raise
     if searched is not None:
         searched(run_dir)
-    if release:
-        workers.release()
     finish_seconds: dict[str, float] = {}
     model = finish(
         new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs

@@ -19,8 +19,7 @@ import time
 
 import numpy as np
 
-#: The kernel groups, one per worker: each compiles its scheme's fitness, sensitivity, LM
-#: and full-model rollout kernels.
+#: The kernel groups, one per worker (what each compiles: `warm`).
 GROUPS = ("euler", "rk4")
 
 #: The synthetic flight: length (s), sample period (s), window length (samples).

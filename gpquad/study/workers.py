@@ -10,6 +10,7 @@ parallel, say) searches in its own process: `inside_worker`.
 
 from __future__ import annotations
 
+import atexit
 import os
 from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
 
@@ -84,3 +85,8 @@ def release(wait: bool = False, kill: bool = False) -> None:
     _pool.clear()
     if executor is not None:
         executor.shutdown(wait=wait, kill_workers=kill)
+
+
+# a pool still open at exit (gpquad.fit's, kept for the next fit) is shut down while the
+# modules its shutdown needs are still there
+atexit.register(release, wait=True)
