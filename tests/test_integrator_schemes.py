@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from test_kernels import as_tree, smooth_trees, unit_quaternions
 
@@ -132,6 +132,15 @@ def test_rk4_converges_at_fourth_order_and_euler_gives_its_discrete_factor():
     st.sampled_from([1.0, 0.35]),
     st.sampled_from([1, 2]),
 )
+@example(  # q_dot = 3 q: a growing window, 1.5e-7 apart from the numpy RK4 at error 11.3
+    nodes=[(2, 0.0), (4, 3.0), (12, 0.0)],
+    target=4,
+    delays=[0, 0, 0, 0],
+    squared=False,
+    att_weight=0.7,
+    alpha=1.0,
+    substeps=1,
+)
 def test_rk4_fitness_matches_the_numpy_rk4(
     short_dataset, nodes, target, delays, squared, att_weight, alpha, substeps
 ):
@@ -164,9 +173,13 @@ def test_rk4_fitness_matches_the_numpy_rk4(
         ]
     )
     both_inf = np.isinf(out) & np.isinf(ref)
-    tame = ~both_inf & (ref < 1e3)  # runaway windows: round-off grows with the state
+    # round-off grows with a growing state: a window whose error is ten times the data's
+    # scale (q_dot = 3 q, say: 1.5e-7 apart at error 11.3, on 0adb92b too) agrees to 1e-5
+    tame = ~both_inf & (ref < 10.0)
+    grown = ~both_inf & (ref >= 10.0) & (ref < 1e3)
     np.testing.assert_allclose(out[tame], ref[tame], rtol=1e-7, atol=1e-9)
-    assert np.all(out[~both_inf & ~tame] > 1e2)
+    np.testing.assert_allclose(out[grown], ref[grown], rtol=1e-5)
+    assert np.all(out[~both_inf & ~tame & ~grown] > 1e2)
 
 
 def test_rk4_rollout_equals_the_fitness_path(short_dataset):
