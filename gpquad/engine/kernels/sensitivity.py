@@ -200,10 +200,7 @@ def euler_window_residuals(
                     jac[row + extra, :] = 0.0
                 continue
             idx = s + k
-            for i in range(9 + n_in):
-                for c in range(n_c):
-                    tangents[i, c] = 0.0
-            if linear:
+            if linear:  # the leaves' tangents below are set every step, the others stay zero
                 for i in (0, 1, 2, 6, 7, 8):
                     features[i] = states[idx, i]
                 for i in range(3):

@@ -135,8 +135,7 @@ def rk4_window_residuals(
                     stage_features(ys, 0, every_state, features)
                     for i in range(9):
                         leaf[i] = features[i, 0]
-                    tangents[:, :] = 0.0
-                    for c in range(n_c):
+                    for c in range(n_c):  # the other rows stay zero
                         if linear:
                             for i in range(3):
                                 tangents[3 + i, c] = tan_s[TV + i, c]
