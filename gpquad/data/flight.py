@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from gpquad.data.plausibility import (
     MAX_PLAUSIBLE_RATE,
@@ -30,6 +30,9 @@ from gpquad.engine.variables import (
 )
 from gpquad.errors import GpquadError
 from gpquad.extras import require
+
+if TYPE_CHECKING:  # pandas loads where a table is read or made (a search needs none)
+    import pandas as pd
 
 #: Allowed relative jitter of the sample period.
 DT_TOLERANCE = 0.01
@@ -62,6 +65,8 @@ class Flight:
 
     def to_frame(self) -> pd.DataFrame:
         """The flight as a generic-format table (NED/FRD)."""
+        import pandas as pd
+
         cols = {"t": self.t}
         cols.update({c: self.quat[:, i] for i, c in enumerate(QUAT_COLUMNS)})
         cols.update({c: self.vel[:, i] for i, c in enumerate(BODY_VEL_COLUMNS)})
@@ -108,6 +113,8 @@ def flip_world(vectors):
 
 
 def _read_table(path: Path) -> pd.DataFrame:
+    import pandas as pd
+
     if not path.is_file():
         raise GpquadError("file not found", source=str(path))
     suffix = path.suffix.lower()
@@ -131,6 +138,8 @@ def _read_table(path: Path) -> pd.DataFrame:
 
 
 def _column(df: pd.DataFrame, name: str, columns: dict, source: str) -> np.ndarray:
+    import pandas as pd
+
     col = columns.get(name, name)
     if col not in df.columns:
         raise GpquadError(
@@ -271,6 +280,8 @@ def flights_of(
 ) -> list[Flight]:
     """Flights from a list of Flights, DataFrames of the generic columns (module notes) and,
     with `read(path) -> list[Flight]`, log paths; anything else is one line naming it."""
+    import pandas as pd
+
     flights: list[Flight] = []
     for k, item in enumerate(items):
         if isinstance(item, Flight):

@@ -16,12 +16,16 @@ is, so the same questions are asked of it here, each as a one-line error naming 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 
 from gpquad.engine.kernels.integrator import rates_from_quaternions
 from gpquad.engine.variables import QUAT_COLUMNS, RATE_COLUMNS
 from gpquad.errors import GpquadError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Body rates above this (rad/s) are implausible for a multirotor: degrees logged as radians.
 MAX_PLAUSIBLE_RATE = 40.0
