@@ -21,7 +21,13 @@ from gpquad.engine.evolve.local_search import (
     improve_delays,
     prune,
 )
-from gpquad.engine.evolve.selection import mse_of, prune_by_bic, select_by_bic
+from gpquad.engine.evolve.selection import (
+    bic_on,
+    lowest_bic,
+    mse_of,
+    prune_by_bic,
+    select_by_bic,
+)
 from gpquad.engine.evolve.state import (
     SEED_HORIZONS,
     SEED_WINDOWS,
@@ -388,22 +394,28 @@ class Coevolution:
             regain = self.regain_fitter(cfg.gradient_steps, ev)
             return ev, fit, prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain)
 
-        ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
-        candidates = [pruned] + [t for t, _ in self.front(state, train)]
-        if cfg.integrator != SEARCH_SCHEME:
-            # pruned again: terms the surrogate needed only for its own discretisation go
-            ev_mse, fit, candidates[0] = pruned_in(cfg.integrator, cfg.substeps, pruned)
-            candidates[1:] = [
-                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0] for t in candidates[1:]
-            ]
         # BIC over every window, training and validation: a criterion made for the data the
         # constants were fitted on, and the validation windows alone are often one or two
         # (px4-s250: its 10 s of validation favoured r_dot = u_Y - r over 16.8 (u_Y - r),
         # which predicts the held-out flight 50 times better).
+        chosen_from = starts
         val_starts, val_steps = tile(self.dataset.validation, self.window_steps, cfg.max_delay)
         if len(val_starts) and val_steps == steps:
-            starts = np.concatenate([starts, val_starts])
-        return select_by_bic(ev_mse, candidates, starts, steps)[0]
+            chosen_from = np.concatenate([starts, val_starts])
+        ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
+        front = [t for t, _ in self.front(state, train)]
+        if cfg.integrator != SEARCH_SCHEME:
+            # pruned again: terms the surrogate needed only for its own discretisation go
+            ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
+            # a climber that cannot beat the pruned equation, whatever its constants, is not
+            # fitted (the first on ties is the pruned one)
+            to_beat = bic_on(ev_mse, pruned, chosen_from, steps)
+            front = [
+                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0]
+                for t in front
+                if lowest_bic(ev_mse, t.size, chosen_from, steps) < to_beat
+            ]
+        return select_by_bic(ev_mse, [pruned] + front, chosen_from, steps)[0]
 
     def _mse_fitter(self, integrator: str, substeps: int):
         """(mean-squared-error evaluator flying `integrator`, its constant fit)."""

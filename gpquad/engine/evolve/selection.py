@@ -113,6 +113,20 @@ def prune_by_bic(
     return model
 
 
+def bic_on(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
+    """The BIC of `tree` on the windows, as select_by_bic scores it."""
+    floor = mse_floor(ev_mse, starts, n_steps)
+    return bic(mse_of(ev_mse, tree, starts, n_steps), len(starts) * n_steps, tree.size, floor)
+
+
+def lowest_bic(ev_mse: Evaluator, size: int, starts, n_steps: int) -> float:
+    """The lowest BIC a tree of `size` nodes can have on the windows, whatever its
+    constants: its BIC at the MSE floor, n log(floor) + size log(n). A candidate whose
+    lowest BIC is not below another's BIC cannot be chosen before it and needs no fit."""
+    floor = mse_floor(ev_mse, starts, n_steps)
+    return bic(floor, len(starts) * n_steps, size, floor)
+
+
 def select_by_bic(
     ev_mse: Evaluator, candidates: list[Tree], starts, n_steps: int
 ) -> tuple[Tree, list[float]]:
