@@ -17,7 +17,8 @@ import numpy as np
 from scipy.linalg import qr
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.lm import levenberg_marquardt
+from gpquad.engine.evolve.lm import column_norms, levenberg_marquardt
+from gpquad.engine.kernels import least_squares
 from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
 from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree
@@ -94,6 +95,29 @@ def identifiable(jac: np.ndarray, rtol: float = IDENTIFIABLE_RTOL) -> np.ndarray
     diag = np.abs(np.diag(r))
     rank = int(np.count_nonzero(diag > rtol * diag[0]))
     return np.sort(live[pivots[:rank]])
+
+
+def gauss_newton_step(ev: Evaluator, tree: Tree, starts, n_steps: int) -> Tree | None:
+    """`tree` after one undamped Gauss-Newton step in all its identifiable constants, on the
+    integrated-state residuals of the windows (one residual-and-Jacobian flight: the cost
+    of one LM iteration); None when a window diverges, the flight is not finite or the step
+    is singular."""
+    res, jac, diverged = residuals_and_jacobian(ev, tree, starts, n_steps)
+    if diverged or not np.all(np.isfinite(res)) or not np.all(np.isfinite(jac)):
+        return None
+    free = identifiable(jac)
+    if free.size == 0:
+        return None
+    j = np.ascontiguousarray(jac[:, free])
+    n = free.size
+    scale = column_norms(j)
+    r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
+    least_squares.triangularize(j, scale, res, r, qtr)
+    if least_squares.damped_step(r, qtr, 0.0, h) < 0.0:
+        return None
+    values = tree.values.copy()
+    values[np.flatnonzero(tree.codes == CONST)[free]] += h / scale
+    return Tree(tree.codes, values, tree.delays)
 
 
 def gauss_newton_constants(

@@ -2,10 +2,12 @@
 
 The hill climbers rarely build a small bilinear coupling such as 0.9 q r in p_dot: the
 mutant that adds it must also get its coefficient right to be accepted. Here every
-candidate `model + c x_i` and `model + c x_i x_j` (x over the states and inputs) has all
-its constants re-fitted (Levenberg-Marquardt through the integrator, or the configured
-fit), and the best one replaces the model when it lowers the error by more than
-`min_gain` (relative). Final selection (BIC) removes what the data do not support.
+candidate `model + c x_i` and `model + c x_i x_j` (x over the states and inputs) is
+screened by the error after one Gauss-Newton step through the integrator from c = 0, the
+SCREEN_KEEP best have all their constants re-fitted (Levenberg-Marquardt through the
+integrator, or the configured fit), and the best one replaces the model when it lowers the
+error by more than `min_gain` (relative). Final selection (BIC) removes what the data do not
+support.
 """
 
 from __future__ import annotations
@@ -13,10 +15,15 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_step
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
 from gpquad.engine.tree.polynomial import expand, monomial_terms
+
+#: Term candidates fitted in full: those with the lowest error after their screening step
+#: (docs/decisions/2026-11-26-term-screen.md).
+SCREEN_KEEP = 16
 
 
 def additive_terms(codes, values, start: int = 0, sign: float = 1.0) -> list:
@@ -177,19 +184,30 @@ def improve_terms(
     allows=None,
 ) -> tuple[Tree, float]:
     """Best of the regain candidates and the single-term insertions (constants fitted by
-    fit(tree, error, starts, n_steps));
+    fit(tree, error, starts, n_steps); of the insertions only the SCREEN_KEEP with the
+    lowest error after one gauss_newton_step, in their order of term_candidates);
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves.
     allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
-    candidates = regain + [
+    insertions = [
         t
         for t in term_candidates(
             model, n_variables, max_depth, term_contributions(ev, model, suite), taps
         )
         if allows is None or allows(t.codes)
     ]
+    if len(insertions) > SCREEN_KEEP:
+        stepped = [gauss_newton_step(ev, t, suite, ev.n_steps) for t in insertions]
+        live = [k for k, t in enumerate(stepped) if t is not None]
+        errors = np.full(len(insertions), np.inf)
+        if live:
+            errors[live] = ev.mean_errors([stepped[k] for k in live], suite)
+        errors[~np.isfinite(errors)] = np.inf
+        kept = np.sort(np.argsort(errors, kind="stable")[:SCREEN_KEEP])
+        insertions = [insertions[k] for k in kept]
+    candidates = regain + insertions
     if not candidates:
         return model, error
     errors = ev.mean_errors(candidates, suite)

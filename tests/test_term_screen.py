@@ -1,0 +1,81 @@
+"""The term search's screen: one Gauss-Newton step through the integrator per candidate,
+checked against numpy's least squares, and shown to be what finds a missing term."""
+
+import numpy as np
+import pytest
+from test_engine_gradient import STARTS, _fit, _sym, _tree, rigid_dataset  # noqa: F401
+
+import gpquad.engine.evolve.term_search as term_search
+from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.gradient_fit import gauss_newton_step, residuals_and_jacobian
+from gpquad.engine.evolve.term_search import improve_terms, term_candidates
+from gpquad.engine.tree.operators import CONST
+
+
+@pytest.mark.parametrize("target", ["p_dot", "a_x"])
+def test_the_step_is_numpys_least_squares_step(rigid_dataset, target):  # noqa: F811
+    ds = rigid_dataset
+    ev = Evaluator(ds, target, 100, "mse")
+    text = "8.0*u_R(t-2) - 3.0*p" if target == "p_dot" else "-0.5*u + 2.0*theta"
+    model = _tree(text, ds)
+    for candidate in term_candidates(model, 13, 5)[:40]:
+        res, jac, _ = residuals_and_jacobian(ev, candidate, STARTS[:3], 100)
+        h = np.linalg.lstsq(jac, -res, rcond=None)[0]
+        slots = candidate.codes == CONST
+        stepped = gauss_newton_step(ev, candidate, STARTS[:3], 100)
+        assert stepped is not None
+        step = stepped.values[slots] - candidate.values[slots]
+        # a least-squares step (where columns repeat, another one than numpy's minimum-norm)
+        best = np.sum((res + jac @ h) ** 2)
+        assert np.sum((res + jac @ step) ** 2) == pytest.approx(best, rel=1e-7, abs=1e-12)
+        if np.linalg.matrix_rank(jac) == jac.shape[1]:
+            np.testing.assert_allclose(step, h, rtol=1e-6, atol=1e-9)
+        np.testing.assert_array_equal(stepped.values[~slots], candidate.values[~slots])
+
+
+def test_no_step_from_a_diverged_flight(rigid_dataset):  # noqa: F811
+    ev = Evaluator(rigid_dataset, "p_dot", 250, "mse")
+    runaway = _tree("40.0*p + 8.0*u_R(t-2)", rigid_dataset)  # unstable: p grows as e^(40 t)
+    assert gauss_newton_step(ev, runaway, STARTS, 250) is None
+
+
+def test_the_screen_keeps_the_missing_term(rigid_dataset, monkeypatch):  # noqa: F811
+    """The gyroscopic q r of the rigid body's p_dot is found among 182 candidates with
+    SCREEN_KEEP fitted; ranked without the step (by the error at c = 0, the bad case), the
+    screen keeps the first candidates and misses it."""
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    model = _tree("8.0*u_R(t-2) - 3.0*p", ds)
+    err = ev.mean_errors([model], STARTS)[0]
+    fitted = []
+
+    def counting(tree, error, starts, n_steps):
+        fitted.append(tree)
+        return _fit(ev)(tree, error, starts, n_steps)
+
+    found, found_err = improve_terms(ev, model, err, STARTS, counting, 13, 5, 0.01)
+    assert found_err < 1e-8 * err
+    assert {"q", "r"} <= {str(s) for s in _sym(found, ds).free_symbols}
+    assert len(fitted) == 1 + term_search.SCREEN_KEEP  # c * model, then the kept insertions
+
+    monkeypatch.setattr(term_search, "gauss_newton_step", lambda ev, tree, *a: tree)
+    worst, worst_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
+    assert worst_err > 1e-3 * err
+
+
+def test_lowest_bic_bounds_every_tree_of_its_size(rigid_dataset):  # noqa: F811
+    """A front climber is fitted only when lowest_bic(its size) is below the pruned
+    equation's BIC: the bound is never above a real tree's BIC, and a larger tree cannot
+    beat an exact one (it is skipped), while a smaller one could (it is fitted)."""
+    from gpquad.engine.evolve.selection import bic_on, lowest_bic
+
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
+    for text in ("9.0*u_R(t-2) - 4.0*p", "8.0*u_R(t-2) - 3.0*p + 0.1*q", "1.0*p"):
+        tree = _tree(text, ds)
+        assert lowest_bic(ev, tree.size, STARTS, 250) <= bic_on(ev, tree, STARTS, 250)
+    at_floor = bic_on(ev, exact, STARTS, 250)
+    assert lowest_bic(ev, exact.size, STARTS, 250) == pytest.approx(at_floor, rel=1e-12)
+    assert lowest_bic(ev, exact.size + 2, STARTS, 250) > at_floor  # skipped
+    assert lowest_bic(ev, exact.size - 2, STARTS, 250) < at_floor  # fitted
