@@ -22,38 +22,41 @@ from gpquad.engine.numba_config import njit
 
 
 @njit
-def _householder(a, b, n_rows, n_cols):
-    """In place: a (n_rows, n_cols) -> R in its upper triangle, b (n_rows,) -> Q^T b."""
+def _householder(at, b, n_rows, n_cols):
+    """In place: at (n_cols, n_rows), the matrix transposed (its columns contiguous) -> R^T
+    in its lower triangle, b (n_rows,) -> Q^T b."""
     for k in range(n_cols):
+        v = at[k]
         norm = 0.0
         for i in range(k, n_rows):
-            norm += a[i, k] * a[i, k]
+            norm += v[i] * v[i]
         norm = np.sqrt(norm)
         if norm == 0.0:
             continue
-        alpha = -norm if a[k, k] >= 0.0 else norm
+        alpha = -norm if v[k] >= 0.0 else norm
         # v = a[k:, k] - alpha e_k, kept in a[k:, k]; H = I - 2 v v^T / (v^T v)
-        a[k, k] -= alpha
+        v[k] -= alpha
         vtv = 0.0
         for i in range(k, n_rows):
-            vtv += a[i, k] * a[i, k]
+            vtv += v[i] * v[i]
         if vtv == 0.0:
-            a[k, k] = alpha
+            v[k] = alpha
             continue
         for j in range(k + 1, n_cols):
+            column = at[j]
             dot = 0.0
             for i in range(k, n_rows):
-                dot += a[i, k] * a[i, j]
+                dot += v[i] * column[i]
             scale = 2.0 * dot / vtv
             for i in range(k, n_rows):
-                a[i, j] -= scale * a[i, k]
+                column[i] -= scale * v[i]
         dot = 0.0
         for i in range(k, n_rows):
-            dot += a[i, k] * b[i]
+            dot += v[i] * b[i]
         scale = 2.0 * dot / vtv
         for i in range(k, n_rows):
-            b[i] -= scale * a[i, k]
-        a[k, k] = alpha
+            b[i] -= scale * v[i]
+        v[k] = alpha
 
 
 @njit
@@ -61,16 +64,16 @@ def triangularize(jac, scale, res, r, qtr):
     """R (upper triangle of r) and the first n entries of Q^T res for jac / scale = Q R
     (each column j divided by scale[j]); jac and res are left as they are."""
     m, n = jac.shape
-    a = np.empty((m, n))
+    at = np.empty((n, m))
     for i in range(m):
         for j in range(n):
-            a[i, j] = jac[i, j] / scale[j]
+            at[j, i] = jac[i, j] / scale[j]
     b = res.copy()
-    _householder(a, b, m, n)
+    _householder(at, b, m, n)
     for i in range(n):
         qtr[i] = b[i]
         for j in range(n):
-            r[i, j] = a[i, j] if j >= i else 0.0
+            r[i, j] = at[j, i] if j >= i else 0.0
 
 
 @njit
@@ -80,31 +83,31 @@ def damped_step(r, qtr, mu, h):
     iteration), or -1 (h untouched) when the damped system is singular (mu = 0, R singular).
     """
     n = r.shape[0]
-    a = np.zeros((2 * n, n))
+    at = np.zeros((n, 2 * n))  # [R; sqrt(mu) I], transposed
     b = np.zeros(2 * n)
     root = np.sqrt(mu)
     for i in range(n):
         b[i] = -qtr[i]
-        a[n + i, i] = root
+        at[i, n + i] = root
         for j in range(i, n):
-            a[i, j] = r[i, j]
-    _householder(a, b, 2 * n, n)
+            at[j, i] = r[i, j]
+    _householder(at, b, 2 * n, n)
     for i in range(n):
-        if a[i, i] == 0.0:
+        if at[i, i] == 0.0:
             return -1.0
     for i in range(n - 1, -1, -1):
         acc = b[i]
         for j in range(i + 1, n):
-            acc -= a[i, j] * h[j]
-        h[i] = acc / a[i, i]
-    # z = S^-T h with S^T S = R^T R + mu I (S: the upper triangle of a)
+            acc -= at[j, i] * h[j]
+        h[i] = acc / at[i, i]
+    # z = S^-T h with S^T S = R^T R + mu I (S: the upper triangle, at's lower one)
     z = np.zeros(n)
     total = 0.0
     for i in range(n):
         acc = h[i]
         for j in range(i):
-            acc -= a[j, i] * z[j]
-        z[i] = acc / a[i, i]
+            acc -= at[i, j] * z[j]
+        z[i] = acc / at[i, i]
         total += z[i] * z[i]
     return total
 
