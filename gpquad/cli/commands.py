@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import errno
-import functools
 import json
 import os
 import sys
@@ -12,15 +11,6 @@ from pathlib import Path
 
 from gpquad.cli.parsing import EXAMPLES, Parser, Version, WarningLines, add_examples
 from gpquad.errors import GpquadError
-
-
-def _import_figures() -> None:
-    """Load the figures' modules (matplotlib) ahead of the drawing; a failure is left to
-    the drawing, which reports it."""
-    try:
-        import gpquad.report.plotting  # noqa: F401
-    except Exception:  # noqa: BLE001
-        pass
 
 
 def _cmd_run(args) -> int:
@@ -44,32 +34,24 @@ def _cmd_run(args) -> int:
 
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     figures: list[Path] = []
-    drawing = []  # the figures, drawn by the workers: the convergence figure while the
-    # model is finished (the other worker loads matplotlib meanwhile), then the prediction
+    drawing = []  # the convergence figure, drawn by a worker while the model is finished
 
     def searched(folder) -> None:
         from gpquad.report.builder import convergence_report
 
-        if args.no_figures:
-            workers.release()
-            return
-        targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
-        future = workers.submit(convergence_report, folder, targets, metric, ("png",))
-        drawing.extend([] if future is None else [future])
-        workers.submit(_import_figures)
+        if not args.no_figures:
+            targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
+            future = workers.submit(convergence_report, folder, targets, metric, ("png",))
+            drawing.extend([] if future is None else [future])
+        workers.release()  # they exit (after the figure) while the model is finished
 
     def draw(model, dataset) -> None:
         from gpquad.report.builder import make_run_report
 
-        report = functools.partial(
-            make_run_report, run_dir, formats=("png",), dataset=dataset, convergence=not drawing
+        figures.extend(drawing[0].result() if drawing else [])
+        figures.extend(
+            make_run_report(run_dir, formats=("png",), dataset=dataset, convergence=not drawing)
         )
-        future = workers.submit(report)
-        mine = report() if future is None else []
-        for done in drawing + ([] if future is None else [future]):
-            figures.extend(done.result())
-        figures.extend(mine)
-        workers.release(kill=True)  # idle now: stopped rather than left to tear down
 
     try:
         model = run_experiment(
