@@ -199,11 +199,14 @@ def improve_terms(
         if allows is None or allows(t.codes)
     ]
     if len(insertions) > SCREEN_KEEP:
-        stepped = [gauss_newton_step(ev, t, suite, ev.n_steps) for t in insertions]
-        live = [k for k, t in enumerate(stepped) if t is not None]
+        stepped = {}
+        for k, tree in enumerate(insertions):
+            step = gauss_newton_step(ev, tree, suite, ev.n_steps)
+            if step is not None:
+                stepped[k] = step
         errors = np.full(len(insertions), np.inf)
-        if live:
-            errors[live] = ev.mean_errors([stepped[k] for k in live], suite)
+        if stepped:
+            errors[list(stepped)] = ev.mean_errors(list(stepped.values()), suite)
         errors[~np.isfinite(errors)] = np.inf
         kept = np.sort(np.argsort(errors, kind="stable")[:SCREEN_KEEP])
         insertions = [insertions[k] for k in kept]
