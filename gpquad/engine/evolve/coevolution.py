@@ -21,13 +21,7 @@ from gpquad.engine.evolve.local_search import (
     improve_delays,
     prune,
 )
-from gpquad.engine.evolve.selection import (
-    bic_on,
-    lowest_bic,
-    mse_of,
-    prune_by_bic,
-    select_by_bic,
-)
+from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.state import (
     SEED_HORIZONS,
     SEED_WINDOWS,
@@ -407,14 +401,7 @@ class Coevolution:
         if cfg.integrator != SEARCH_SCHEME:
             # pruned again: terms the surrogate needed only for its own discretisation go
             ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
-            # a climber that cannot beat the pruned equation, whatever its constants, is not
-            # fitted (the first on ties is the pruned one)
-            to_beat = bic_on(ev_mse, pruned, chosen_from, steps)
-            front = [
-                fit(t, mse_of(ev_mse, t, starts, steps), starts, steps)[0]
-                for t in front
-                if lowest_bic(ev_mse, t.size, chosen_from, steps) < to_beat
-            ]
+            front = fitted_rivals(ev_mse, fit, pruned, front, starts, chosen_from, steps)
         return select_by_bic(ev_mse, [pruned] + front, chosen_from, steps)[0]
 
     def _mse_fitter(self, integrator: str, substeps: int):

@@ -127,6 +127,19 @@ def lowest_bic(ev_mse: Evaluator, size: int, starts, n_steps: int) -> float:
     return bic(floor, len(starts) * n_steps, size, floor)
 
 
+def fitted_rivals(ev_mse: Evaluator, fit, chosen: Tree, rivals, starts, chosen_from, n_steps):
+    """The `rivals` that could beat `chosen` on the windows `chosen_from`, whatever their
+    constants (lowest_bic below its BIC: the first on ties is `chosen`), each with its
+    constants fitted by fit(tree, mse, starts, n_steps) on the windows `starts`; the others
+    are left out unfitted."""
+    to_beat = bic_on(ev_mse, chosen, chosen_from, n_steps)
+    return [
+        fit(t, mse_of(ev_mse, t, starts, n_steps), starts, n_steps)[0]
+        for t in rivals
+        if lowest_bic(ev_mse, t.size, chosen_from, n_steps) < to_beat
+    ]
+
+
 def select_by_bic(
     ev_mse: Evaluator, candidates: list[Tree], starts, n_steps: int
 ) -> tuple[Tree, list[float]]:
