@@ -22,7 +22,6 @@ result is also a function of the inputs alone.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from gpquad.engine.kernels import least_squares as kernels
 from gpquad.engine.threads import thread_map
@@ -155,6 +154,8 @@ def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.nda
     norms; at most max_nfev residual evaluations (jac's are not counted); stops when a step
     lowers the sum by less than the fraction ftol. Returns x, whose sum is never above
     x0's (a step is taken only when it lowers the sum)."""
+    from scipy.optimize import least_squares  # the joint refit's only: searches need none
+
     x0 = np.asarray(x0, dtype=float)
     fit = least_squares(
         fun,

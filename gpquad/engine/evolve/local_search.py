@@ -9,7 +9,6 @@ strictly better on the current suite.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import minimize
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.tree.encoding import Tree
@@ -48,6 +47,8 @@ def improve_delays(
 
 def fit_constants(model: Tree, error: float, error_of, max_evals: int) -> tuple[Tree, float]:
     """Nelder-Mead on all constants of the tree against error_of(tree); keeps improvements."""
+    from scipy.optimize import minimize  # the LM engine (the default) loads no scipy.optimize
+
     slots = np.flatnonzero(model.codes == CONST)
     if slots.size == 0 or max_evals == 0:
         return model, error
