@@ -49,7 +49,6 @@ import numpy as np
 
 from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.lm import forward_difference, trust_region
-from gpquad.engine.evolve.selection import RSE_RESOLUTION
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -196,9 +195,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
     "constants", "rollouts" (full-model flights over the training windows, Jacobians
-    included), "substeps" (of the fit's flights), "time_s"}. A model whose error is
-    already within the resolution (each state's RSE at most RSE_RESOLUTION^2 on average,
-    what the choice by BIC calls zero) is not refitted: "error_after" is None.
+    included), "substeps" (of the fit's flights), "time_s"}.
     """
     t0 = time.perf_counter()
     states = measured_states(dataset)
@@ -228,14 +225,6 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
     before_w = judge.window_errors(as_flown_by_readers(model))
     before = float(before_w.sum())
-    if before <= len(states) * RSE_RESOLUTION**2:
-        report.update(
-            judged_on=judged_on,
-            error_before=before,
-            error_after=None,
-            time_s=time.perf_counter() - t0,
-        )
-        return model, report
     x = x0.copy()
     objectives = []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
@@ -274,12 +263,6 @@ def joint_fit_summary(report: dict) -> str:
     """One line for the user: what the joint refit did."""
     if report.get("error_before") is None:
         return "joint refit: not made (no measured state or no window fits)"
-    if report.get("error_after") is None:
-        return (
-            f"joint refit: not needed; the full model flies within the resolution "
-            f"({report['judged_on']} error, the sum of the RSE of {', '.join(report['states'])} "
-            f"over {report['horizon_s']:g} s windows, {report['error_before']:.4g})"
-        )
     verdict = "kept" if report["accepted"] else "not kept (not significantly better)"
     return (
         f"joint refit of {report['constants']} constants on full-model rollouts: "
