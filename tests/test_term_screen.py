@@ -63,19 +63,31 @@ def test_the_screen_keeps_the_missing_term(rigid_dataset, monkeypatch):  # noqa:
     assert worst_err > 1e-3 * err
 
 
-def test_lowest_bic_bounds_every_tree_of_its_size(rigid_dataset):  # noqa: F811
-    """A front climber is fitted only when lowest_bic(its size) is below the pruned
-    equation's BIC: the bound is never above a real tree's BIC, and a larger tree cannot
-    beat an exact one (it is skipped), while a smaller one could (it is fitted)."""
-    from gpquad.engine.evolve.selection import bic_on, lowest_bic
+def test_rivals_that_cannot_beat_the_chosen_equation_are_not_fitted(rigid_dataset):  # noqa: F811
+    """Beside an exact equation (at the MSE floor) a larger rival cannot win on BIC and is
+    not fitted, a smaller one could and is; beside an equation far from the floor (the bad
+    case for the rule) every rival is fitted."""
+    from gpquad.engine.evolve.selection import fitted_rivals, select_by_bic
 
     ds = rigid_dataset
     ev = Evaluator(ds, "p_dot", 250, "mse")
     exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
-    for text in ("9.0*u_R(t-2) - 4.0*p", "8.0*u_R(t-2) - 3.0*p + 0.1*q", "1.0*p"):
-        tree = _tree(text, ds)
-        assert lowest_bic(ev, tree.size, STARTS, 250) <= bic_on(ev, tree, STARTS, 250)
-    at_floor = bic_on(ev, exact, STARTS, 250)
-    assert lowest_bic(ev, exact.size, STARTS, 250) == pytest.approx(at_floor, rel=1e-12)
-    assert lowest_bic(ev, exact.size + 2, STARTS, 250) > at_floor  # skipped
-    assert lowest_bic(ev, exact.size - 2, STARTS, 250) < at_floor  # fitted
+    larger = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r + 0.01*w", ds)
+    smaller = _tree("8.0*u_R(t-2) - 3.0*p", ds)
+    assert larger.size > exact.size > smaller.size
+    fitted = []
+
+    def counting(tree, error, starts, n_steps):
+        fitted.append(tree.size)
+        return _fit(ev)(tree, error, starts, n_steps)
+
+    kept = fitted_rivals(ev, counting, exact, [larger, smaller], STARTS[:4], STARTS, 250)
+    assert fitted == [smaller.size] and [t.size for t in kept] == [smaller.size]
+    # the choice is the one fitting every rival would make
+    everyone = [_fit(ev)(t, np.inf, STARTS[:4], 250)[0] for t in (larger, smaller)]
+    assert select_by_bic(ev, [exact] + kept, STARTS, 250)[0] is exact
+    assert select_by_bic(ev, [exact] + everyone, STARTS, 250)[0] is exact
+
+    fitted.clear()
+    fitted_rivals(ev, counting, smaller, [larger, exact], STARTS[:4], STARTS, 250)
+    assert fitted == [larger.size, exact.size]

@@ -113,30 +113,19 @@ def prune_by_bic(
     return model
 
 
-def bic_on(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
-    """The BIC of `tree` on the windows, as select_by_bic scores it."""
-    floor = mse_floor(ev_mse, starts, n_steps)
-    return bic(mse_of(ev_mse, tree, starts, n_steps), len(starts) * n_steps, tree.size, floor)
-
-
-def lowest_bic(ev_mse: Evaluator, size: int, starts, n_steps: int) -> float:
-    """The lowest BIC a tree of `size` nodes can have on the windows, whatever its
-    constants: its BIC at the MSE floor, n log(floor) + size log(n). A candidate whose
-    lowest BIC is not below another's BIC cannot be chosen before it and needs no fit."""
-    floor = mse_floor(ev_mse, starts, n_steps)
-    return bic(floor, len(starts) * n_steps, size, floor)
-
-
 def fitted_rivals(ev_mse: Evaluator, fit, chosen: Tree, rivals, starts, chosen_from, n_steps):
-    """The `rivals` that could beat `chosen` on the windows `chosen_from`, whatever their
-    constants (lowest_bic below its BIC: the first on ties is `chosen`), each with its
+    """The `rivals` that could beat `chosen` on the windows `chosen_from`, each with its
     constants fitted by fit(tree, mse, starts, n_steps) on the windows `starts`; the others
-    are left out unfitted."""
-    to_beat = bic_on(ev_mse, chosen, chosen_from, n_steps)
+    are left out unfitted. A tree of k nodes scores at least n log(floor) + k log(n)
+    whatever its constants; one whose bound is not below `chosen`'s BIC cannot be chosen
+    before it (select_by_bic keeps the first on ties)."""
+    n = len(chosen_from) * n_steps
+    floor = mse_floor(ev_mse, chosen_from, n_steps)
+    to_beat = bic(mse_of(ev_mse, chosen, chosen_from, n_steps), n, chosen.size, floor)
     return [
         fit(t, mse_of(ev_mse, t, starts, n_steps), starts, n_steps)[0]
         for t in rivals
-        if lowest_bic(ev_mse, t.size, chosen_from, n_steps) < to_beat
+        if bic(floor, n, t.size, floor) < to_beat
     ]
 
 
