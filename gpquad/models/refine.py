@@ -50,7 +50,7 @@ from gpquad.engine.tree.export import round_constants
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.earned import earn_terms
 from gpquad.models.equation import Equation
-from gpquad.models.joint_fit import JOINT_HORIZONS_S, judged_windows
+from gpquad.models.joint_fit import CHECK_HORIZON_S, judged_windows
 from gpquad.models.refine_problem import RefineProblem
 from gpquad.models.stability import FullModelFlights
 from gpquad.models.symmetry import wrong_parity
@@ -302,7 +302,7 @@ def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[st
     ]
     if not changed or not all(t in refined.equations for t in TARGET_NAMES):
         return refined, []
-    starts, steps, _ = judged_windows(dataset, refined, JOINT_HORIZONS_S[-1])
+    starts, steps, _ = judged_windows(dataset, refined, CHECK_HORIZON_S)
     if len(starts) == 0:
         return refined, []
     flights = FullModelFlights(dataset, starts, steps)

@@ -37,7 +37,7 @@ import numpy as np
 from gpquad.data.mirror import mirror_dataset
 from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import (
-    JOINT_HORIZONS_S,
+    CHECK_HORIZON_S,
     FullModelError,
     judged_windows,
     measured_states,
@@ -69,7 +69,7 @@ def _swap(model, target: str, equation):
     return dataclasses.replace(model, equations={**model.equations, target: kept})
 
 
-def repair_stability(model, dataset, seconds: float = JOINT_HORIZONS_S[-1], mirror=()):
+def repair_stability(model, dataset, seconds: float = CHECK_HORIZON_S, mirror=()):
     """(model, report): the model with equations swapped for front alternatives until its
     full-model flights stop diverging (or no swap helps); with `mirror` (input names), the
     mirrored flights count too (module notes). Unchanged when no swap is needed or helps.
