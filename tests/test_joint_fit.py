@@ -86,6 +86,17 @@ def test_the_refit_is_judged_as_a_readers_simulator_flies_it(raw_dataset):
     assert abs(judge.error(model) - judge.error(fine)) > 0.01 * judge.error(fine)
 
 
+def test_the_refit_is_judged_at_the_longest_horizon_the_validation_fits(short_flight):
+    """36 s of validation data: judged on its 30 s windows; 15 s: on one window of all of
+    it (30 s windows shortened to the range, not the 10 s ones), and the report says so."""
+    wrong = dict(TRUTH, q_dot="-9.0*u_P - 3.3*q")
+    for fraction, shortest, longest in ((0.6, 30.0, 30.0), (0.25, 14.0, 15.0)):
+        dataset = build_dataset([short_flight], validation_fraction=fraction, trim="none")
+        _, report = joint_fit.joint_refit(model_of(wrong, dataset), dataset)
+        assert report["judged_on"] == "validation" and report["accepted"]
+        assert shortest <= report["horizon_s"] <= longest
+
+
 def test_threads_give_the_same_refit(raw_dataset):
     """The Jacobian's rollouts in two threads: the same constants, bit for bit, and the same
     count of rollouts."""
@@ -124,7 +135,9 @@ def test_unmeasured_states_keep_their_equations(raw_dataset):
     assert report["states"] == ["w", "p", "q", "r"]
     assert _consts(refitted.equations["a_x"].tree) == [-0.9, 10.0]
     assert report["accepted"]
-    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=5e-3)
+    # within 1 %: over the 30 s window the wrong a_x, not refitted, weighs on w, and the
+    # refit moves q_dot a little to make up for it
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=1e-2)
 
 
 def test_finish_model_only_with_the_option_and_six_equations(raw_dataset, tmp_path):
@@ -197,7 +210,9 @@ def test_sweep_full_models_are_refitted_when_configured(raw_dataset):
     )
     refitted = assembled(choice, runs, raw_dataset, on)
     assert refitted.joint_fit["accepted"]
-    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=5e-3)
+    # within 1 %: over the 30 s window the wrong a_x, not refitted, weighs on w, and the
+    # refit moves q_dot a little to make up for it
+    np.testing.assert_allclose(_consts(refitted.equations["q_dot"].tree), [-9.8, -3.3], rtol=1e-2)
 
 
 def test_significant_drop_needs_more_than_the_windows_spread():

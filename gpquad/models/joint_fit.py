@@ -59,8 +59,8 @@ from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 from gpquad.models.stiffness import model_substeps
 
-#: Window lengths of the growing horizon (s); the longest that the validation data fit
-#: decides acceptance.
+#: Window lengths of the growing horizon (s); the last one, shortened to the longest
+#: validation range if need be, decides acceptance.
 JOINT_HORIZONS_S = (1.0, 10.0, 30.0)
 #: Window length (s) of the full-model checks before the refit (the stability repair,
 #: the refinement's keep_what_flies).
@@ -223,11 +223,9 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         "constants": int(x0.size),
         "rollouts": 0,
     }
-    for seconds in sorted(horizons_s, reverse=True):  # the longest the data fit
-        judge_starts, judge_steps, judged_on = judged_windows(dataset, model, seconds)
-        if len(judge_starts):
-            report["horizon_s"] = float(seconds)
-            break
+    # windows of the longest horizon, shortened to the longest validation range if need be
+    judge_starts, judge_steps, judged_on = judged_windows(dataset, model, horizons_s[-1])
+    report["horizon_s"] = round(float(judge_steps * dataset.dt), 9)
     if x0.size == 0 or not states or len(judge_starts) == 0 or len(model.equations) < 6:
         report.update(
             judged_on=None, error_before=None, error_after=None, time_s=time.perf_counter() - t0
