@@ -18,18 +18,18 @@ per-equation constants); each later fit keeps the shorter windows'
 residuals beside its own, so that the model stays right over one second as well as over
 ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE of p, q
 40 % worse) and thirty: the velocities integrate the attitude, and a model refitted on
-10 s windows alone can drift beyond them (rotorpy-rate, crazyflie, seeds 1 and 2: RSE at
-30 s 0.23 and 0.35 on the test flight, 0.13 and 0.12 with the 30 s windows; 7 s no
-worse; docs/decisions/2026-11-26-joint-refit-horizon.md). Structures are not changed.
+10 s windows alone can drift beyond them (rotorpy-rate;
+docs/decisions/2026-11-26-joint-refit-horizon.md). The horizon stops growing once a fit
+flies the model to round-off (RESOLVED): it has no drift left to correct. Structures are
+not changed.
 
 Each horizon's fit is a candidate: the one with the lowest error on the validation windows
-below is kept if it is significantly better than the model as it was. On rotorpy-rate the
-30 s fit flies the validation flight's 30 s windows best (crazyflie, seeds 1-3); on
-betaflight-gecko, whose validation pieces are 6 s long and whose velocities are not
-measured, the 10 s fit flies them best (seeds 1-3), as before the 30 s windows.
+below is kept if it is significantly better than the model as it was. Where drift matters
+(rotorpy-rate) the 30 s fit wins there; where the validation pieces are short and only the
+rates are measured (betaflight-gecko) the 10 s fit does.
 The refit is kept only if it lowers the same error on the validation windows (or, with
-no validation data, on the training windows) at the longest horizon they fit, flown as a reader
-flies the printed ODEs (`as_flown_by_readers`: RK4 with 8 steps per sample for a
+no validation data, on the training windows) at the longest horizon they fit, flown as a
+reader flies the printed ODEs (`as_flown_by_readers`: RK4 with 8 steps per sample for a
 continuous-time model, so that constants that fly only by one RK4 step's damping are
 not kept), by more than the
 windows' spread explains (`significant_drop`: mean paired drop > 2 standard errors, or
@@ -69,8 +69,7 @@ from gpquad.models.stiffness import model_substeps
 JOINT_HORIZONS_S = (1.0, 10.0, 30.0)
 #: The growing horizon stops when a fit leaves its objective (the sum over states and
 #: horizons of the RSE) below this: a model flown to round-off has no drift for longer
-#: windows to correct (the quickstart: 1.9e-10 at 30 s after the 1 s fit, 2.1e-11 after
-#: the 30 s one, at two and a half times the cost).
+#: windows to correct.
 RESOLVED = 1e-6
 #: Window length (s) of the full-model checks before the refit (the stability repair,
 #: the refinement's keep_what_flies).
