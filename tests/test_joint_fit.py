@@ -127,6 +127,34 @@ def test_the_horizon_grows_only_while_the_model_is_not_resolved(raw_dataset):
     assert list(report["stages"]) == ["1", "10", "30"]
 
 
+def test_too_few_long_windows_fall_back_on_the_shorter_check(short_flight, monkeypatch):
+    """36 s of validation: one 30 s window and three 10 s ones. With the long windows' test
+    made blind (it never finds a drop significant), a refit that lowers both errors is
+    kept on the 10 s windows' test. Bad cases: with that test blind too, refused; with a
+    refit that raises the 30 s error, refused however the 10 s test answers."""
+    dataset = build_dataset([short_flight], validation_fraction=0.6, trim="none")
+    model = model_of(dict(TRUTH, q_dot="-9.0*u_P - 3.3*q"), dataset)
+    real = joint_fit.significant_drop
+    sizes = []
+
+    def blind_to_long(before, after):
+        sizes.append(len(before))
+        return False if len(before) == 1 else real(before, after)
+
+    monkeypatch.setattr(joint_fit, "significant_drop", blind_to_long)
+    _, report = joint_fit.joint_refit(model, dataset)
+    assert report["accepted"] and sizes == [1, 3]
+    assert report["error_after"] < report["error_before"]
+
+    monkeypatch.setattr(joint_fit, "significant_drop", lambda before, after: False)
+    assert not joint_fit.joint_refit(model, dataset)[1]["accepted"]
+
+    monkeypatch.setattr(joint_fit, "significant_drop", lambda b, a: len(b) > 1)
+    monkeypatch.setattr(joint_fit, "trust_region", lambda fun, x, jac, n, ftol: x * 1.3)
+    _, report = joint_fit.joint_refit(model, dataset)
+    assert report["error_after"] > report["error_before"] and not report["accepted"]
+
+
 def test_threads_give_the_same_refit(raw_dataset):
     """The Jacobian's rollouts in two threads: the same constants, bit for bit, and the same
     count of rollouts."""

@@ -42,7 +42,11 @@ substitute term, the refit lowered the validation error by 11 % and moved the ex
 misses because they are skewed: on the held-out vehicle (rotorpy-heldout-angle, seed 3)
 the refit lowered all 11 validation windows, 0.144 -> 0.036 in sum, but one window held
 three quarters of the drop and the t statistic was 1.5; refused, the model flew r to RSE
-2.5 at 7 s on the test flight. No random draw: the result is a function of model and data.
+2.5 at 7 s on the test flight. A 120 s validation flight has only four 30 s windows, too
+few for a real drop to look significant (rotorpy-rate, hummingbird, seed 2: 0.43 -> 0.36,
+refused; the model kept flew u, v, w to RSE 0.19 at 7 s): the refit is also kept when the
+longest windows' error does not rise and the drop is significant on the CHECK_HORIZON_S
+windows. No random draw: the result is a function of model and data.
 Equations whose state the log does not measure keep their constants.
 """
 
@@ -245,6 +249,9 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
     before_w = judge.window_errors(as_flown_by_readers(model))
     before = float(before_w.sum())
+    # the check's shorter windows: more of them, so a real drop is seen as significant
+    short = FullModelError(dataset, *judged_windows(dataset, model, CHECK_HORIZON_S)[:2], states)
+    short_before = short.window_errors(as_flown_by_readers(model))
     x = x0.copy()
     objectives, staged = [], []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
@@ -275,7 +282,10 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         refitted = with_constants(model, slots, x)
         judged.append((judge.window_errors(as_flown_by_readers(refitted)), seconds, refitted))
     after_w, stage_s, refitted = min(judged, key=lambda j: float(j[0].sum()))
-    accepted = significant_drop(before_w, after_w)
+    accepted = significant_drop(before_w, after_w) or (
+        float(after_w.sum()) <= before
+        and significant_drop(short_before, short.window_errors(as_flown_by_readers(refitted)))
+    )
     report.update(
         accepted=accepted,
         judged_on=judged_on,
