@@ -121,7 +121,8 @@ def test_the_horizon_grows_only_while_the_model_is_not_resolved(raw_dataset):
     stops there. A structural error (a_x without its drag) leaves every horizon to fit."""
     wrong = dict(TRUTH, q_dot="-9.0*u_P - 3.3*q")
     _, report = joint_fit.joint_refit(model_of(wrong, raw_dataset), raw_dataset)
-    assert list(report["stages"]) == ["1"] and report["error_after"] < joint_fit.RESOLVED
+    assert list(report["stages"]) == ["1"]
+    assert report["error_after"] < len(report["states"]) * joint_fit.RSE_RESOLUTION**2
     unresolved = dict(TRUTH, a_x="10.0*theta")
     _, report = joint_fit.joint_refit(model_of(unresolved, raw_dataset), raw_dataset)
     assert list(report["stages"]) == ["1", "10", "30"]
@@ -153,6 +154,19 @@ def test_too_few_long_windows_fall_back_on_the_shorter_check(short_flight, monke
     monkeypatch.setattr(joint_fit, "trust_region", lambda fun, x, jac, n, ftol: x * 1.3)
     _, report = joint_fit.joint_refit(model, dataset)
     assert report["error_after"] > report["error_before"] and not report["accepted"]
+
+
+def test_the_shorter_windows_are_tested_only_when_they_are_shorter(raw_dataset):
+    """The true model against a wrong one, on 10 s windows: a significant drop when the
+    judged windows were 30 s long; no second test when they were 10 s already (the same
+    windows, the same test). The bad case, the true model judged against itself: none."""
+    truth = model_of(TRUTH, raw_dataset)
+    wrong = model_of(dict(TRUTH, q_dot="-9.0*u_P - 3.3*q"), raw_dataset)
+    states = joint_fit.measured_states(raw_dataset)
+    steps = joint_fit.judged_windows(raw_dataset, truth, joint_fit.CHECK_HORIZON_S)[1]
+    assert joint_fit.drops_on_shorter_windows(raw_dataset, states, 3 * steps, wrong, truth)
+    assert not joint_fit.drops_on_shorter_windows(raw_dataset, states, steps, wrong, truth)
+    assert not joint_fit.drops_on_shorter_windows(raw_dataset, states, 3 * steps, truth, truth)
 
 
 def test_threads_give_the_same_refit(raw_dataset):

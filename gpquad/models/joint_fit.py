@@ -20,7 +20,8 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 40 % worse) and thirty: the velocities integrate the attitude, and a model refitted on
 10 s windows alone can drift beyond them (rotorpy-rate;
 docs/decisions/2026-11-26-joint-refit-horizon.md). The horizon stops growing once a fit
-flies the model to round-off (RESOLVED): it has no drift left to correct. Structures are
+flies the model to round-off (every state's RSE at each horizon below the selection's
+RSE_RESOLUTION, squared, on average): it has no drift left to correct. Structures are
 not changed.
 
 Each horizon's fit is a candidate: the one with the lowest error on the validation windows
@@ -61,6 +62,7 @@ import numpy as np
 
 from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.lm import forward_difference, trust_region
+from gpquad.engine.evolve.selection import RSE_RESOLUTION
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -71,10 +73,6 @@ from gpquad.models.stiffness import model_substeps
 #: Window lengths of the growing horizon (s); the last one, shortened to the longest
 #: validation range if need be, decides acceptance.
 JOINT_HORIZONS_S = (1.0, 10.0, 30.0)
-#: The growing horizon stops when a fit leaves its objective (the sum over states and
-#: horizons of the RSE) below this: a model flown to round-off has no drift for longer
-#: windows to correct.
-RESOLVED = 1e-6
 #: Window length (s) of the full-model checks before the refit (the stability repair,
 #: the refinement's keep_what_flies).
 CHECK_HORIZON_S = 10.0
@@ -247,11 +245,9 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         )
         return model, report
     judge = FullModelError(dataset, judge_starts, judge_steps, states)
-    before_w = judge.window_errors(as_flown_by_readers(model))
+    read_before = as_flown_by_readers(model)
+    before_w = judge.window_errors(read_before)
     before = float(before_w.sum())
-    # the check's shorter windows: more of them, so a real drop is seen as significant
-    short = FullModelError(dataset, *judged_windows(dataset, model, CHECK_HORIZON_S)[:2], states)
-    short_before = short.window_errors(as_flown_by_readers(model))
     x = x0.copy()
     objectives, staged = [], []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
@@ -273,8 +269,8 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL)
         staged.append((float(seconds), x))
         reached = value(x)
-        if float(reached @ reached) < RESOLVED:  # flown to round-off: nothing left to drift
-            break
+        if float(reached @ reached) < len(objectives) * len(states) * RSE_RESOLUTION**2:
+            break  # flown to round-off (selection's resolution): nothing left to drift
     report["rollouts"] = next(rollouts)
     # each horizon's fit is a candidate; the validation windows choose among them
     judged = []
@@ -284,7 +280,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     after_w, stage_s, refitted = min(judged, key=lambda j: float(j[0].sum()))
     accepted = significant_drop(before_w, after_w) or (
         float(after_w.sum()) <= before
-        and significant_drop(short_before, short.window_errors(as_flown_by_readers(refitted)))
+        and drops_on_shorter_windows(dataset, states, judge_steps, read_before, refitted)
     )
     report.update(
         accepted=accepted,
@@ -296,6 +292,20 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         time_s=time.perf_counter() - t0,
     )
     return (refitted if accepted else model), report
+
+
+def drops_on_shorter_windows(dataset, states, judged_steps: int, before, refitted) -> bool:
+    """Whether `refitted` flies the CHECK_HORIZON_S windows (more of them than the longest
+    ones, so that a real drop can look significant) significantly better than `before`
+    (already as readers fly it); False when those windows are no shorter than the judged
+    ones (the same test, already made)."""
+    starts, steps, _ = judged_windows(dataset, refitted, CHECK_HORIZON_S)
+    if steps >= judged_steps or len(starts) == 0:
+        return False
+    short = FullModelError(dataset, starts, steps, states)
+    return significant_drop(
+        short.window_errors(before), short.window_errors(as_flown_by_readers(refitted))
+    )
 
 
 def joint_fit_summary(report: dict) -> str:
