@@ -13,6 +13,10 @@ from gpquad.cli.parsing import EXAMPLES, Parser, Version, WarningLines, add_exam
 from gpquad.errors import GpquadError
 
 
+def _import_plotting() -> None:
+    import gpquad.report.plotting  # noqa: F401
+
+
 def _cmd_run(args) -> int:
     from gpquad.study import workers
     from gpquad.study.config import load_config, override
@@ -33,6 +37,10 @@ def _cmd_run(args) -> int:
     from gpquad.study.runner import default_run_dir, run_experiment
 
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
+    if not args.no_figures:  # matplotlib loads while this process mostly waits on the search
+        import threading
+
+        threading.Thread(target=_import_plotting, daemon=True).start()
     figures: list[Path] = []
     drawing = []  # the convergence figure, drawn by a worker while the model is finished
 
