@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -190,9 +191,12 @@ def fit(
         if n_jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
         found = run_experiment(cfg, run_dir, progress=progress, dataset=dataset, jobs=n_jobs)
+        record = json.loads((Path(run_dir) / "run.json").read_text())
+        profile = {"search": record["target_time_s"], "finish": record["finish_time_s"]}
     else:
         warn_unmeasured(dataset, cfg.evolution.targets)
         ev = cfg.evolution
+        profile = {}
         if jobs is not None and jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
         found = fit_dataset(
@@ -200,8 +204,9 @@ def fit(
             cfg,
             Progress(progress, ev.iterations * len(ev.targets)),
             jobs=default_jobs(len(ev.targets)) if jobs is None else jobs,
+            seconds=profile,
         )
-    return Model(found, cfg)
+    return Model(found, cfg, profile)
 
 
 def reference_flight(

@@ -60,11 +60,15 @@ class Model:
         The engine's model (model.json).
     config : Config, optional
         The config it was fitted with (recorded in the model too).
+    profile : dict, optional
+        Where the fit's time went, in seconds: ``{"search": {target: s}, "finish":
+        {step: s}}`` (`fit` sets it; a loaded model has none).
     """
 
-    def __init__(self, discovered: DiscoveredModel, config=None):
+    def __init__(self, discovered: DiscoveredModel, config=None, profile: dict | None = None):
         self.discovered = discovered
         self.config = config
+        self.profile = profile
 
     # ------------------------------------------------------------------ description
     @property

@@ -244,6 +244,28 @@ def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
     assert "nan" not in marked.markdown().lower()
 
 
+def test_fit_reports_where_its_time_went(model, tmp_path):
+    """model.profile: each searched equation's seconds and each finishing step's, the same
+    keys whether the fit kept a run folder or not."""
+    assert set(model.profile["search"]) == set(FAST["targets"])
+    assert set(model.profile["finish"]) == {"symmetrize", "refine", "repair", "joint_fit"}
+    assert all(s > 0 for s in model.profile["search"].values())
+    assert gpquad.Model(model.discovered).profile is None  # a loaded model was not timed here
+    two = gpquad.fit(
+        gpquad.reference_flight(seed=0, duration_s=40.0),
+        seed=1,
+        run_dir=tmp_path / "r",
+        progress=False,
+        **{**FAST, "targets": ["p_dot"]},
+    )
+    assert set(two.profile["search"]) == {"p_dot"} and set(two.profile["finish"]) <= {
+        "symmetrize",
+        "refine",
+        "repair",
+        "joint_fit",
+    }
+
+
 def test_parallel_searches_give_the_same_equations(flight):
     """jobs = 1 and jobs = 2 (two worker processes) give the same bits; jobs = 0 is refused."""
     one = gpquad.fit(flight, seed=3, jobs=1, **FAST)

@@ -142,6 +142,14 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     counts = [json.loads(c.read_text())["n_parameters"] for c in cells[:2]]
     assert all(n > 0 for n in counts)
     assert agg["tiny"]["gpquad"]["parameters"]["mean"] == sum(counts) / 2
+    # where the fit's time went: each equation's search and each finishing step
+    profile = json.loads(cells[0].read_text())["fit_profile_s"]
+    assert set(profile["search"]) == set(json.loads(cells[0].read_text())["equations"])
+    assert profile["finish"] == {}  # the paper preset has no finishing step
+    assert "## Where gpquad's fit time went" in text and "| tiny | " in text.split("went")[1]
+    assert table.fit_profile({"method": "zero"}) is None
+    grouped = {"fit_profile_s": {"a": profile, "b": profile}}  # a per-vehicle cell
+    assert table.fit_profile(grouped)["searches"] == 2 * sum(profile["search"].values())
     assert table.parameters({"n_parameters": {"a": 3, "b": 4}}) == 7
     assert table.parameters({"n_parameters": {"a": 3, "b": None}}) is None
     assert table.parameters({}) is None

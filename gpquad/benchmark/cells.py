@@ -73,7 +73,14 @@ def _fit(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
         g: _fit_one(method, sub, seed, engine, fit_jobs) for g, sub in scenario.groups.items()
     }
     simulate = grouped_simulate(scenario, {g: f[0] for g, f in fitted.items()})
-    keys = ("equations", "equations_raw_inputs", "n_parameters", "joint_fit", "scheme")
+    keys = (
+        "equations",
+        "equations_raw_inputs",
+        "n_parameters",
+        "joint_fit",
+        "scheme",
+        "fit_profile_s",
+    )
     record = {
         k: {g: f[2][k] for g, f in fitted.items()}
         for k in keys
@@ -109,7 +116,8 @@ def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
 
         cfg = engine_config(seed, engine)
         t0 = time.perf_counter()
-        model = fit_gpquad(scenario.fit, cfg, fit_jobs)
+        profile: dict = {}
+        model = fit_gpquad(scenario.fit, cfg, fit_jobs, profile)
         fit_time = time.perf_counter() - t0
         record = {
             "equations": {t: e.text() for t, e in model.equations.items()},
@@ -123,6 +131,8 @@ def _fit_one(method: str, scenario, seed: int, engine, fit_jobs: int = 1):
             "recovery": recovery_gpquad(model, scenario),
             "joint_fit": model.joint_fit,
             "n_parameters": model.n_parameters,
+            # where the fit's time went: each search's own seconds, each finishing step's
+            "fit_profile_s": profile,
         }
         return (lambda starts, steps: model.simulate(test, starts, steps)), fit_time, record
     peer, fit_time = peers.fit_peer(method, scenario.fit, seed)

@@ -31,9 +31,10 @@ def load_engine(path=None) -> tuple[Config, str]:
     return load_config(path, quiet=True), str(path)
 
 
-def fit_gpquad(dataset, cfg: Config, jobs: int = 1):
+def fit_gpquad(dataset, cfg: Config, jobs: int = 1, seconds: dict | None = None):
     """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel
-    (the searches in `jobs` processes; the same equations for any value)."""
+    (the searches in `jobs` processes; the same equations for any value); `seconds`
+    receives the fit's profile (gpquad.study.fit.fit_dataset)."""
     from gpquad.study.fit import fit_dataset
 
-    return fit_dataset(dataset, cfg, jobs=jobs)
+    return fit_dataset(dataset, cfg, jobs=jobs, seconds=seconds)

@@ -81,6 +81,46 @@ def aggregate(cells: list[dict]) -> dict:
     return result
 
 
+def fit_profile(cell: dict) -> dict[str, float] | None:
+    """Where a gpquad cell's fit time went (seconds, summed over a per-vehicle cell's fits):
+    "searches" (each equation's search, summed: CPU-like, they run side by side), the
+    slowest search, and each finishing step's wall time; None for a cell without it."""
+    profile = cell.get("fit_profile_s")
+    if not profile:
+        return None
+    fits = [profile] if "search" in profile else list(profile.values())
+    out: dict[str, float] = {"searches": 0.0, "slowest search": 0.0}
+    for fit in fits:
+        out["searches"] += sum(fit["search"].values())
+        out["slowest search"] += max(fit["search"].values(), default=0.0)
+        for step, seconds in fit["finish"].items():
+            out[step] = out.get(step, 0.0) + seconds
+    return out
+
+
+def profile_markdown(cells: list[dict]) -> str:
+    """Where gpquad's fit time went, per scenario (mean over seeds): fit wall time, the
+    searches summed and the slowest, and each finishing step; empty without profiles."""
+    rows: dict[str, list[dict]] = {}
+    for cell in cells:
+        found = fit_profile(cell) if cell["method"] == "gpquad" else None
+        if found is not None:
+            rows.setdefault(cell["scenario"], []).append(
+                {"fit": cell["cost"]["fit_time_s"], **found}
+            )
+    if not rows:
+        return ""
+    steps = list(dict.fromkeys(k for group in rows.values() for r in group for k in r))
+    lines = [
+        "| scenario | " + " | ".join(f"{k} s" for k in steps) + " |",
+        "|" + "---|" * (len(steps) + 1),
+    ]
+    for scenario, group in rows.items():
+        means = [_num(_stats([r.get(k) for r in group])) for k in steps]
+        lines.append(f"| {scenario} | " + " | ".join(means) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _num(stats, spread: bool = False) -> str:
     if stats is None:
         return "-"

@@ -130,6 +130,16 @@ def write_report(out: Path, info: dict) -> dict:
             "",
             loop_gains.markdown(gains),
         ]
+    profile = table.profile_markdown(found)
+    if profile:
+        head += [
+            "## Where gpquad's fit time went (mean over seeds)",
+            "",
+            "searches: each equation's search, summed (they run side by side, one per "
+            "process); the finishing steps run after them, each its wall time.",
+            "",
+            profile,
+        ]
     head += ["## Per state", "", table.markdown(agg)]
     atomic_write_text(out / "benchmark.md", "\n".join(head))
     for name in info["scenarios"]:

@@ -299,9 +299,16 @@ def fit_dataset(
     run_dir: Path | None = None,
     resuming: bool = False,
     jobs: int = 1,
+    seconds: dict | None = None,
 ) -> DiscoveredModel:
     """Search every configured target and finish the model (module notes). Without a run
-    folder the searches may run in `jobs` processes (the same equations for any value)."""
+    folder the searches may run in `jobs` processes (the same equations for any value).
+    `seconds`, if given, receives the fit's profile: {"search": {target: s}, "finish":
+    {step: s}} (each search's own time, each finishing step's wall time)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
-    equations, _ = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
-    return finish(new_model(equations, dataset, cfg), dataset, cfg, report, workers=jobs)
+    equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
+    steps: dict[str, float] = {}
+    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)
+    if seconds is not None:
+        seconds.update(search=timings, finish=steps)
+    return model
