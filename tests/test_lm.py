@@ -245,3 +245,66 @@ def test_search_tolerance_stops_earlier_within_its_relative_drop():
         costs[name], calls[name] = float(np.sum(fun(x) ** 2)), n[0]
     assert calls["search"] < calls["tight"]
     assert costs["tight"] <= costs["search"] <= costs["tight"] * (1.0 + 10.0 * SEARCH_FTOL)
+
+
+def test_stall_rule_stops_once_the_steps_stop_gaining():
+    """lm.STALL (the finishing fits'): once k steps taken lowered the sum by at most the
+    fraction, the fit stops, in fewer evaluations than MINPACK's tolerances alone and at a
+    sum within a small fraction of theirs; rejected trials do not count, so a fit that
+    shrinks its radius from a plateau is not stopped there."""
+    from gpquad.engine.evolve.lm import STALL
+
+    def fitted(fun, jac, x0, stall):
+        sums = []
+
+        def counted(x):
+            r = fun(x)
+            sums.append(float(np.sum(r * r)))
+            return r
+
+        x = levenberg_marquardt(counted, np.array(x0, dtype=float), jac, 200, stall=stall)
+        return float(np.sum(fun(x) ** 2)), sums
+
+    # Powell's singular function beside a residual no constant can fit: linear convergence,
+    # each late step gaining less of the sum
+    def powell(x):
+        return np.array(
+            [
+                x[0] + 10 * x[1],
+                np.sqrt(5) * (x[2] - x[3]),
+                (x[1] - 2 * x[2]) ** 2,
+                np.sqrt(10) * (x[0] - x[3]) ** 2,
+                0.1,
+            ]
+        )
+
+    def powell_jac(x):
+        a, b = 2 * (x[1] - 2 * x[2]), 2 * np.sqrt(10) * (x[0] - x[3])
+        z = np.sqrt(5)
+        return np.array(
+            [[1, 10, 0, 0], [0, 0, z, -z], [0, a, -2 * a, 0], [b, 0, 0, -b], [0, 0, 0, 0]]
+        )
+
+    tight, all_sums = fitted(powell, powell_jac, [3, -1, 0, 1], None)
+    stalled, sums = fitted(powell, powell_jac, [3, -1, 0, 1], STALL)
+    assert len(sums) < len(all_sums)
+    assert tight <= stalled <= tight * (1.0 + STALL[1])
+    taken = [v for i, v in enumerate(sums) if v < min(sums[:i], default=np.inf)]
+    k, drop = STALL
+    assert taken[-1 - k] - taken[-1] <= drop * taken[-1 - k]  # why it stopped
+
+    # a saturating curve from a far start: the first trials are all rejected (a rule that
+    # counted evaluations would stop there, at a sum 15 % above the fit's)
+    t = np.linspace(0.01, 5.0, 200)
+    y = 2.0 * t / (0.3 + t) + 0.05 * np.sin(13.0 * t)
+
+    def curve(x):
+        return x[0] * t / (x[1] + t) - y
+
+    def curve_jac(x):
+        return np.column_stack([t / (x[1] + t), -x[0] * t / (x[1] + t) ** 2])
+
+    tight, all_sums = fitted(curve, curve_jac, [0.1, 20.0], None)
+    stalled, sums = fitted(curve, curve_jac, [0.1, 20.0], STALL)
+    assert min(all_sums[1 : k + 2]) >= all_sums[0]  # k + 1 rejected trials first
+    assert tight <= stalled <= tight * (1.0 + 1e-6)

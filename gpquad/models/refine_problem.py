@@ -11,7 +11,7 @@ import sympy as sp
 from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
-from gpquad.engine.evolve.lm import FTOL
+from gpquad.engine.evolve.lm import FTOL, STALL
 from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
@@ -189,6 +189,7 @@ class RefineProblem:
                 FIT_STEPS,
                 short,
                 FTOL,
+                STALL,
             )
             expr = self.expr(fitted)
             finer = self.fitting(expr)

@@ -129,12 +129,13 @@ def gauss_newton_constants(
     error_of,
     max_steps: int,
     ftol: float = SEARCH_FTOL,
+    stall: tuple[int, float] | None = None,
 ) -> tuple[Tree, float]:
     """LM fit of all constants of `model` on the windows `starts` (n_steps each).
 
     Keeps the result only if error_of(fitted) < error. max_steps bounds the number of
     residual evaluations (each one flies every window once with sensitivities); ftol is
-    the LM's relative-drop tolerance (gpquad.engine.evolve.lm).
+    the LM's relative-drop tolerance and `stall` its stall rule (gpquad.engine.evolve.lm).
     """
     slots = np.flatnonzero(model.codes == CONST)
     if slots.size == 0 or max_steps == 0:
@@ -173,6 +174,7 @@ def gauss_newton_constants(
             lambda x: evaluate(full(x))[1][:, free],
             max_steps,
             ftol=ftol,
+            stall=stall,
         )
     except (ValueError, np.linalg.LinAlgError):  # pragma: no cover - non-finite steps
         return model, error
@@ -195,6 +197,7 @@ def continued_constants(
     max_steps: int,
     short_windows,
     ftol: float = SEARCH_FTOL,
+    stall: tuple[int, float] | None = None,
 ) -> tuple[Tree, float]:
     """LM fit with a growing horizon: the direct fit on (starts, n_steps), and a fit that
     starts on each (short_starts, short_steps) of `short_windows` in turn (each from the
@@ -204,17 +207,18 @@ def continued_constants(
     Short windows are nearly the one-step problem, whose error has one basin for a model
     linear in its constants; the long-window error of a stiff closed loop has many, and a
     fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
-    ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish).
+    ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish);
+    stall: its stall rule (lm.STALL to finish), both passed to every fit.
     """
     best, best_error = gauss_newton_constants(
-        ev, model, error, starts, n_steps, error_of, max_steps, ftol
+        ev, model, error, starts, n_steps, error_of, max_steps, ftol, stall
     )
     if not short_windows:
         return best, best_error
     tree = model
     for short_starts, short_steps in short_windows:
         tree, _ = gauss_newton_constants(
-            ev, tree, np.inf, short_starts, short_steps, lambda t: 0.0, max_steps, ftol
+            ev, tree, np.inf, short_starts, short_steps, lambda t: 0.0, max_steps, ftol, stall
         )
     if tree is model:
         return best, best_error
@@ -222,7 +226,7 @@ def continued_constants(
     if not np.isfinite(tree_error):
         return best, best_error
     tree, tree_error = gauss_newton_constants(
-        ev, tree, tree_error, starts, n_steps, error_of, max_steps, ftol
+        ev, tree, tree_error, starts, n_steps, error_of, max_steps, ftol, stall
     )
     if tree_error < best_error:
         return tree, tree_error

@@ -35,6 +35,10 @@ FTOL = XTOL = 1.49012e-8
 RADIUS_FACTOR = 100.0
 ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
+#: The finishing fits' stall rule (steps, relative drop): they stop once that many taken
+#: steps together lowered the sum by at most that fraction of it. Measured on the
+#: refinement's fits (docs/decisions/2026-11-26-refine-stall.md).
+STALL = (3, 1e-4)
 
 
 def column_norms(j: np.ndarray) -> np.ndarray:
@@ -79,7 +83,13 @@ def _damping_for_radius(r, qtr, radius: float, mu: float, h: np.ndarray) -> floa
 
 
 def levenberg_marquardt(
-    fun, x0: np.ndarray, jac, max_nfev: int, ftol: float = FTOL, xtol: float = XTOL
+    fun,
+    x0: np.ndarray,
+    jac,
+    max_nfev: int,
+    ftol: float = FTOL,
+    xtol: float = XTOL,
+    stall: tuple[int, float] | None = None,
 ) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals),
     at most max_nfev evaluations of fun after the one at x0; jac is asked only at x0 and at
@@ -94,8 +104,10 @@ def levenberg_marquardt(
     when the actual drop of the sum is at least ACCEPT_RATIO of the predicted one; the
     radius halves (or shrinks to a tenth after a blow-up) when that ratio is below 1/4 and
     doubles the step when it is above 3/4. Stops when the actual and predicted relative
-    drops are at most ftol, or the radius is at most xtol of the scaled |x|. Returns x; its
-    sum is never above x0's."""
+    drops are at most ftol, or the radius is at most xtol of the scaled |x|, or, with
+    `stall` = (k, drop), when the last k steps taken lowered the sum by at most that
+    fraction of it (rejected trials do not count: a fit that shrinks its radius from a
+    plateau is not stopped). Returns x; its sum is never above x0's."""
     x = np.array(x0, dtype=float)
     f = np.ascontiguousarray(fun(x), dtype=float)
     cost = kernels.sum_squares(f)
@@ -110,6 +122,7 @@ def levenberg_marquardt(
     kernels.triangularize(j, scale, f, r, qtr)
     radius = RADIUS_FACTOR * (_norm(x * scale) or 1.0)
     mu = 0.0
+    costs = [cost]  # the sum after each step taken
     for evaluation in range(int(max_nfev)):
         mu = _damping_for_radius(r, qtr, radius, mu, h)
         step = _norm(h)
@@ -135,6 +148,7 @@ def levenberg_marquardt(
             mu *= 0.5
         if ratio >= ACCEPT_RATIO:
             x, f, cost = trial, f_trial, cost_trial
+            costs.append(cost)
             if cost == 0.0:
                 break
             j = np.ascontiguousarray(jac(x), dtype=float)
@@ -145,6 +159,10 @@ def levenberg_marquardt(
             x * scale
         ):
             break
+        if stall is not None and len(costs) > stall[0] and ratio >= ACCEPT_RATIO:
+            before = costs[-1 - stall[0]]
+            if before - cost <= stall[1] * before:
+                break
     return x
 
 
