@@ -248,7 +248,7 @@ def test_search_tolerance_stops_earlier_within_its_relative_drop():
 
 
 def test_stall_rule_stops_once_the_steps_stop_gaining():
-    """lm.STALL (the finishing fits'): once k steps taken lowered the sum by at most the
+    """lm.STALL (the refinement's): once k steps taken lowered the sum by at most the
     fraction, the fit stops, in fewer evaluations than MINPACK's tolerances alone and at a
     sum within a small fraction of theirs; rejected trials do not count, so a fit that
     shrinks its radius from a plateau is not stopped there."""

@@ -208,7 +208,7 @@ def continued_constants(
     linear in its constants; the long-window error of a stiff closed loop has many, and a
     fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
     ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish);
-    stall: its stall rule (lm.STALL to finish), both passed to every fit.
+    stall: its stall rule (lm.STALL in the refinement), both passed to every fit.
     """
     best, best_error = gauss_newton_constants(
         ev, model, error, starts, n_steps, error_of, max_steps, ftol, stall

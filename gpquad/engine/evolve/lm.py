@@ -35,7 +35,7 @@ FTOL = XTOL = 1.49012e-8
 RADIUS_FACTOR = 100.0
 ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
-#: The finishing fits' stall rule (steps, relative drop): they stop once that many taken
+#: The refinement's stall rule (steps, relative drop): its fits stop once that many taken
 #: steps together lowered the sum by at most that fraction of it. Measured on the
 #: refinement's fits (docs/decisions/2026-11-26-refine-stall.md).
 STALL = (3, 1e-4)
