@@ -19,7 +19,9 @@ from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
 from gpquad.engine.evolve.selection import bic, mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.term_search import improve_terms, regain_candidates, term_candidates
+from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.export import from_sympy, parse_equation
+from gpquad.engine.tree.operators import CONST, MUL
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import load_config, override
@@ -93,6 +95,29 @@ def test_select_by_bic_picks_the_lowest_and_the_first_on_ties(rigid_dataset):
     missing = _tree("9.0*u_R(t-2) - 4.0*p", ds)
     chosen, scores = select_by_bic(ev, [missing, exact, exact], STARTS, 250)
     assert chosen is exact and scores[1] == scores[2] < scores[0]
+
+
+def test_select_by_bic_counts_a_polynomial_multiplied_out(rigid_dataset):
+    """BIC counts nodes: the truth grown as a product of a sum (15 nodes) is scored, and
+    returned, multiplied out (13 nodes), as the truth written plainly is; a rational stays
+    as it is."""
+    from gpquad.engine.evolve.selection import fewest_nodes
+
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 250, "mse")
+    exact = _tree("9.0*u_R(t-2) - 4.0*p - 0.9*q*r", ds)
+    grown = Tree.from_lists(  # 3 * (3 u_R(t-2) - 4/3 p - 0.3 q r), the same function
+        [MUL, CONST] + exact.codes.tolist(),
+        [0.0, 3.0] + (exact.values / 3.0).tolist(),
+        exact.delays,
+    )
+    assert grown.size == exact.size + 2
+    chosen, scores = select_by_bic(ev, [grown], STARTS, 250)
+    assert chosen.size == exact.size
+    assert np.isclose(scores[0], select_by_bic(ev, [exact], STARTS, 250)[1][0], rtol=1e-9)
+    assert fewest_nodes(exact) is exact
+    rational = _tree("9.0*u_R(t-2)/(1 + p*p) - 4.0*p", ds)
+    assert fewest_nodes(rational) is rational
 
 
 def test_term_insertion_finds_the_gyroscopic_term(rigid_dataset):

@@ -86,3 +86,11 @@ def product(variables: tuple[int, ...]) -> list[tuple[int, float]]:
 def monomial_terms(poly: Polynomial) -> list[list[tuple[int, float]]]:
     """Each monomial as a prefix term c * x * y ... (a constant alone for the monomial ())."""
     return [[(MUL, 0.0), (CONST, c)] + product(m) if m else [(CONST, c)] for m, c in poly.items()]
+
+
+def polynomial_form(codes, values) -> list[tuple[int, float]] | None:
+    """The prefix (code, value) list of the tree multiplied out: the shallow sum of its
+    monomials (c * x * y ..., one constant each), the same function written with as few
+    nodes as its printed form; None when it does not multiply out (`expand`)."""
+    poly = expand(codes, values)
+    return None if poly is None else shallow_sum(monomial_terms(poly))
