@@ -42,24 +42,14 @@ def _cmd_run(args) -> int:
 
         threading.Thread(target=_import_plotting, daemon=True).start()
     figures: list[Path] = []
-    drawing = []  # the convergence figure, drawn by a worker while the model is finished
 
     def searched(folder) -> None:
-        from gpquad.report.builder import convergence_report
-
-        if not args.no_figures:
-            targets, metric = list(cfg.evolution.targets), cfg.evolution.metric
-            future = workers.submit(convergence_report, folder, targets, metric, ("png",))
-            drawing.extend([] if future is None else [future])
-        workers.release()  # they exit (after the figure) while the model is finished
+        workers.release()  # they exit while the model is finished
 
     def draw(model, dataset) -> None:
         from gpquad.report.builder import make_run_report
 
-        figures.extend(drawing[0].result() if drawing else [])
-        figures.extend(
-            make_run_report(run_dir, formats=("png",), dataset=dataset, convergence=not drawing)
-        )
+        figures.extend(make_run_report(run_dir, formats=("png",), dataset=dataset))
 
     try:
         model = run_experiment(

@@ -316,15 +316,14 @@ def convergence_report(folder, targets, metric: str, formats=("png", "pdf")) -> 
 
 
 def make_run_report(
-    folder, formats=("png", "pdf"), window_s: float = 7.0, dataset=None, convergence=True
+    folder, formats=("png", "pdf"), window_s: float = 7.0, dataset=None
 ) -> list[Path]:
     """Figures of one `gpquad run` folder, written into FOLDER/report/; `dataset`: the run's
     data when the caller has it loaded (else it is loaded from the folder's config).
 
     prediction: the run's equations flown over the first validation window of `window_s`
     (states without an equation use the data's accelerations); convergence: best suite
-    error against generation for each equation (`convergence_report`; False: drawn
-    elsewhere).
+    error against generation for each equation (`convergence_report`).
     """
     import io
 
@@ -339,11 +338,7 @@ def make_run_report(
     cfg = load_folder_config(folder)
     model = DiscoveredModel.load(folder)
     out = folder / "report"
-    written = (
-        convergence_report(folder, list(model.equations), cfg.evolution.metric, formats)
-        if convergence
-        else []
-    )
+    written = convergence_report(folder, list(model.equations), cfg.evolution.metric, formats)
     dataset = load_dataset(cfg) if dataset is None else dataset
     steps_wanted = max(1, int(round(window_s / dataset.dt)))
     starts, steps = tile(dataset.validation, steps_wanted, cfg.evolution.max_delay)

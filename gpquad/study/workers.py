@@ -59,12 +59,6 @@ def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
     return [executor.submit(func, *args) for args in arguments]
 
 
-def submit(func, *args) -> Future | None:
-    """func(*args) in a worker of the started pool, or None when there is none."""
-    executor = _pool.get("executor")
-    return None if executor is None else executor.submit(func, *args)
-
-
 def completed(futures: list[Future]):
     """The futures' results as they finish; on an interruption or an error the rest are
     cancelled and the workers stopped."""
