@@ -61,10 +61,8 @@ SCREENED = 6
 #: Errors below this fraction of the zero equation's count as flown exactly, the
 #: selection's resolution (selection.RSE_RESOLUTION): a found equation there is kept as
 #: found, and a gain is term_min_gain of max(error, NEGLIGIBLE * zero error). Below it
-#: what a refinement fits is the scheme's error in the data's other states, held over a
-#: sample: rigid-body's rate equations, found at 3-6e-5 of the zero equation's error, took
-#: 9 s of refinement to gain junk terms of 1e-3 that the joint refit then removed; the
-#: lowest of every other scenario's was 1.3e-2 (docs/decisions/2026-11-26-refine-stall.md).
+#: what a refinement could fit is the scheme's error in the data's other states, held
+#: over a sample, not the vehicle (docs/decisions/2026-11-26-refine-stall.md).
 NEGLIGIBLE = RSE_RESOLUTION
 
 

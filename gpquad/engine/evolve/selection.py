@@ -132,9 +132,8 @@ def fitted_rivals(ev_mse: Evaluator, fit, chosen: Tree, rivals, starts, chosen_f
 
 def fewest_nodes(tree: Tree) -> Tree:
     """The tree, or the same function multiplied out (gpquad.engine.tree.polynomial) when
-    that takes fewer nodes: BIC counts a tree's nodes, and -4.1 p + 10.2 u_R(t-1) - 0.005
-    grown as 21 nodes would lose to a 13-node rational of the same error (median-noisy4x,
-    seed 2) that its 9 nodes multiplied out beat."""
+    that takes fewer nodes: BIC counts a tree's nodes, so a linear equation grown as a deep
+    tree would lose to a smaller rival of the same error that its printed form beats."""
     prefix = polynomial_form(tree.codes, tree.values)
     if prefix is None or len(prefix) >= tree.size:
         return tree
