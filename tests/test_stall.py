@@ -67,12 +67,16 @@ def test_stall_settings_are_checked_and_the_paper_runs_every_iteration():
     assert config_from_dict({}).evolution.stall_iterations == 3
 
 
-def test_an_exact_error_is_below_a_millionth_of_the_state():
-    assert exact(0.5e-6, 1.0, False) and not exact(2e-6, 1.0, False)
-    assert exact(0.5e-12, 1.0, True) and not exact(2e-12, 1.0, True)  # squared metric
-    assert exact(1e-5, 20.0, False) and not exact(1e-5, 1.0, False)
+def test_an_exact_error_is_below_the_selections_resolution():
+    """Exact: below a thousandth of the state's spread (selection.RSE_RESOLUTION), where
+    the final selection sees no error left to gain."""
+    from gpquad.engine.evolve.selection import RSE_RESOLUTION
+
+    assert EXACT_RSE == RSE_RESOLUTION == 1e-3
+    assert exact(0.5e-3, 1.0, False) and not exact(2e-3, 1.0, False)
+    assert exact(0.5e-6, 1.0, True) and not exact(2e-6, 1.0, True)  # squared metric
+    assert exact(1e-2, 20.0, False) and not exact(1e-2, 1.0, False)
     assert not exact(float("inf"), 1.0, False) and not exact(float("nan"), 1.0, False)
-    assert EXACT_RSE == 1e-6
 
 
 def test_a_search_that_is_exact_stops_and_the_paper_goes_on():

@@ -4,8 +4,8 @@ After every iteration the run loop records the best climber's error over the who
 training data (`RunState.best_errors`). The search stops early when `patience`
 iterations in a row did not lower the best error recorded so far by at least the
 fraction `gain` of it, or at once when the best error is `exact`: below EXACT_RSE of the
-target state's spread, where the data are the equation's own up to rounding and no later
-iteration can gain (the final selection still prunes the climber). The climbers are scored
+target state's spread, the selection's resolution, below which the final selection sees no
+error to gain (it still prunes the climber). The climbers are scored
 on a co-evolving suite, so the best training error is not monotone; the rule compares with
 the lowest error reached, and an iteration that does not beat it by `gain` counts as
 stalled. The measurements behind the defaults are in docs/decisions/2026-11-26-finish-speed.md.
@@ -15,8 +15,11 @@ from __future__ import annotations
 
 import math
 
-#: A best error below this fraction of the target state's standard deviation is exact.
-EXACT_RSE = 1e-6
+from gpquad.engine.evolve.selection import RSE_RESOLUTION
+
+#: A best error below this fraction of the target state's standard deviation is exact:
+#: the final selection's resolution (errors below it count as zero there).
+EXACT_RSE = RSE_RESOLUTION
 
 
 def stalled(best_errors: list[float], patience: int, gain: float) -> bool:
