@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -186,17 +185,17 @@ def fit(
     cfg = _with_overrides(_config(config), seed, overrides)
     flights, cfg, source = _flights_and_config(data, cfg)
     dataset = load_dataset(cfg) if flights is None else dataset_of(flights, cfg, source)
+    profile: dict = {}  # where the fit's time went (Model.profile)
     if run_dir is not None:
         n_jobs = 1 if jobs is None else jobs
         if n_jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
-        found = run_experiment(cfg, run_dir, progress=progress, dataset=dataset, jobs=n_jobs)
-        record = json.loads((Path(run_dir) / "run.json").read_text())
-        profile = {"search": record["target_time_s"], "finish": record["finish_time_s"]}
+        found = run_experiment(
+            cfg, run_dir, progress=progress, dataset=dataset, jobs=n_jobs, seconds=profile
+        )
     else:
         warn_unmeasured(dataset, cfg.evolution.targets)
         ev = cfg.evolution
-        profile = {}
         if jobs is not None and jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
         found = fit_dataset(

@@ -123,7 +123,7 @@ def prediction_figure(
         fig.suptitle(
             f"Prediction over a {t[-1]:.3g} s validation window{where}{clipped}", y=0.99, fontsize=9
         )
-        # fixed margins: tight layout and tight bounding boxes measured every text (half the time)
+        # fixed margins: no text is measured when the figure is saved
         fig.subplots_adjust(left=0.1, right=0.98, bottom=0.08, top=0.88, hspace=0.3, wspace=0.28)
         return _save(fig, Path(stem), formats)
 

@@ -150,6 +150,7 @@ def run_experiment(
     jobs: int = 1,
     after=None,
     searched=None,
+    seconds: dict | None = None,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -157,6 +158,8 @@ def run_experiment(
     found so far (model.json has "interrupted": true) and re-raises. `dataset`: the data
     already loaded (gpquad.fit), else the config's. `after(model, dataset)` runs once the
     model is written (the command line draws its figures there, on the loaded data).
+    `seconds`, if given, receives the fit's profile as gpquad.study.fit.fit_dataset's (the
+    same numbers run.json keeps).
     """
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg)
     show = cfg.output.progress if progress is None else progress
@@ -212,6 +215,8 @@ def run_experiment(
         finish_time_s=finish_seconds,
     )
     write_json(run_dir / "run.json", info)
+    if seconds is not None:
+        seconds.update(search=timings, finish=finish_seconds)
     report.say(time_profile(wall, load_seconds, timings, finish_seconds))
     if after is not None:
         after(model, dataset)

@@ -149,7 +149,11 @@ def levenberg_marquardt(
         if ratio >= ACCEPT_RATIO:
             x, f, cost = trial, f_trial, cost_trial
             costs.append(cost)
-            if cost == 0.0:
+            if cost == 0.0 or (
+                stall is not None
+                and len(costs) > stall[0]
+                and costs[-1 - stall[0]] - cost <= stall[1] * costs[-1 - stall[0]]
+            ):
                 break
             j = np.ascontiguousarray(jac(x), dtype=float)
             if not np.isfinite(kernels.sum_squares(j.ravel())):
@@ -159,10 +163,6 @@ def levenberg_marquardt(
             x * scale
         ):
             break
-        if stall is not None and len(costs) > stall[0] and ratio >= ACCEPT_RATIO:
-            before = costs[-1 - stall[0]]
-            if before - cost <= stall[1] * before:
-                break
     return x
 
 
