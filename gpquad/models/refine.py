@@ -9,10 +9,11 @@ of the roll and pitch set-points at several delays, filtered by the motors
 
 0. beyond FREE_TERMS terms, those that do not lower the validation error are removed
    (gpquad.models.earned); the found equation is then no longer a choice of step 3;
-1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried, the
-   equation's own terms refitted (one-step least squares on the inverse-filtered target,
-   then Levenberg-Marquardt through the integrator with a growing horizon); a lag is kept
-   when it lowers the training error by more than term_min_gain (relative);
+1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried
+   (gpquad.models.lag_fit.choose_lag), the equation's own terms refitted (one-step least
+   squares on the inverse-filtered target, then Levenberg-Marquardt through the
+   integrator with a growing horizon); a lag is kept when it lowers the training error by
+   more than term_min_gain (relative);
 2. up to `refine_terms` new terms, one at a time: every product of two of the states (not
    psi) and input taps at delays 0..max_delay, and every tap alone, is screened by how much
    of the one-step residual it explains beyond the equation's terms; the SCREENED best are
@@ -25,7 +26,10 @@ of the roll and pitch set-points at several delays, filtered by the motors
    continuous-time engine the validation flights are flown by RK4 with FIDELITY_SUBSTEPS
    steps per sample, as a reader's simulator flies the printed ODE: a stiff loop that holds
    only by the damping of one RK4 step per sample does not win there;
-4. with all six equations, the six are flown together on the stability repair's windows
+4. a chosen equation with a lag has its time constant fitted as well, every constant
+   refitted (gpquad.models.lag_fit.polish_lag), and is replaced by that fit when it flies
+   the validation windows better;
+5. with all six equations, the six are flown together on the stability repair's windows
    (and their mirror images), and refinements are undone one at a time while that makes
    the full model fly better (keep_what_flies): each equation was refined flown alone, and
    a lagged stiff loop that flies alone can diverge beside the others.
@@ -44,7 +48,6 @@ import sympy as sp
 
 from gpquad.data.mirror import mirror_dataset
 from gpquad.engine.evolve.selection import RSE_RESOLUTION
-from gpquad.engine.lag import LAG_GRID
 from gpquad.engine.taps import base_input
 from gpquad.engine.threads import thread_map
 from gpquad.engine.tree.export import round_constants
@@ -52,7 +55,8 @@ from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.earned import earn_terms
 from gpquad.models.equation import Equation
 from gpquad.models.joint_fit import CHECK_HORIZON_S, judged_windows
-from gpquad.models.refine_problem import RefineProblem
+from gpquad.models.lag_fit import choose_lag, polish_lag
+from gpquad.models.refine_problem import RefineProblem, monomials
 from gpquad.models.stability import FullModelFlights
 from gpquad.models.symmetry import wrong_parity
 
@@ -75,11 +79,6 @@ class Step(NamedTuple):
     validation: float  # validation windows
     added: list  # the terms added so far
     dropped: tuple = ()  # the found equation's terms that did not earn their place
-
-
-def monomials(expr: sp.Expr) -> list[sp.Expr]:
-    """The expanded expression's monomials without their coefficients (1 for a constant)."""
-    return [term.as_coeff_Mul()[1] for term in sp.Add.make_args(sp.expand(expr))]
 
 
 def library(problem: RefineProblem, flipped) -> list[sp.Expr]:
@@ -123,30 +122,6 @@ def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray, residual: np.nd
     validation error 0.022; from here it went on to 0.0092.)"""
     c = float(column @ residual / max(float(column @ column), 1e-300))
     return expr + sp.Float(c) * term
-
-
-def choose_lag(
-    problem: RefineProblem, expr: sp.Expr, error: float, gain: float, workers: int = 1
-) -> tuple[float, sp.Expr, float]:
-    """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
-    the equation's own terms flies best, if it beats the found equation by `gain`; the
-    time constants are fitted in up to `workers` threads, each on a problem of its own."""
-    best = (0.0, expr, error)
-    terms = monomials(expr)
-    columns = np.column_stack([problem.values(m) for m in terms])  # the same for every lag
-
-    def fitted(tau: float) -> tuple[sp.Expr, float]:
-        lagged = problem.with_lag(tau)  # the one-step target is the data inverse-filtered by it
-        coef, *_ = np.linalg.lstsq(columns, lagged.commanded(), rcond=None)
-        start = sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, terms, strict=True)])
-        return lagged.fit(start)
-
-    taus = list(LAG_GRID[1:])
-    for tau, (fit, fit_error) in zip(taus, thread_map(fitted, taus, workers), strict=True):
-        if fit_error < best[2] - gain:
-            best = (tau, fit, fit_error)
-    problem.ev.set_lag(best[0])
-    return best
 
 
 def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
@@ -229,6 +204,15 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
     # path[0] (path[1] after earn_terms) has a finite validation error; a later step may not
     eligible = [p for p in path[1 if dropped else 0 :] if np.isfinite(p.validation)]
     chosen = min(eligible, key=lambda p: p.validation)
+    chosen_problem = problem
+    if chosen.lag > 0:  # the lag fitted as one more constant of the chosen equation
+        polished = polish_lag(problem, chosen.expr, chosen.lag, chosen.error, workers)
+        if polished[0] != chosen.lag:
+            tau, expr, error, lagged = polished
+            val = lagged.error(lagged.tree(expr), dataset.validation)
+            path.append(Step(tau, expr, error, val, chosen.added, chosen.dropped))
+            if np.isfinite(val) and val < chosen.validation:
+                chosen, chosen_problem = path[-1], lagged
     report = {
         "lag": chosen.lag,
         "added": [text(equation, t) for t in chosen.added],
@@ -238,7 +222,7 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
         "validation_before": path[0].validation,
         "validation_after": chosen.validation,
         "tried": len(path) - 1,
-        "substeps": problem.fitting(chosen.expr).substeps,
+        "substeps": chosen_problem.fitting(chosen.expr).substeps,
     }
     if chosen is path[0]:
         return equation, report

@@ -28,6 +28,11 @@ FIT_STEPS = 40
 SCREEN_SAMPLES = 20000
 
 
+def monomials(expr: sp.Expr) -> list[sp.Expr]:
+    """The expanded expression's monomials without their coefficients (1 for a constant)."""
+    return [term.as_coeff_Mul()[1] for term in sp.Add.make_args(sp.expand(expr))]
+
+
 class RefineProblem:
     """One equation's data for the refinement: the dataset with one tap per delay
     0..max_delay, the search's evaluator on it (`ev`, which fits), the evaluator that
