@@ -24,8 +24,7 @@ ten (measured on rotorpy-angle: fitting the 10 s windows alone made the 1 s RSE 
 docs/decisions/2026-11-26-joint-refit-horizon.md). The horizon stops growing once a fit
 flies the model to round-off (every state's RSE at each horizon below the selection's
 RSE_RESOLUTION, squared, on average): it has no drift left to correct. Structures are
-not changed. A model that already flies the judged windows (below) to round-off is left
-as it is: there is nothing for a refit to gain.
+not changed.
 
 Each horizon's fit is a candidate: the one with the lowest error on the validation windows
 below is kept if it is significantly better than the model as it was. Where drift matters
@@ -224,8 +223,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     "constants", "lags" (time constants fitted), "rollouts" (full-model flights over the
     training windows, Jacobians included), "substeps" (of the fit's flights), "stages"
     ({horizon: judged error of the fit that ended there}), "fitted_to_s" (the horizon of
-    the fit judged best, the one kept if it is significantly better), "time_s"}; with
-    "resolved": true and no fit when the model flies the judged windows to round-off.
+    the fit judged best, the one kept if it is significantly better), "time_s"}.
     """
     t0 = time.perf_counter()
     states = measured_states(dataset)
@@ -260,15 +258,6 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     read_before = as_flown_by_readers(model)
     before_w = judge.window_errors(read_before)
     before = float(before_w.sum())
-    if before < len(states) * RSE_RESOLUTION**2:  # flown to round-off: nothing to refit
-        report.update(
-            judged_on=judged_on,
-            error_before=before,
-            error_after=before,
-            resolved=True,
-            time_s=time.perf_counter() - t0,
-        )
-        return model, report
     x = x0.copy()
     objectives, staged = [], []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
@@ -333,11 +322,6 @@ def joint_fit_summary(report: dict) -> str:
     """One line for the user: what the joint refit did."""
     if report.get("error_before") is None:
         return "joint refit: not made (no measured state or no window fits)"
-    if report.get("resolved"):
-        return (
-            f"joint refit: not needed ({report['judged_on']} error {report['error_before']:.3g}"
-            f" over {report['horizon_s']:g} s windows, within the resolution)"
-        )
     verdict = "kept" if report["accepted"] else "not kept (not significantly better)"
     return (
         f"joint refit of {report['constants']} constants"
