@@ -4,9 +4,7 @@ Each equation is identified with the other five accelerations taken from the dat
 section 3.2), so each is right with the data's states around it. Flown together, a small
 error in one (say an attitude loop) is integrated by the others (the velocities), and the
 full model drifts. This step refits the constants of every equation at once on the error
-of the full model, every state integrated, and the time constant of each lagged equation
-with them (its logarithm, one more parameter; printed and kept at the digits the
-equations print it with, gpquad.models.lag_fit):
+of the full model, every state integrated:
 
     minimise  sum_s  sum_{w,k} (x_s[w,k] - data_s[w,k])^2 / sum_{w,k} (data_s - mean)^2
 
@@ -69,7 +67,6 @@ from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
-from gpquad.models.lag_fit import printed_lag
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 from gpquad.models.stiffness import model_substeps
 
@@ -108,10 +105,8 @@ def _slots(model) -> list[tuple[str, np.ndarray]]:
     ]
 
 
-def with_constants(model, slots, x: np.ndarray, lagged=(), printed: bool = False):
-    """The model with the constants of `slots` set from the flat vector x, then the lags of
-    the `lagged` targets from its last entries (log of the time constant; at the digits
-    the equations print them with when `printed`)."""
+def with_constants(model, slots, x: np.ndarray):
+    """The model with the constants of `slots` set from the flat vector x."""
     eqs, at = dict(model.equations), 0
     for target, idx in slots:
         eq = eqs[target]
@@ -119,9 +114,6 @@ def with_constants(model, slots, x: np.ndarray, lagged=(), printed: bool = False
         values[idx] = x[at : at + len(idx)]
         at += len(idx)
         eqs[target] = dataclasses.replace(eq, tree=Tree(eq.tree.codes, values, eq.tree.delays))
-    for target, log_tau in zip(lagged, x[at:], strict=True):
-        tau = float(np.exp(log_tau))
-        eqs[target] = dataclasses.replace(eqs[target], lag=printed_lag(tau) if printed else tau)
     return dataclasses.replace(model, equations=eqs)
 
 
@@ -220,10 +212,10 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
 
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
-    "constants", "lags" (time constants fitted), "rollouts" (full-model flights over the
-    training windows, Jacobians included), "substeps" (of the fit's flights), "stages"
-    ({horizon: judged error of the fit that ended there}), "fitted_to_s" (the horizon of
-    the fit judged best, the one kept if it is significantly better), "time_s"}.
+    "constants", "rollouts" (full-model flights over the training windows, Jacobians
+    included), "substeps" (of the fit's flights), "stages" ({horizon: judged error of the
+    fit that ended there}), "fitted_to_s" (the horizon of the fit judged best, the one
+    kept if it is significantly better), "time_s"}.
     """
     t0 = time.perf_counter()
     states = measured_states(dataset)
@@ -231,19 +223,17 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         t for t in TARGET_NAMES if TARGET_STATE[t] in {SCORED_STATES[i] for i in states}
     }
     slots = [(t, idx) for t, idx in _slots(model) if t in fitted_targets and len(idx)]
-    # a lag's time constant is fitted beside the constants, as its logarithm (positive)
-    lagged = [t for t, _ in slots if model.equations[t].lag > 0]
-    x0 = np.concatenate(
-        [model.equations[t].tree.values[idx] for t, idx in slots]
-        + [np.log([model.equations[t].lag for t in lagged])]
+    x0 = (
+        np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots])
+        if slots
+        else np.zeros(0)
     )
     history = model_history(model)
     report: dict[str, Any] = {
         "accepted": False,
         "horizon_s": float(horizons_s[-1]),
         "states": [SCORED_STATES[i] for i in states],
-        "constants": int(x0.size - len(lagged)),
-        "lags": len(lagged),
+        "constants": int(x0.size),
         "rollouts": 0,
     }
     # windows of the longest horizon, shortened to the longest validation range if need be
@@ -272,7 +262,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
 
         def residuals(v, objectives=tuple(objectives)):
             next(rollouts)
-            m = with_constants(flown, slots, v, lagged)
+            m = with_constants(flown, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
         value, jacobian = forward_difference(residuals, workers)
@@ -285,7 +275,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     # each horizon's fit is a candidate; the validation windows choose among them
     judged = []
     for seconds, x in staged or [(0.0, x0)]:  # (none without a training window: no change)
-        refitted = with_constants(model, slots, x, lagged, printed=True)
+        refitted = with_constants(model, slots, x)
         judged.append((judge.window_errors(as_flown_by_readers(refitted)), seconds, refitted))
     after_w, stage_s, refitted = min(judged, key=lambda j: float(j[0].sum()))
     accepted = significant_drop(before_w, after_w) or (
@@ -324,9 +314,7 @@ def joint_fit_summary(report: dict) -> str:
         return "joint refit: not made (no measured state or no window fits)"
     verdict = "kept" if report["accepted"] else "not kept (not significantly better)"
     return (
-        f"joint refit of {report['constants']} constants"
-        + (f" and {report['lags']} lags" if report.get("lags") else "")
-        + " on full-model rollouts: "
+        f"joint refit of {report['constants']} constants on full-model rollouts: "
         f"{verdict}; {report['judged_on']} error (sum of the RSE of "
         f"{', '.join(report['states'])} over {report['horizon_s']:g} s windows) "
         f"{report['error_before']:.4g} -> {report['error_after']:.4g}"
