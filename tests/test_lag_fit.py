@@ -1,0 +1,77 @@
+"""The lag fitted as one more constant (gpquad.models.lag_fit.polish_lag): from the grid's
+pick to the minimum between its neighbours, at the digits the equations print."""
+
+import math
+
+import pytest
+import sympy as sp
+
+from gpquad.engine.lag import LAG_GRID
+from gpquad.models.lag_fit import (
+    grid_neighbours,
+    parabola_vertex,
+    polish_lag,
+    printed_lag,
+)
+
+
+class Bowl:
+    """A refinement problem whose fit at lag tau leaves an error of a smooth bowl in
+    log tau, lowest at `best` (what refitting every constant at each lag gives)."""
+
+    def __init__(self, best: float, tau: float = 0.0, calls=None):
+        self.best, self.tau = best, tau
+        self.calls = [] if calls is None else calls
+
+    def with_lag(self, tau: float):
+        return Bowl(self.best, tau, self.calls)
+
+    def fit(self, expr):
+        self.calls.append(self.tau)
+        x = math.log(self.tau / self.best)
+        return expr * self.tau, 1.0 + x * x + 0.3 * x**3
+
+
+def chosen_by_grid(best: float) -> float:
+    grid = [t for t in LAG_GRID if t > 0]
+    return min(grid, key=lambda t: Bowl(best).with_lag(t).fit(sp.Integer(1))[1])
+
+
+@pytest.mark.parametrize("truth", [0.064, 0.072, 0.043, 0.16])
+def test_the_lag_is_fitted_between_the_grids_points(truth):
+    """The grid's pick is off by up to a fifth; the polish lands within 2 % of the
+    minimum, in at most five fits, and the fit it returns is the one made at its lag."""
+    problem = Bowl(truth)
+    grid_tau = chosen_by_grid(truth)
+    assert abs(grid_tau / truth - 1) > 0.02  # the bad case: the grid alone misses it
+    _, error = problem.with_lag(grid_tau).fit(sp.Integer(1))
+    problem.calls.clear()
+    tau, expr, fit_error, lagged = polish_lag(problem, sp.Integer(1), grid_tau, error)
+    assert tau == pytest.approx(truth, rel=0.02)
+    assert fit_error < error
+    assert expr == sp.Float(tau) and lagged.tau == tau
+    assert len(problem.calls) <= 5
+
+
+def test_the_polish_walks_past_the_neighbours_when_the_minimum_is_beyond():
+    """The equation's terms were added at the grid's lag; with them the best lag may be
+    beyond a neighbour: the polish steps on along the grid (a walk, not a bracket)."""
+    problem = Bowl(0.13)
+    _, error = problem.with_lag(0.05).fit(sp.Integer(1))
+    tau, *_ = polish_lag(problem, sp.Integer(1), 0.05, error)
+    assert tau > 0.07
+
+
+def test_a_lag_is_printed_as_it_was_fitted():
+    assert printed_lag(0.0641837) == 0.0642
+    assert float(f"{printed_lag(0.0641837):.3g}") == printed_lag(0.0641837)
+
+
+def test_the_neighbours_and_the_vertex():
+    assert grid_neighbours(0.05) == (0.035, 0.07)
+    assert grid_neighbours(0.06) == (0.05, 0.07)
+    low, high = grid_neighbours(0.2)
+    assert low == 0.14 and high > 0.2
+    assert parabola_vertex([(0.0, 1.0), (1.0, 0.0), (2.0, 1.0)]) == pytest.approx(1.0)
+    assert parabola_vertex([(0.0, 0.0), (1.0, 1.0), (2.0, 0.0)]) is None  # a maximum
+    assert parabola_vertex([(0.0, 0.0), (1.0, 1.0), (2.0, 2.0)]) is None  # a line
