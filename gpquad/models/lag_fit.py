@@ -1,13 +1,11 @@
 """An equation's first-order lag, fitted (gpquad.engine.lag; steps of gpquad.models.refine).
 
 `choose_lag` tries every time constant of LAG_GRID on the found equation's own terms.
-The grid is coarse (a factor 1.4 between neighbours) and it is searched before the
-refinement adds its terms; the terms added then make up for a lag off the vehicle's: on
-rotorpy's crazyflie (72 ms motors) the grid's 50 ms won, and the roll equation's rate and
-angle gains came out 25 % and 41 % under the controller's. `polish_lag` fits the chosen
-equation's time constant as one more constant: every constant refitted through the
-integrator at each trial lag, the trials placed by parabolas in log tau between the grid's
-neighbours (docs/decisions/2026-11-27-lag-fit.md).
+The grid is coarse (a factor of about 1.4 between neighbours) and it is searched before
+the refinement adds its terms, which then make up for a lag off the vehicle's. `polish_lag`
+fits the chosen equation's time constant as one more constant: every constant refitted
+through the integrator at each trial lag, the trials placed by parabolas in log tau from
+the grid's neighbours (docs/decisions/2026-11-26-lag-fit.md).
 """
 
 from __future__ import annotations
