@@ -258,3 +258,18 @@ def test_a_lagged_equation_is_judged_with_its_lag(dataset):
     want = float(problem.judge.window_errors([tree], starts, n_steps=steps).mean())
     assert lagged == pytest.approx(want, rel=1e-12)
     assert lagged != pytest.approx(unlagged, rel=1e-3)
+
+
+def test_a_fitted_lag_must_gain_like_any_other_step():
+    """The lag fit replaces the chosen equation only when it lowers the training error by
+    more than the step's gain and flies the validation windows better: a fit 0.5 % better
+    in training (and better on validation) is not taken, the bad case of taking any
+    validation gain."""
+    from gpquad.models.refine import Step, takes_fitted_lag
+
+    chosen = Step(0.05, None, 1.0, 1.0, [])
+    gain = 0.01 * chosen.error
+    assert not takes_fitted_lag(chosen, Step(0.06, None, 0.995, 0.9, []), gain)
+    assert takes_fitted_lag(chosen, Step(0.06, None, 0.95, 0.9, []), gain)
+    assert not takes_fitted_lag(chosen, Step(0.06, None, 0.95, 1.1, []), gain)
+    assert not takes_fitted_lag(chosen, Step(0.06, None, 0.95, float("nan"), []), gain)

@@ -27,8 +27,8 @@ of the roll and pitch set-points at several delays, filtered by the motors
    steps per sample, as a reader's simulator flies the printed ODE: a stiff loop that holds
    only by the damping of one RK4 step per sample does not win there;
 4. a chosen equation with a lag has its time constant fitted as well, every constant
-   refitted (gpquad.models.lag_fit.polish_lag), and is replaced by that fit when it flies
-   the validation windows better;
+   refitted (gpquad.models.lag_fit.polish_lag), and is replaced by that fit when it lowers
+   the training error by more than term_min_gain and flies the validation windows better;
 5. with all six equations, the six are flown together on the stability repair's windows
    (and their mirror images), and refinements are undone one at a time while that makes
    the full model fly better (keep_what_flies): each equation was refined flown alone, and
@@ -124,6 +124,16 @@ def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray, residual: np.nd
     return expr + sp.Float(c) * term
 
 
+def takes_fitted_lag(chosen: Step, fitted: Step, gain: float) -> bool:
+    """Whether the lag fit's step replaces the chosen one: a training error lower by more
+    than `gain` (as any step of the path must earn) and a lower validation error."""
+    return (
+        fitted.error < chosen.error - gain
+        and bool(np.isfinite(fitted.validation))
+        and fitted.validation < chosen.validation
+    )
+
+
 def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
     """(equation, report): the found equation's lag and added terms (module notes), or the
     found equation itself when no refinement flies the validation windows better. workers:
@@ -211,7 +221,7 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
             tau, expr, error, lagged = polished
             val = lagged.error(lagged.tree(expr), dataset.validation)
             path.append(Step(tau, expr, error, val, chosen.added, chosen.dropped))
-            if np.isfinite(val) and val < chosen.validation:
+            if takes_fitted_lag(chosen, path[-1], gain(chosen.error)):
                 chosen, chosen_problem = path[-1], lagged
     report = {
         "lag": chosen.lag,
