@@ -75,3 +75,23 @@ def test_the_neighbours_and_the_vertex():
     assert parabola_vertex([(0.0, 1.0), (1.0, 0.0), (2.0, 1.0)]) == pytest.approx(1.0)
     assert parabola_vertex([(0.0, 0.0), (1.0, 1.0), (2.0, 0.0)]) is None  # a maximum
     assert parabola_vertex([(0.0, 0.0), (1.0, 1.0), (2.0, 2.0)]) is None  # a line
+
+
+def test_the_grids_fits_of_the_same_terms_are_not_made_again():
+    """When the chosen equation is the grid's own fit (no term added since), its fits at
+    the other grid lags are the polish's first trials: no neighbour is fitted again, and
+    the result is the polish's from scratch. Without `known` (the bad case for the saving)
+    both neighbours are fitted."""
+    fresh = Bowl(0.064)
+    _, error = fresh.with_lag(0.07).fit(sp.Integer(1))
+    fresh.calls.clear()
+    tau_fresh, *_ = polish_lag(fresh, sp.Integer(1), 0.07, error)
+    assert {0.05, 0.1} <= set(fresh.calls)
+    problem = Bowl(0.064)
+    known = {
+        t: (*problem.with_lag(t).fit(sp.Integer(1)), problem.with_lag(t)) for t in LAG_GRID[1:]
+    }
+    problem.calls.clear()
+    tau, *_ = polish_lag(problem, sp.Integer(1), 0.07, error, known=known)
+    assert tau == tau_fresh
+    assert not set(problem.calls) & set(LAG_GRID)

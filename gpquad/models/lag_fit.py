@@ -33,27 +33,30 @@ def printed_lag(tau: float) -> float:
 
 
 def choose_lag(problem, expr: sp.Expr, error: float, gain: float, workers: int = 1):
-    """(tau, refitted expr, its training error): the LAG_GRID time constant whose refit of
-    the equation's own terms flies best, if it beats the found equation by `gain`; the
-    time constants are fitted in up to `workers` threads, each on a problem of its own.
-    `problem` is a gpquad.models.refine_problem.RefineProblem; its lag is set to the one
-    chosen."""
+    """(tau, refitted expr, its training error, every lag's fit): the LAG_GRID time
+    constant whose refit of the equation's own terms flies best, if it beats the found
+    equation by `gain`; the time constants are fitted in up to `workers` threads, each on
+    a problem of its own. `problem` is a gpquad.models.refine_problem.RefineProblem; its lag
+    is set to the one chosen. The fits, {tau: (expr, training error, problem at tau)}, are
+    polish_lag's `known` when the chosen equation is the one returned here."""
     best = (0.0, expr, error)
     terms = monomials(expr)
     columns = np.column_stack([problem.values(m) for m in terms])  # the same for every lag
 
-    def fitted(tau: float) -> tuple[sp.Expr, float]:
+    def fitted(tau: float):
         lagged = problem.with_lag(tau)  # the one-step target is the data inverse-filtered by it
         coef, *_ = np.linalg.lstsq(columns, lagged.commanded(), rcond=None)
         start = sp.Add(*[sp.Float(float(c)) * m for c, m in zip(coef, terms, strict=True)])
-        return lagged.fit(start)
+        fit, fit_error = lagged.fit(start)
+        return fit, fit_error if np.isfinite(fit_error) else np.inf, lagged
 
     taus = list(LAG_GRID[1:])
-    for tau, (fit, fit_error) in zip(taus, thread_map(fitted, taus, workers), strict=True):
+    fits = dict(zip(taus, thread_map(fitted, taus, workers), strict=True))
+    for tau, (fit, fit_error, _) in fits.items():
         if fit_error < best[2] - gain:
             best = (tau, fit, fit_error)
     problem.ev.set_lag(best[0])
-    return best
+    return (*best, fits)
 
 
 def grid_neighbours(tau: float) -> tuple[float, float]:
@@ -79,22 +82,24 @@ def parabola_vertex(points: list[tuple[float, float]]) -> float | None:
     return 0.5 * (x0 + x1) - d01 / (2.0 * curvature)
 
 
-def polish_lag(problem, expr: sp.Expr, tau: float, error: float, workers: int = 1):
+def polish_lag(problem, expr: sp.Expr, tau: float, error: float, workers: int = 1, known=None):
     """(tau, expr, training error, the problem at that lag): `expr`, fitted at lag tau > 0
-    with training error `error`, with its time constant fitted too (module notes). The two
-    grid neighbours are fitted side by side in up to `workers` threads, then up to
+    with training error `error`, with its time constant fitted too (module notes). `known`:
+    fits of the same terms at other lags already made ({tau: (expr, error, problem)},
+    choose_lag's), not made again. The two grid neighbours are fitted side by side in up to
+    `workers` threads, then up to
     POLISH_FITS trials at the vertex of the parabola in log tau through the best trial and
     the nearest tried either side of it (a step of the grid beyond the best when it is at
     an end of the tried). Each trial refits every constant from `expr`'s; the lags are
     printed_lag values, so the equation prints the lag it was fitted with."""
-    tried = {tau: (expr, error, problem)}
+    tried = {**(known or {}), tau: (expr, error, problem)}
 
     def trial(t: float):
         lagged = problem.with_lag(t)
         fit, fit_error = lagged.fit(expr)
         return fit, fit_error if np.isfinite(fit_error) else np.inf, lagged
 
-    neighbours = list(grid_neighbours(tau))
+    neighbours = [t for t in grid_neighbours(tau) if t not in tried]
     tried.update(zip(neighbours, thread_map(trial, neighbours, workers), strict=True))
     for _ in range(POLISH_FITS):
         best = min(tried, key=lambda t: (tried[t][1], t))

@@ -186,7 +186,8 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
             val = problem.error(problem.tree(refit), dataset.validation)
             path.append(Step(0.0, refit, refit_error, val, [], tuple(dropped)))
             expr, error = refit, refit_error
-    tau, expr, error = choose_lag(problem, expr, error, gain(error), workers)
+    tau, expr, error, grid_fits = choose_lag(problem, expr, error, gain(error), workers)
+    lag_choice = expr
     if tau > 0:
         val = problem.error(problem.tree(expr), dataset.validation)
         path.append(Step(tau, expr, error, val, [], tuple(dropped)))
@@ -216,7 +217,9 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
     chosen = min(eligible, key=lambda p: p.validation)
     chosen_problem = problem
     if chosen.lag > 0:  # the lag fitted as one more constant of the chosen equation
-        polished = polish_lag(problem, chosen.expr, chosen.lag, chosen.error, workers)
+        # the grid's fits of the same terms are the polish's first trials
+        known = grid_fits if chosen.expr is lag_choice else None
+        polished = polish_lag(problem, chosen.expr, chosen.lag, chosen.error, workers, known)
         if polished[0] != chosen.lag:
             tau, expr, error, lagged = polished
             val = lagged.error(lagged.tree(expr), dataset.validation)
