@@ -21,6 +21,7 @@ from gpquad.models.precision import (
     printed_digits,
     sample_columns,
     sample_rows,
+    with_exact_raw_constant,
     with_printed_digits,
 )
 from gpquad.study.config import SimulatorConfig
@@ -161,3 +162,32 @@ def test_a_rounded_constant_is_bounded_on_average_too(dataset, monkeypatch):
     assert not faithful(eq.sympy(), own, columns, 3)
     monkeypatch.setattr(precision, "BIAS_TOLERANCE", 1.0)
     assert printed_digits(eq, ds.arrays, rows) == 3
+
+
+def _trimmed_roll(ds, residue: float) -> Equation:
+    """p_dot = -4.15 p + 10.3 (u_R(t-1) - trim) + c with c such that the raw form's constant
+    is `residue`."""
+    trim = ds.trim["u_R"]
+    return _equation(f"-4.15*p + 10.3*u_R(t-1) + {10.3 * trim + residue!r}", ds)
+
+
+def test_a_raw_constant_the_data_cannot_see_is_not_printed(dataset):
+    ds = dataset
+    assert ds.trim["u_R"] != 0.0
+    rows = sample_rows(ds.train, 5)
+    found = _trimmed_roll(ds, 2.6e-8)  # as a fit leaves it: the trimmed constant to 1e-6
+    assert "e-8" in found.text(raw=True)  # a real number is not taken for round-off
+    exact = with_exact_raw_constant(found, ds.arrays, rows)
+    assert exact.text(raw=True) == "p_dot = -4.15*p + 10.3*u_R(t-1)"
+    assert exact.text() == found.text()  # the trimmed form keeps its constant
+    moved = _tree_values(exact, ds, rows) - _tree_values(found, ds, rows)
+    assert np.max(np.abs(moved)) < 1e-7
+    # a constant the data see is kept (the bad case): 1 % of the equation's RMS
+    rms = float(np.sqrt(np.mean(_tree_values(found, ds, rows) ** 2)))
+    real = _trimmed_roll(ds, 0.01 * rms)
+    kept = with_exact_raw_constant(real, ds.arrays, rows)
+    assert kept.text(raw=True) == real.text(raw=True)
+    assert kept.text(raw=True).endswith(f"{0.01 * rms:.3g}")
+    # and with_printed_digits applies it to a model's equations
+    model = DiscoveredModel({"p_dot": found}, ds.input_names, dict(ds.trim), ds.dt, 0, {})
+    assert with_printed_digits(model, ds).equations["p_dot"].text(raw=True).endswith("u_R(t-1)")

@@ -31,6 +31,12 @@ from gpquad.models.model_checks import (
     parse_candidate,
 )
 
+#: A raw-input constant at most this fraction of the constants it sums (the equation's own
+#: and each trimmed input's coefficient times its trim) is their float round-off, and the
+#: raw forms print none (gpquad.models.precision.with_exact_raw_constant makes a negligible
+#: one exactly that).
+RAW_ROUNDOFF = 1e-9
+
 
 @dataclass
 class Equation:
@@ -87,15 +93,38 @@ class Equation:
         """Fitted numbers in the printed equation (each occurrence of a float in sympy())."""
         return sum(1 for a in sp.preorder_traversal(self.sympy()) if isinstance(a, sp.Float))
 
-    def sympy_raw(self) -> sp.Expr:
-        """The same equation in the raw (not trim-subtracted) inputs."""
-        expr = self.sympy()
-        reps = {
-            sp.Symbol(n, real=True): sp.Symbol(n, real=True) - self.trim.get(base_input(n), 0.0)
+    def trims(self) -> dict[sp.Symbol, float]:
+        """Each input leaf with a trim -> its trim."""
+        return {
+            sp.Symbol(n, real=True): self.trim.get(base_input(n), 0.0)
             for n in self.leaf_names
             if self.trim.get(base_input(n), 0.0)
         }
-        return simplify(expr.xreplace(reps)) if reps else expr
+
+    def raw_constant_parts(self) -> list[float]:
+        """What the raw form's constant sums: each term of the expanded equation that reads
+        only trimmed inputs (or nothing), at raw inputs 0 (each trimmed input at -trim)."""
+        trims = self.trims()
+        at_zero = {s: -t for s, t in trims.items()}
+        return [
+            float(term.xreplace(at_zero))
+            for term in sp.Add.make_args(sp.expand(self.sympy()))
+            if term.free_symbols <= set(trims)
+        ]
+
+    def sympy_raw(self) -> sp.Expr:
+        """The same equation in the raw (not trim-subtracted) inputs; a constant that is the
+        round-off of its parts (RAW_ROUNDOFF) is left out."""
+        expr = self.sympy()
+        trims = self.trims()
+        if not trims:
+            return expr
+        raw = simplify(expr.xreplace({s: s - t for s, t in trims.items()}))
+        constant, rest = raw.as_coeff_Add()
+        scale = sum(abs(c) for c in self.raw_constant_parts())
+        if constant and abs(float(constant)) <= RAW_ROUNDOFF * scale:
+            return rest
+        return raw
 
     def latex_lhs(self) -> str:
         """The left-hand side in LaTeX: the target, with its lag operator when lag > 0."""

@@ -127,6 +127,26 @@ def without_negligible_terms(equation, arrays, rows):
     return dataclasses.replace(equation, tree=tree)
 
 
+def with_exact_raw_constant(equation, arrays, rows):
+    """`equation` with its constant moved so that its raw form's constant is zero when that
+    constant moves the equation by at most half of BIAS_TOLERANCE x RMS on `rows`: a fit
+    leaves the trimmed constant of p_dot = 10.3 (u_R - trim) - 4.15 p at 1e-6 of its value,
+    and the raw form would print the difference (+ 2.6e-8) as a constant the data do not
+    have. The same equation otherwise."""
+    constant = sum(equation.raw_constant_parts())
+    if not equation.trims() or constant == 0.0:
+        return equation
+    expr = equation.sympy()
+    values = expression_values(expr, sample_columns(equation, arrays, rows, raw=False), len(rows))
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return equation
+    if abs(constant) > 0.5 * BIAS_TOLERANCE * float(np.sqrt(np.mean(values**2))):
+        return equation
+    tree = from_sympy(expr - constant, equation.delays, equation.input_names)
+    return dataclasses.replace(equation, tree=tree)
+
+
 def model_rows(model, dataset) -> np.ndarray:
     """The training samples (else validation) on which a model's equations are compared."""
     max_delay = max((d for e in model.equations.values() for d in e.delays.values()), default=0)
@@ -146,14 +166,18 @@ def without_negligible(model, dataset):
 
 
 def with_printed_digits(model, dataset):
-    """The model without negligible terms (without_negligible_terms) and with each
-    equation's `digits` set from the dataset's training samples."""
+    """The model without negligible terms (without_negligible_terms), with raw constants
+    that are negligible made zero (with_exact_raw_constant) and with each equation's
+    `digits` set from the dataset's training samples."""
     rows = model_rows(model, dataset)
     if len(rows) == 0:
         return model
     model = without_negligible(model, dataset)
+    exact = {
+        t: with_exact_raw_constant(e, dataset.arrays, rows) for t, e in model.equations.items()
+    }
     equations = {
         t: dataclasses.replace(e, digits=printed_digits(e, dataset.arrays, rows))
-        for t, e in model.equations.items()
+        for t, e in exact.items()
     }
     return dataclasses.replace(model, equations=equations)
