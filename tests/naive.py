@@ -201,3 +201,53 @@ def rk4_window_error(
             d = att_weight * (np.mod(d + np.pi, 2 * np.pi) - np.pi)
             total += d * d if squared else abs(d)
     return total / n_steps
+
+
+def right_operands(codes):
+    """Index of each operator node's right operand in a prefix tree, -1 for leaves, by a
+    recursive parse."""
+    out = [-1] * len(codes)
+    pos = 0
+
+    def rec():
+        nonlocal pos
+        here = pos
+        pos += 1
+        if int(codes[here]) < CONST:
+            rec()
+            out[here] = pos
+            rec()
+
+    rec()
+    return out
+
+
+def eval_with_tangent(codes, values, leaves, tangents):
+    """(value, gradient w.r.t. the constants) by forward mode: every node carries its
+    derivative vector; a leaf k carries tangents[k], the j-th constant the unit vector j."""
+    n_c = tangents.shape[1]
+    pos, slot = 0, 0
+
+    def rec():
+        nonlocal pos, slot
+        c, v = int(codes[pos]), float(values[pos])
+        pos += 1
+        if c == CONST:
+            d = np.zeros(n_c)
+            d[slot] = 1.0
+            slot += 1
+            return v, d
+        if c >= VAR_BASE:
+            return float(leaves[c - VAR_BASE]), np.array(tangents[c - VAR_BASE], dtype=float)
+        (a, da), (b, db) = rec(), rec()
+        if c == 0:
+            return a + b, da + db
+        if c == 1:
+            return a - b, da - db
+        if c == 2:
+            return a * b, da * b + a * db
+        if abs(b) < DIV_EPS:
+            return 1.0, np.zeros(n_c)
+        return a / b, (da - (a / b) * db) / b
+
+    return rec()

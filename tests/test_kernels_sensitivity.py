@@ -9,8 +9,8 @@ from test_kernels import as_tree, prefix_trees, smooth_trees
 import naive
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants, residuals_and_jacobian
-from gpquad.engine.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_tangent
-from gpquad.engine.kernels.tree_eval import STACK_ROWS
+from gpquad.engine.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_gradient
+from gpquad.engine.kernels.tree_tangent import right_children
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, VAR_BASE
 from gpquad.engine.variables import TARGET_NAMES
@@ -39,15 +39,17 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
     n_c = _n_const(tree)
     slot_of = np.where(tree.codes == CONST, np.cumsum(tree.codes == CONST) - 1, -1)
     grad = np.empty(n_c)
-    value = eval_with_tangent(
+    value = eval_with_gradient(
         tree.codes,
         tree.values,
         tree.size,
         slot_of,
+        right_children(tree.codes, tree.size),
         np.array(leaves),
         np.zeros((13, n_c)),
-        np.empty(STACK_ROWS),
-        np.empty((STACK_ROWS, n_c)),
+        np.empty(tree.size),
+        np.empty(tree.size),
+        np.empty(13),
         grad,
     )
     assert value == pytest.approx(

@@ -55,17 +55,17 @@ from gpquad.engine.kernels.step import (
     euler_velocity_tangent,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
-    eval_with_tangent,
+    eval_with_gradient,
     residual_rows,
+    right_children,
 )
 from gpquad.engine.numba_config import njit
 
 __all__ = [
     "DIVERGED_RESIDUAL",
-    "eval_with_tangent",
+    "eval_with_gradient",
     "euler_kinematics",
     "residual_rows",
     "window_residuals",
@@ -166,8 +166,10 @@ def euler_window_residuals(
     slot_of = constant_slots(codes, size)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
-    stack = np.empty(STACK_ROWS)
-    dstack = np.empty((STACK_ROWS, n_c))
+    right = right_children(codes, size)
+    node_value = np.empty(size)
+    node_adjoint = np.empty(size)
+    leaf_adjoint = np.empty(9 + n_in)
     grad = np.empty(n_c)
     sens = np.zeros((3, n_c))  # linear: d vel / d theta; angular: row 0 = d rate_k / d theta
     asens = np.zeros((3, n_c))  # angular: d (phi, theta, psi) / d theta
@@ -222,8 +224,18 @@ def euler_window_residuals(
                             tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
-            pred = eval_with_tangent(
-                codes, values, size, slot_of, features, tangents, stack, dstack, grad
+            pred = eval_with_gradient(
+                codes,
+                values,
+                size,
+                slot_of,
+                right,
+                features,
+                tangents,
+                node_value,
+                node_adjoint,
+                leaf_adjoint,
+                grad,
             )
             if lagged:
                 applied += alpha * (pred - applied)

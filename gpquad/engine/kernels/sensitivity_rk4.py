@@ -20,7 +20,7 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT
+from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, uses_leaves
 from gpquad.engine.kernels.fitness_rk4 import LAG, attitude_and_rates_from_data, stage_features
 from gpquad.engine.kernels.quaternion import euler_angle
 from gpquad.engine.kernels.step import (
@@ -41,13 +41,14 @@ from gpquad.engine.kernels.step import (
     stage_state,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
-    eval_with_tangent,
+    eval_with_gradient,
     residual_rows,
+    right_children,
 )
 from gpquad.engine.numba_config import njit
+from gpquad.engine.tree.operators import VAR_BASE
 
 #: Tangent rows: body velocity (linear targets), the target rate, the Euler angles, the lag.
 TV, TR, TA, TL = 0, 3, 4, 7
@@ -87,8 +88,10 @@ def rk4_window_residuals(
     features = np.zeros((9 + n_in, 1))
     leaf = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
-    stack = np.empty(STACK_ROWS)
-    dstack = np.empty((STACK_ROWS, n_c))
+    right = right_children(codes, size)
+    node_value = np.empty(size)
+    node_adjoint = np.empty(size)
+    leaf_adjoint = np.empty(9 + n_in)
     grad = np.empty(n_c)
     y = np.empty((n_y, 1))
     ys = np.empty((n_y, 1))
@@ -98,7 +101,19 @@ def rk4_window_residuals(
     tan_s = np.zeros((TANGENT_ROWS, n_c))
     tan_slope = np.zeros((TANGENT_ROWS, n_c))
     tan_total = np.zeros((TANGENT_ROWS, n_c))
-    every_state = np.ones(9, dtype=np.bool_)
+    # the leaves computed at each stage: those the tree reads, and the angles the Euler
+    # kinematics of the angles' tangents read
+    used = np.zeros(9 + n_in, dtype=np.bool_)
+    for i in range(size):
+        if codes[i] >= VAR_BASE:
+            used[codes[i] - VAR_BASE] = True
+    used[0] = used[0] or track_angles
+    used[1] = used[1] or track_angles
+    uses_state = uses_leaves(codes, size, 0, 8) or track_angles
+    # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
+    # are tracked, the lag's when there is one
+    t_first = TV if linear else TR
+    t_end = TANGENT_ROWS if lagged else (TV + 3 if linear else (TA + 3 if track_angles else TR + 1))
     a = np.empty(6)
     kin = np.zeros(3)
     jang = np.zeros((3, 2))
@@ -131,10 +146,11 @@ def rk4_window_residuals(
                     node = NODES[stage]
                     body_stage_state(y, slope, node, h, ys, 0, n_y)
                     for c in range(n_c):
-                        stage_state(tan, tan_slope, node, h, tan_s, c, TANGENT_ROWS)
-                    stage_features(ys, 0, every_state, features)
-                    for i in range(9):
-                        leaf[i] = features[i, 0]
+                        stage_state(tan, tan_slope, node, h, tan_s, c, t_end, t_first)
+                    if uses_state:
+                        stage_features(ys, 0, used, features)
+                        for i in range(9):
+                            leaf[i] = features[i, 0]
                     for c in range(n_c):  # the other rows stay zero
                         if linear:
                             for i in range(3):
@@ -144,8 +160,18 @@ def rk4_window_residuals(
                             if angle_tangents:
                                 for i in range(3):
                                     tangents[i, c] = tan_s[TA + i, c]
-                    pred = eval_with_tangent(
-                        codes, values, size, slot_of, leaf, tangents, stack, dstack, grad
+                    pred = eval_with_gradient(
+                        codes,
+                        values,
+                        size,
+                        slot_of,
+                        right,
+                        leaf,
+                        tangents,
+                        node_value,
+                        node_adjoint,
+                        leaf_adjoint,
+                        grad,
                     )
                     f = ys[LAG, 0] if lagged else pred
                     for i in range(6):
@@ -174,10 +200,10 @@ def rk4_window_residuals(
                                     tan_slope[TA + i, c] = (
                                         jang[i, 0] * a0 + jang[i, 1] * a1 + kin[i] * tan_s[TR, c]
                                     )
-                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c, TANGENT_ROWS)
+                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c, t_end, t_first)
                 finish_step(y, total, h, 0, n_y)
                 for c in range(n_c):
-                    advance(tan, tan_total, h, c, TANGENT_ROWS)
+                    advance(tan, tan_total, h, c, t_end, t_first)
             x = y[V + target, 0] if linear else y[W + axis, 0]
             if not abs(x) < STATE_LIMIT:
                 alive = False

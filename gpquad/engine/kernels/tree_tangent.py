@@ -1,9 +1,10 @@
-"""A prefix tree's value and its gradient with respect to its constants (forward mode)."""
+"""A prefix tree's value and its gradient with respect to its constants, by reverse mode
+(the sensitivity kernels' inner loop; tests/naive.py holds the forward-mode reference)."""
 
 import numpy as np
 
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
+from gpquad.engine.tree.operators import ADD, CONST, DIV_EPS, MUL, SUB, VAR_BASE
 
 
 @njit
@@ -27,58 +28,107 @@ def constant_slots(codes, size):
 
 
 @njit
-def eval_with_tangent(codes, values, size, slot_of, features, tangents, stack, dstack, grad):
-    """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)).
+def right_children(codes, size):
+    """(size,) index of each operator node's right operand in a prefix tree (its left one
+    is the next node); -1 for the leaves."""
+    right = np.full(size, -1, dtype=np.int64)
+    pending = np.empty(size, dtype=np.int64)  # operators whose left operand is still open
+    need = np.empty(size, dtype=np.int64)  # operands each pending operator still lacks
+    depth = 0
+    for i in range(size):
+        if depth > 0 and need[depth - 1] == 1:
+            right[pending[depth - 1]] = i
+        if codes[i] < CONST:
+            pending[depth] = i
+            need[depth] = 2
+            depth += 1
+        else:  # a leaf closes operands up the chain
+            while depth > 0:
+                need[depth - 1] -= 1
+                if need[depth - 1] > 0:
+                    break
+                depth -= 1
+    return right
 
-    slot_of (size,): column of each CONST node (-1 otherwise); features (n_terminals,);
-    tangents (n_terminals, n_c): d(leaf)/d(constants); stack (STACK_ROWS,), dstack
-    (STACK_ROWS, n_c) are work buffers. Returns the value.
-    """
-    n_c = grad.shape[0]
-    sp = 0
+
+@njit
+def eval_with_gradient(
+    codes,
+    values,
+    size,
+    slot_of,
+    right,
+    features,
+    tangents,
+    node_value,
+    node_adjoint,
+    leaf_adjoint,
+    grad,
+):
+    """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)),
+    by reverse mode: O(size + leaves read x n_c), where forward mode (every node carrying
+    n_c derivatives) costs O(size x n_c).
+
+    slot_of (size,): column of each CONST node (-1 otherwise); right (size,):
+    right_children(codes, size); features (n_terminals,); tangents (n_terminals, n_c):
+    d(leaf)/d(constants); node_value, node_adjoint (size,) and leaf_adjoint (n_terminals,)
+    are work buffers. The value is the stack evaluation's to the bit (the same operations
+    in the same order). Returns the value."""
     for i in range(size - 1, -1, -1):
         c = codes[i]
         if c >= VAR_BASE:
-            k = c - VAR_BASE
-            stack[sp] = features[k]
-            for j in range(n_c):
-                dstack[sp, j] = tangents[k, j]
-            sp += 1
+            node_value[i] = features[c - VAR_BASE]
         elif c == CONST:
-            stack[sp] = values[i]
-            for j in range(n_c):
-                dstack[sp, j] = 0.0
-            if slot_of[i] >= 0:
-                dstack[sp, slot_of[i]] = 1.0
-            sp += 1
+            node_value[i] = values[i]
         else:
-            top = sp - 1  # left operand
-            res = sp - 2  # right operand, overwritten by the result
-            a = stack[top]
-            b = stack[res]
+            a = node_value[i + 1]
+            b = node_value[right[i]]
             if c == ADD:
-                stack[res] = a + b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] + dstack[res, j]
+                node_value[i] = a + b
             elif c == SUB:
-                stack[res] = a - b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] - dstack[res, j]
+                node_value[i] = a - b
             elif c == MUL:
-                stack[res] = a * b
-                for j in range(n_c):
-                    dstack[res, j] = dstack[top, j] * b + a * dstack[res, j]
-            elif c == DIV:
-                if abs(b) < DIV_EPS:
-                    stack[res] = 1.0
-                    for j in range(n_c):
-                        dstack[res, j] = 0.0
-                else:
-                    q = a / b
-                    stack[res] = q
-                    for j in range(n_c):
-                        dstack[res, j] = (dstack[top, j] - q * dstack[res, j]) / b
-            sp -= 1
+                node_value[i] = a * b
+            elif abs(b) < DIV_EPS:
+                node_value[i] = 1.0
+            else:
+                node_value[i] = a / b
+    n_c = grad.shape[0]
     for j in range(n_c):
-        grad[j] = dstack[0, j]
-    return stack[0]
+        grad[j] = 0.0
+    for k in range(leaf_adjoint.shape[0]):
+        leaf_adjoint[k] = 0.0
+    node_adjoint[0] = 1.0
+    for i in range(size):
+        c = codes[i]
+        g = node_adjoint[i]
+        if c >= VAR_BASE:
+            leaf_adjoint[c - VAR_BASE] += g
+        elif c == CONST:
+            if slot_of[i] >= 0:
+                grad[slot_of[i]] += g
+        else:
+            left, r = i + 1, right[i]
+            if c == ADD:
+                node_adjoint[left] = g
+                node_adjoint[r] = g
+            elif c == SUB:
+                node_adjoint[left] = g
+                node_adjoint[r] = -g
+            elif c == MUL:
+                node_adjoint[left] = g * node_value[r]
+                node_adjoint[r] = g * node_value[left]
+            else:
+                b = node_value[r]
+                if abs(b) < DIV_EPS:
+                    node_adjoint[left] = 0.0
+                    node_adjoint[r] = 0.0
+                else:
+                    node_adjoint[left] = g / b
+                    node_adjoint[r] = -g * node_value[i] / b
+    for k in range(leaf_adjoint.shape[0]):
+        g = leaf_adjoint[k]
+        if g != 0.0:
+            for j in range(n_c):
+                grad[j] += g * tangents[k, j]
+    return node_value[0]
