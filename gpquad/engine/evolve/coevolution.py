@@ -21,6 +21,7 @@ from gpquad.engine.evolve.local_search import (
     improve_delays,
     prune,
 )
+from gpquad.engine.evolve.poles import without_poles
 from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.state import (
     SEED_HORIZONS,
@@ -397,7 +398,14 @@ class Coevolution:
         if len(val_starts) and val_steps == steps:
             chosen_from = np.concatenate([starts, val_starts])
         ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
-        front = [t for t, _ in self.front(state, train)]
+        arrays = self.dataset.arrays
+        # a quotient singular where the data went is no choice (gpquad.engine.evolve.poles)
+        pruned, *front = without_poles(
+            [pruned] + [t for t, _ in self.front(state, train)],
+            arrays.states,
+            arrays.inputs,
+            samples,
+        )
         if cfg.integrator != SEARCH_SCHEME:
             # pruned again: terms the surrogate needed only for its own discretisation go
             ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
