@@ -11,18 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.data.dataset import Dataset
+from gpquad.engine.evolve.choice import SEARCH_SCHEME, FinalChoice
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants
 from gpquad.engine.evolve.leaves import measured_variables
 from gpquad.engine.evolve.linear_seed import linear_seed, variable_scales
 from gpquad.engine.evolve.local_search import (
-    fit_constants,
     improve_constants,
     improve_delays,
-    prune,
 )
-from gpquad.engine.evolve.poles import without_poles
-from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
 from gpquad.engine.evolve.state import (
     SEED_HORIZONS,
     SEED_WINDOWS,
@@ -36,7 +33,6 @@ from gpquad.engine.evolve.windows import WindowSpace, spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.taps import initial_delays, with_taps
 from gpquad.engine.tree.encoding import Tree
-from gpquad.engine.tree.operators import CONST
 from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import (
     constant_mutation,
@@ -48,12 +44,8 @@ from gpquad.engine.tree.variation import (
 from gpquad.engine.variables import N_STATE
 from gpquad.study.config import EvolutionConfig
 
-#: The scheme the generations fly (gpquad.engine.kernels.step): eq. 2, the cheapest; a
-#: configured continuous-time `integrator` fits and chooses the reported equation.
-SEARCH_SCHEME = "euler"
 
-
-class Coevolution:
+class Coevolution(FinalChoice):
     """Coevolutionary identification of one target's equation."""
 
     def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
@@ -316,135 +308,3 @@ class Coevolution:
         state.iteration += 1
         state.rng_state = rng.bit_generator.state
         return state
-
-    # ------------------------------------------------------------- selection
-    def tiled_errors(self, trees: list[Tree], ranges, ev: Evaluator | None = None) -> np.ndarray:
-        """Mean error of each tree over non-overlapping windows tiling `ranges` (inf if none),
-        flown by `ev` (default: the search's evaluator)."""
-        starts, steps = tile(ranges, self.window_steps, self.cfg.max_delay)
-        if len(starts) == 0:
-            return np.full(len(trees), np.nan)
-        ev = self.evaluator if ev is None else ev
-        return ev.window_errors(trees, starts, n_steps=steps).mean(axis=1)
-
-    def training_errors(self, state: RunState) -> np.ndarray:
-        """Each climber's error over the whole training data (NaN: no window fits)."""
-        return self.tiled_errors(state.models, self.dataset.train)
-
-    def best(self, state: RunState, train=None) -> tuple[Tree, float, float]:
-        """The climber with the lowest error over the whole training data, with its training
-        and validation errors. With prune_tolerance > 0 it is pruned first: subtrees become
-        constants while the error grows by less than prune_tolerance times the error of the
-        best constant model. `train` may pass training_errors(state) computed already."""
-        train = self.training_errors(state) if train is None else train
-        i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
-        model, error = state.models[i], float(train[i])
-        if self.cfg.selection == "bic":
-            model = self.select_by_bic(state, model, train)
-        elif self.cfg.prune_tolerance > 0:
-            starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
-            samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
-            # The allowance is a fraction of the error of the best constant model.
-            mean_acc = float(self.dataset.arrays.acc[samples, self.evaluator.target].mean())
-            trivial = Tree.from_lists([CONST], [mean_acc], np.zeros_like(model.delays))
-            scale = float(self.evaluator.window_errors([trivial], starts, n_steps=steps).mean())
-            model, error = prune(
-                self.evaluator,
-                model,
-                starts,
-                steps,
-                self.cfg.prune_tolerance * scale,
-                self.cfg.nelder_mead_evals,
-                lambda t, a, b: self.subtree_mean(t, a, b, samples),
-                self.gradient_fitter(self.cfg.gradient_steps),
-            )
-        ev = self.model_evaluator
-        if self.cfg.selection != "bic" and ev is not self.evaluator:
-            fit = self.gradient_fitter(self.cfg.gradient_steps, ev)
-            starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
-            if fit is not None and len(starts):
-                model = fit(
-                    model,
-                    float(self.tiled_errors([model], self.dataset.train, ev)[0]),
-                    starts,
-                    steps,
-                )[0]
-        error = float(self.tiled_errors([model], self.dataset.train, ev)[0])
-        validation = self.tiled_errors([model], self.dataset.validation, ev)[0]
-        return model, error, float(validation)
-
-    def select_by_bic(self, state: RunState, model: Tree, train) -> Tree:
-        """Prune `model` while its training BIC does not grow, then pick the lowest BIC over
-        the training and validation windows among it and the front's climbers
-        (gpquad.engine.evolve.selection). The pruning flies the search's scheme; with another
-        configured `integrator` the pruned equation is pruned again in it, the front's
-        constants are fitted through it, and the choice is made in it."""
-        cfg = self.cfg
-        starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
-        samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
-
-        def pruned_in(scheme: str, substeps: int, tree: Tree):
-            ev, fit = self._mse_fitter(scheme, substeps)
-            constant_of = lambda t, a, b: self.subtree_mean(t, a, b, samples)  # noqa: E731
-            regain = self.regain_fitter(cfg.gradient_steps, ev)
-            return ev, fit, prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain)
-
-        # BIC over every window, training and validation: a criterion made for the data the
-        # constants were fitted on, and the validation windows alone are often one or two
-        # (px4-s250: its 10 s of validation favoured r_dot = u_Y - r over 16.8 (u_Y - r),
-        # which predicts the held-out flight 50 times better).
-        chosen_from = starts
-        val_starts, val_steps = tile(self.dataset.validation, self.window_steps, cfg.max_delay)
-        if len(val_starts) and val_steps == steps:
-            chosen_from = np.concatenate([starts, val_starts])
-        ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
-        arrays = self.dataset.arrays
-        # a quotient singular where the data went is no choice (gpquad.engine.evolve.poles)
-        pruned, *front = without_poles(
-            [pruned] + [t for t, _ in self.front(state, train)],
-            arrays.states,
-            arrays.inputs,
-            samples,
-        )
-        if cfg.integrator != SEARCH_SCHEME:
-            # pruned again: terms the surrogate needed only for its own discretisation go
-            ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
-            front = fitted_rivals(ev_mse, fit, pruned, front, starts, chosen_from, steps)
-        return select_by_bic(ev_mse, [pruned] + front, chosen_from, steps)[0]
-
-    def _mse_fitter(self, integrator: str, substeps: int):
-        """(mean-squared-error evaluator flying `integrator`, its constant fit)."""
-        cfg = self.cfg
-        ev_mse = Evaluator(
-            self.dataset,
-            self.target,
-            self.window_steps,
-            "mse",
-            cfg.max_depth,
-            integrator=integrator,
-            substeps=substeps,
-        )
-        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
-        if fit is None:
-
-            def fit(tree, err, starts, n_steps):
-                return fit_constants(
-                    tree, err, lambda t: mse_of(ev_mse, t, starts, n_steps), cfg.nelder_mead_evals
-                )
-
-        return ev_mse, fit
-
-    def front(self, state: RunState, train=None) -> list[tuple[Tree, float]]:
-        """The climbers on the size/error Pareto front (training data), smallest first:
-        each is more accurate than every smaller one (alternatives to the best equation)."""
-        train = self.training_errors(state) if train is None else train
-        order = sorted(
-            range(len(state.models)),
-            key=lambda i: (state.models[i].size, np.nan_to_num(train[i], nan=np.inf)),
-        )
-        front, best = [], np.inf
-        for i in order:
-            if train[i] < best:
-                front.append((state.models[i], float(train[i])))
-                best = train[i]
-        return front
