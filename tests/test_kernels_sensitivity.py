@@ -10,7 +10,7 @@ import naive
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants, residuals_and_jacobian
 from gpquad.engine.kernels.sensitivity import DIVERGED_RESIDUAL, eval_with_gradient
-from gpquad.engine.kernels.tree_tangent import right_children
+from gpquad.engine.kernels.tree_tangent import gradient_work
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, VAR_BASE
 from gpquad.engine.variables import TARGET_NAMES
@@ -44,12 +44,9 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
         tree.values,
         tree.size,
         slot_of,
-        right_children(tree.codes, tree.size),
         np.array(leaves),
         np.zeros((13, n_c)),
-        np.empty(tree.size),
-        np.empty(tree.size),
-        np.empty(13),
+        gradient_work(tree.codes, tree.size, 13),
         grad,
     )
     assert value == pytest.approx(

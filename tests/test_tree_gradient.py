@@ -12,6 +12,7 @@ import naive
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     eval_with_gradient,
+    gradient_work,
     right_children,
 )
 from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
@@ -25,12 +26,9 @@ def _gradient(tree, leaves, tangents):
         tree.values,
         tree.size,
         constant_slots(tree.codes, tree.size),
-        right_children(tree.codes, tree.size),
         np.asarray(leaves, dtype=float),
         np.ascontiguousarray(tangents, dtype=float).reshape(len(leaves), n_c),
-        np.empty(tree.size),
-        np.empty(tree.size),
-        np.empty(len(leaves)),
+        gradient_work(tree.codes, tree.size, len(leaves)),
         grad,
     )
     return value, grad

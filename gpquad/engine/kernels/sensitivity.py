@@ -58,8 +58,8 @@ from gpquad.engine.kernels.step import (
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     eval_with_gradient,
+    gradient_work,
     residual_rows,
-    right_children,
 )
 from gpquad.engine.numba_config import njit
 
@@ -166,10 +166,7 @@ def euler_window_residuals(
     slot_of = constant_slots(codes, size)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
-    right = right_children(codes, size)
-    node_value = np.empty(size)
-    node_adjoint = np.empty(size)
-    leaf_adjoint = np.empty(9 + n_in)
+    work = gradient_work(codes, size, 9 + n_in)
     grad = np.empty(n_c)
     sens = np.zeros((3, n_c))  # linear: d vel / d theta; angular: row 0 = d rate_k / d theta
     asens = np.zeros((3, n_c))  # angular: d (phi, theta, psi) / d theta
@@ -224,19 +221,7 @@ def euler_window_residuals(
                             tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
-            pred = eval_with_gradient(
-                codes,
-                values,
-                size,
-                slot_of,
-                right,
-                features,
-                tangents,
-                node_value,
-                node_adjoint,
-                leaf_adjoint,
-                grad,
-            )
+            pred = eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad)
             if lagged:
                 applied += alpha * (pred - applied)
                 pred = applied

@@ -44,8 +44,8 @@ from gpquad.engine.kernels.step import (
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     eval_with_gradient,
+    gradient_work,
     residual_rows,
-    right_children,
 )
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import VAR_BASE
@@ -88,10 +88,7 @@ def rk4_window_residuals(
     features = np.zeros((9 + n_in, 1))
     leaf = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
-    right = right_children(codes, size)
-    node_value = np.empty(size)
-    node_adjoint = np.empty(size)
-    leaf_adjoint = np.empty(9 + n_in)
+    work = gradient_work(codes, size, 9 + n_in)
     grad = np.empty(n_c)
     y = np.empty((n_y, 1))
     ys = np.empty((n_y, 1))
@@ -161,17 +158,7 @@ def rk4_window_residuals(
                                 for i in range(3):
                                     tangents[i, c] = tan_s[TA + i, c]
                     pred = eval_with_gradient(
-                        codes,
-                        values,
-                        size,
-                        slot_of,
-                        right,
-                        leaf,
-                        tangents,
-                        node_value,
-                        node_adjoint,
-                        leaf_adjoint,
-                        grad,
+                        codes, values, size, slot_of, leaf, tangents, work, grad
                     )
                     f = ys[LAG, 0] if lagged else pred
                     for i in range(6):

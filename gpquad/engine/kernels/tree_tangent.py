@@ -52,28 +52,23 @@ def right_children(codes, size):
 
 
 @njit
-def eval_with_gradient(
-    codes,
-    values,
-    size,
-    slot_of,
-    right,
-    features,
-    tangents,
-    node_value,
-    node_adjoint,
-    leaf_adjoint,
-    grad,
-):
+def gradient_work(codes, size, n_terminals):
+    """eval_with_gradient's work for one tree: (its right operands (right_children), node
+    values, node adjoints (size,), leaf adjoints (n_terminals,))."""
+    return right_children(codes, size), np.empty(size), np.empty(size), np.empty(n_terminals)
+
+
+@njit
+def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad):
     """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)),
     by reverse mode: O(size + leaves read x n_c), where forward mode (every node carrying
     n_c derivatives) costs O(size x n_c).
 
-    slot_of (size,): column of each CONST node (-1 otherwise); right (size,):
-    right_children(codes, size); features (n_terminals,); tangents (n_terminals, n_c):
-    d(leaf)/d(constants); node_value, node_adjoint (size,) and leaf_adjoint (n_terminals,)
-    are work buffers. The value is the stack evaluation's to the bit (the same operations
-    in the same order). Returns the value."""
+    slot_of (size,): column of each CONST node (-1 otherwise); features (n_terminals,);
+    tangents (n_terminals, n_c): d(leaf)/d(constants); work: gradient_work(codes, size,
+    n_terminals). The value is the stack evaluation's to the bit (the same operations in
+    the same order). Returns the value."""
+    right, node_value, node_adjoint, leaf_adjoint = work
     for i in range(size - 1, -1, -1):
         c = codes[i]
         if c >= VAR_BASE:
