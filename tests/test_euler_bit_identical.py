@@ -1,8 +1,11 @@
 """Eq. 2 through the shared step (gpquad.engine.kernels.step) gives the same bits as the
 kernels that coded it each on their own: the fitness, sensitivity, rollout, integrate, PID
 and peer-rollout outputs of fixed random trees and flights, hashed (SHA-256) when recorded at
-5a4c96c and now. IEEE doubles without fastmath are reproducible on one platform; on another
-libm a hash may differ where atan2 / asin round differently (then re-record there)."""
+5a4c96c and now. The sensitivity kernel's Jacobians are hashed apart from its residuals:
+they were re-recorded when the gradient went to reverse mode (the fixture's recorded_at says
+how far they moved); the residuals are 5a4c96c's. IEEE doubles without fastmath are
+reproducible on one platform; on another libm a hash may differ where atan2 / asin round
+differently (then re-record there)."""
 
 import dataclasses
 import hashlib
@@ -87,7 +90,8 @@ def euler_outputs() -> dict[str, np.ndarray]:
                     EULER,
                     1,
                 )
-                rec[f"sens{i}_{attw}_{alpha}_{angle_t}"] = np.concatenate([res, jac.ravel()])
+                rec[f"sens{i}_{attw}_{alpha}_{angle_t}"] = res
+                rec[f"jac{i}_{attw}_{alpha}_{angle_t}"] = jac.ravel()
     for m in range(4):
         trees = [random_tree(rng, params) for _ in range(6)]
         size = max(t.size for t in trees)
