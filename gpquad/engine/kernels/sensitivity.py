@@ -6,10 +6,13 @@ and step the residual x_k(pred) - x_k(data) (the fitness's error before abs/squa
 its Jacobian with respect to the constants of the tree (one column per CONST node, in
 prefix order), for a Gauss-Newton / Levenberg-Marquardt fit on the integrated error.
 
-The tree is evaluated with tangents: a constant leaf j carries the unit tangent e_j, a
-leaf that the integrator produces from the tree carries the current sensitivity of that
-state, every other leaf (data, inputs) carries zero; the operators apply the chain rule
-(protected division: zero derivative where the division is replaced by 1). The state
+At each step the tree's gradient is that of the tree with tangents: a constant leaf j
+carries the unit tangent e_j, a leaf that the integrator produces from the tree carries the
+current sensitivity of that state, every other leaf (data, inputs) carries zero; the
+operators apply the chain rule (protected division: zero derivative where the division is
+replaced by 1). It is computed by one reverse pass over the tree
+(gpquad.engine.kernels.tree_tangent.eval_with_gradient); the sensitivities go forward in
+time. The state
 sensitivity is then advanced through the integrator step:
 
 - linear targets (a_x, a_y, a_z): the body velocity's sensitivity S (3, n_c) follows
