@@ -10,7 +10,7 @@ import pytest
 
 from gpquad.benchmark import table
 from gpquad.benchmark.engine import ENGINE_SOURCE, engine_config, load_engine
-from gpquad.benchmark.runner import collect, run_benchmark
+from gpquad.benchmark.runner import collect, done_line, run_benchmark
 from gpquad.cli.benchmark import write_report
 from gpquad.cli.commands import main
 
@@ -256,3 +256,16 @@ def test_report_flies_the_stored_cells_of_an_older_folder_without_fitting(tiny, 
     saved = json.loads((out / "results.json").read_text())
     assert saved["fidelity"]["tiny"]["gpquad"]["seeds"] == [1, 2]
     assert "## Fidelity" in (out / "benchmark.md").read_text()
+
+
+def test_the_progress_line_says_when_windows_diverged():
+    """The mean RSE leaves diverged windows out, so a cell whose model diverges can show a
+    lower mean (px4-s250 seed 2 with a pole in a_z): the line says how many it left out."""
+    metrics = {"7s": {"mean": 0.2588, "windows": 12, "diverged": 7}}
+    cell = {"scenario": "px4-s250", "method": "gpquad", "seed": 2, "metrics": metrics}
+    cell["cost"] = {"fit_time_s": 29.8}
+    assert "mean RSE 7s 0.2588 (7 of 12 windows diverged, left out)" in done_line(cell, 153)
+    metrics["7s"]["diverged"] = 0
+    assert "diverged" not in done_line(cell, 153)  # the check can fail
+    cell["metrics"] = {"7s": {"mean": None, "windows": 12, "diverged": 12}}
+    assert "no score" in done_line(cell, 153)

@@ -200,16 +200,7 @@ def run_benchmark(
             )
             for sc, m, s in missing
         ):
-            h = next(
-                (k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean") is not None),
-                None,
-            )
-            shown = f"mean RSE {h} {cell['metrics'][h]['mean']:.4g}" if h else "no score"
-            log(
-                f"  done {cell['scenario']:<20} {cell['method']:<7} seed {cell['seed']}: "
-                f"{shown}, fit {cell['cost']['fit_time_s']:.1f} s "
-                f"({time.perf_counter() - t0:.0f} s elapsed)"
-            )
+            log(done_line(cell, time.perf_counter() - t0))
     info.update(
         wall_time_s=time.perf_counter() - t0,
         jobs=jobs,
@@ -220,6 +211,20 @@ def run_benchmark(
 
     fidelity.update(out, collect(out, info), built, horizons_s, log)
     return info
+
+
+def done_line(cell: dict, elapsed: float) -> str:
+    """The progress line of a finished cell: its mean RSE at 7 s (else 1 s) and, when some
+    of those windows diverged, how many (the mean leaves them out), and its fit time."""
+    h = next((k for k in ("7s", "1s") if cell["metrics"].get(k, {}).get("mean") is not None), None)
+    shown = f"mean RSE {h} {cell['metrics'][h]['mean']:.4g}" if h else "no score"
+    if h and cell["metrics"][h].get("diverged"):
+        m = cell["metrics"][h]
+        shown += f" ({m['diverged']} of {m['windows']} windows diverged, left out)"
+    return (
+        f"  done {cell['scenario']:<20} {cell['method']:<7} seed {cell['seed']}: "
+        f"{shown}, fit {cell['cost']['fit_time_s']:.1f} s ({elapsed:.0f} s elapsed)"
+    )
 
 
 def report_benchmark(out, names=(), log=print) -> dict:
