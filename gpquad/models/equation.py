@@ -101,14 +101,15 @@ class Equation:
             if self.trim.get(base_input(n), 0.0)
         }
 
-    def raw_constant_parts(self) -> list[float]:
-        """What the raw form's constant sums: each term of the expanded equation that reads
-        only trimmed inputs (or nothing), at raw inputs 0 (each trimmed input at -trim)."""
+    def raw_constant_parts(self, expr: sp.Expr | None = None) -> list[float]:
+        """What the raw form's constant sums: each term of the expanded equation (`expr`,
+        default sympy()) that reads only trimmed inputs (or nothing), at raw inputs 0 (each
+        trimmed input at -trim)."""
         trims = self.trims()
         at_zero = {s: -t for s, t in trims.items()}
         return [
             float(term.xreplace(at_zero))
-            for term in sp.Add.make_args(sp.expand(self.sympy()))
+            for term in sp.Add.make_args(sp.expand(self.sympy() if expr is None else expr))
             if term.free_symbols <= set(trims)
         ]
 
@@ -121,8 +122,9 @@ class Equation:
             return expr
         raw = simplify(expr.xreplace({s: s - t for s, t in trims.items()}))
         constant, rest = raw.as_coeff_Add()
-        scale = sum(abs(c) for c in self.raw_constant_parts())
-        if constant and abs(float(constant)) <= RAW_ROUNDOFF * scale:
+        if constant and abs(float(constant)) <= RAW_ROUNDOFF * sum(
+            abs(c) for c in self.raw_constant_parts(expr)
+        ):
             return rest
         return raw
 

@@ -133,10 +133,12 @@ def with_exact_raw_constant(equation, arrays, rows):
     leaves the trimmed constant of p_dot = 10.3 (u_R - trim) - 4.15 p at 1e-6 of its value,
     and the raw form would print the difference (+ 2.6e-8) as a constant the data do not
     have. The same equation otherwise."""
-    constant = sum(equation.raw_constant_parts())
-    if not equation.trims() or constant == 0.0:
+    if not equation.trims():
         return equation
     expr = equation.sympy()
+    constant = sum(equation.raw_constant_parts(expr))
+    if constant == 0.0:
+        return equation
     values = expression_values(expr, sample_columns(equation, arrays, rows, raw=False), len(rows))
     values = values[np.isfinite(values)]
     if not values.size:

@@ -20,3 +20,13 @@ def uses_leaves(codes, size, first, last):
         if first <= c <= last:
             return True
     return False
+
+
+@njit
+def read_leaves(codes, size, n_terminals):
+    """(n_terminals,) bool: the variable leaves the tree reads."""
+    used = np.zeros(n_terminals, dtype=np.bool_)
+    for i in range(size):
+        if codes[i] >= VAR_BASE:
+            used[codes[i] - VAR_BASE] = True
+    return used

@@ -31,7 +31,7 @@ alpha = 1 is no lag and leaves every result bit-identical to the kernels without
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, read_leaves, uses_leaves
 from gpquad.engine.kernels.fitness_rk4 import rk4_population_window_errors, rk4_tree_window_errors
 from gpquad.engine.kernels.quaternion import euler_angle_lanes
 from gpquad.engine.kernels.step import (
@@ -43,7 +43,6 @@ from gpquad.engine.kernels.step import (
 )
 from gpquad.engine.kernels.tree_eval import compile_program, run_program
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import VAR_BASE
 
 __all__ = [
     "DIVERGED",
@@ -173,10 +172,7 @@ def euler_tree_window_errors(
             rates[i, lane] = states[s, 6 + i]
 
     # Only the leaves the tree reads are filled.
-    used = np.zeros(9 + n_in, dtype=np.bool_)
-    for i in range(size):
-        if codes[i] >= VAR_BASE:
-            used[codes[i] - VAR_BASE] = True
+    used = read_leaves(codes, size, 9 + n_in)
     data_cols = np.empty(6, dtype=np.int64)  # states read straight from the data
     n_data = 0
     if linear:

@@ -21,7 +21,7 @@ sample before the window, with 1 / tau from alpha (gpquad.engine.kernels.step.la
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, read_leaves, uses_leaves
 from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
@@ -42,7 +42,6 @@ from gpquad.engine.kernels.step import (
 )
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import VAR_BASE
 
 #: Row of the lag state after the body's rows.
 LAG = BODY_ROWS
@@ -123,10 +122,7 @@ def rk4_tree_window_errors(
         for i in range(3):
             y[V + i, lane] = states[s, 3 + i]
             y[W + i, lane] = states[s, 6 + i]
-    used = np.zeros(9 + n_in, dtype=np.bool_)
-    for i in range(size):
-        if codes[i] >= VAR_BASE:
-            used[codes[i] - VAR_BASE] = True
+    used = read_leaves(codes, size, 9 + n_in)
     uses_state = uses_leaves(codes, size, 0, 8)
     # rows flown: the attitude only where the tree reads an angle or the angle is scored,
     # the velocity only for linear targets or a tree that reads it (the rates always)

@@ -20,7 +20,7 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, read_leaves
 from gpquad.engine.kernels.fitness_rk4 import LAG, attitude_and_rates_from_data, stage_features
 from gpquad.engine.kernels.quaternion import euler_angle
 from gpquad.engine.kernels.step import (
@@ -48,7 +48,6 @@ from gpquad.engine.kernels.tree_tangent import (
     residual_rows,
 )
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import VAR_BASE
 
 #: Tangent rows: body velocity (linear targets), the target rate, the Euler angles, the lag.
 TV, TR, TA, TL = 0, 3, 4, 7
@@ -100,13 +99,10 @@ def rk4_window_residuals(
     tan_total = np.zeros((TANGENT_ROWS, n_c))
     # the leaves computed at each stage: those the tree reads, and the angles the Euler
     # kinematics of the angles' tangents read
-    used = np.zeros(9 + n_in, dtype=np.bool_)
-    for i in range(size):
-        if codes[i] >= VAR_BASE:
-            used[codes[i] - VAR_BASE] = True
+    used = read_leaves(codes, size, 9 + n_in)
     used[0] = used[0] or track_angles
     used[1] = used[1] or track_angles
-    uses_state = uses_leaves(codes, size, 0, 8) or track_angles
+    uses_state = used[:9].any()
     # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
     # are tracked, the lag's when there is one
     t_first = TV if linear else TR

@@ -30,24 +30,17 @@ def constant_slots(codes, size):
 @njit
 def right_children(codes, size):
     """(size,) index of each operator node's right operand in a prefix tree (its left one
-    is the next node); -1 for the leaves."""
+    is the next node); -1 for the leaves. The stack walk of the evaluation, right to left:
+    an operator's operands are the two subtrees on top."""
     right = np.full(size, -1, dtype=np.int64)
-    pending = np.empty(size, dtype=np.int64)  # operators whose left operand is still open
-    need = np.empty(size, dtype=np.int64)  # operands each pending operator still lacks
-    depth = 0
-    for i in range(size):
-        if depth > 0 and need[depth - 1] == 1:
-            right[pending[depth - 1]] = i
-        if codes[i] < CONST:
-            pending[depth] = i
-            need[depth] = 2
-            depth += 1
-        else:  # a leaf closes operands up the chain
-            while depth > 0:
-                need[depth - 1] -= 1
-                if need[depth - 1] > 0:
-                    break
-                depth -= 1
+    roots = np.empty(size, dtype=np.int64)  # roots of the subtrees evaluated, a stack
+    sp = 0
+    for i in range(size - 1, -1, -1):
+        if codes[i] < CONST:  # an operator: its left operand on top, its right one below
+            right[i] = roots[sp - 2]
+            sp -= 2
+        roots[sp] = i
+        sp += 1
     return right
 
 
