@@ -262,6 +262,9 @@ def rk4_rollout(
     """gpquad.engine.kernels.rollout.rollout flown by RK4 (module notes): states
     (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state.
 
+    The windows are the lanes of each tree's evaluation (eval_lanes), as in the fitness
+    kernels: each lane's arithmetic is that of a window flown alone.
+
     The world position x_dot = R(q) V is one more part of the RK4 state (rows X, from x = 0
     at each window start); pos (n_windows, n_steps + 1, 3) receives it, or has no rows
     (it is then not flown).
@@ -276,64 +279,82 @@ def rk4_rollout(
     n_rows = PLANT_ROWS + 6
     h = dt / substeps
     out = np.empty((n, n_steps + 1, 9))
-    features = np.empty((9 + n_slots, 1))
-    held = np.empty((6, n_slots))  # each equation's inputs over the sample
-    stack = np.empty((STACK_ROWS, 1))
-    pred = np.empty(1)
-    a = np.empty(6)
+    features = np.empty((9 + n_slots, n))
+    held = np.empty((6, n_slots, n))  # each equation's inputs over the sample
+    stack = np.empty((STACK_ROWS, n))
+    pred = np.empty(n)
+    a = np.empty((6, n))
     rates = np.empty(6)
     for t in range(6):
         rates[t] = lag_rate_kernel(alphas[t], dt)
-    y = np.empty((n_rows, 1))
-    ys = np.empty((n_rows, 1))
-    slope = np.zeros((n_rows, 1))
-    total = np.empty((n_rows, 1))
+    y = np.empty((n_rows, n))
+    ys = np.empty((n_rows, n))
+    slope = np.zeros((n_rows, n))
+    total = np.empty((n_rows, n))
     every_state = np.ones(9, dtype=np.bool_)
     for lane in range(n):
         s = starts[lane]
         for t in range(6):
-            y[lag + t, 0] = acc[s - 1, t] if s > 0 else 0.0
+            y[lag + t, lane] = acc[s - 1, t] if s > 0 else 0.0
         for i in range(4):
-            y[Q + i, 0] = quat_d[s, i]
+            y[Q + i, lane] = quat_d[s, i]
         for i in range(3):
-            y[V + i, 0] = states[s, 3 + i]
-            y[W + i, 0] = states[s, 6 + i]
-            y[X + i, 0] = 0.0
-        for k in range(n_steps + 1):
-            idx = s + k
-            stage_features(y, 0, every_state, features)
+            y[V + i, lane] = states[s, 3 + i]
+            y[W + i, lane] = states[s, 6 + i]
+            y[X + i, lane] = 0.0
+    for k in range(n_steps + 1):
+        for lane in range(n):
+            stage_features(y, lane, every_state, features)
             for i in range(9):
-                out[lane, k, i] = features[i, 0]
+                out[lane, k, i] = features[i, lane]
             if keep_pos:
                 for i in range(3):
-                    pos[lane, k, i] = y[X + i, 0]
-            if k == n_steps:
-                break
-            for t in range(6):
-                if modelled[t]:
-                    for j in range(n_slots):
-                        c = j % n_in
-                        u = inputs[idx - delays[t, j], c]
+                    pos[lane, k, i] = y[X + i, lane]
+        if k == n_steps:
+            break
+        for t in range(6):
+            if modelled[t]:
+                for j in range(n_slots):
+                    c = j % n_in
+                    for lane in range(n):
+                        u = inputs[starts[lane] + k - delays[t, j], c]
                         if noisy and k - delays[t, j] >= 0:
                             u += input_noise[lane, k - delays[t, j], c]
-                        held[t, j] = u
-            for _ in range(substeps):
-                for stage in range(N_STAGES):
-                    body_stage_state(y, slope, NODES[stage], h, ys, 0, n_rows)
-                    stage_features(ys, 0, every_state, features)
-                    for t in range(6):
-                        a[t] = acc[idx, t]
-                        slope[lag + t, 0] = 0.0
-                        if modelled[t]:
-                            for j in range(n_slots):
-                                features[9 + j, 0] = held[t, j]
-                            eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
-                            if alphas[t] < 1.0:
-                                a[t] = ys[lag + t, 0]
-                                slope[lag + t, 0] = rates[t] * (pred[0] - a[t])
-                            else:
-                                a[t] = pred[0]
-                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], keep_pos, slope)
-                    accumulate(total, slope, WEIGHTS[stage], stage, 0, n_rows)
-                finish_step(y, total, h, 0, n_rows)
+                        held[t, j, lane] = u
+        for _ in range(substeps):
+            for stage in range(N_STAGES):
+                for lane in range(n):
+                    body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows)
+                    stage_features(ys, lane, every_state, features)
+                for t in range(6):
+                    if modelled[t]:
+                        for j in range(n_slots):
+                            for lane in range(n):
+                                features[9 + j, lane] = held[t, j, lane]
+                        eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, n)
+                    for lane in range(n):
+                        slope[lag + t, lane] = 0.0
+                        if not modelled[t]:
+                            a[t, lane] = acc[starts[lane] + k, t]
+                        elif alphas[t] < 1.0:
+                            a[t, lane] = ys[lag + t, lane]
+                            slope[lag + t, lane] = rates[t] * (pred[lane] - a[t, lane])
+                        else:
+                            a[t, lane] = pred[lane]
+                for lane in range(n):
+                    body_derivative(
+                        ys,
+                        lane,
+                        a[0, lane],
+                        a[1, lane],
+                        a[2, lane],
+                        a[3, lane],
+                        a[4, lane],
+                        a[5, lane],
+                        keep_pos,
+                        slope,
+                    )
+                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows)
+            for lane in range(n):
+                finish_step(y, total, h, lane, n_rows)
     return out
