@@ -40,7 +40,7 @@ from gpquad.engine.kernels.step import (
     lag_rate_kernel,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.kernels.tree_eval import STACK_ROWS, compile_program, eval_lanes, run_program
 from gpquad.engine.numba_config import njit
 
 #: Row of the lag state after the body's rows.
@@ -262,8 +262,9 @@ def rk4_rollout(
     """gpquad.engine.kernels.rollout.rollout flown by RK4 (module notes): states
     (n_windows, n_steps + 1, 9); every lagged equation carries its own lag state.
 
-    The windows are the lanes of each tree's evaluation (eval_lanes), as in the fitness
-    kernels: each lane's arithmetic is that of a window flown alone.
+    The windows are the lanes of each tree's evaluation (a tree_eval.compile_program
+    register program, as in the eq. 2 fitness kernel): each lane's arithmetic is that of a
+    window flown alone.
 
     The world position x_dot = R(q) V is one more part of the RK4 state (rows X, from x = 0
     at each window start); pos (n_windows, n_steps + 1, 3) receives it, or has no rows
@@ -279,10 +280,21 @@ def rk4_rollout(
     n_rows = PLANT_ROWS + 6
     h = dt / substeps
     out = np.empty((n, n_steps + 1, 9))
-    features = np.empty((9 + n_slots, n))
-    held = np.empty((6, n_slots, n))  # each equation's inputs over the sample
-    stack = np.empty((STACK_ROWS, n))
-    pred = np.empty(n)
+    features = np.empty((9, n))
+    # each tree's leaves (the states, then its input slots), then one row per node
+    # (tree_eval.compile_program); the inputs are held over a sample, written once
+    n_leaves = 9 + n_slots
+    regs = np.zeros((6, n_leaves + codes.shape[1], n))
+    prog = np.empty((6, codes.shape[1], 4), dtype=np.int64)
+    n_ops = np.zeros(6, dtype=np.int64)
+    root = np.zeros(6, dtype=np.int64)
+    used = np.zeros((6, n_leaves), dtype=np.bool_)
+    for t in range(6):
+        if modelled[t]:
+            n_ops[t], root[t] = compile_program(
+                codes[t], values[t], sizes[t], n_leaves, regs[t], prog[t]
+            )
+            used[t] = read_leaves(codes[t], sizes[t], n_leaves)
     a = np.empty((6, n))
     rates = np.empty(6)
     for t in range(6):
@@ -315,12 +327,14 @@ def rk4_rollout(
         for t in range(6):
             if modelled[t]:
                 for j in range(n_slots):
+                    if not used[t, 9 + j]:
+                        continue
                     c = j % n_in
                     for lane in range(n):
                         u = inputs[starts[lane] + k - delays[t, j], c]
                         if noisy and k - delays[t, j] >= 0:
                             u += input_noise[lane, k - delays[t, j], c]
-                        held[t, j, lane] = u
+                        regs[t, 9 + j, lane] = u
         for _ in range(substeps):
             for stage in range(N_STAGES):
                 for lane in range(n):
@@ -328,19 +342,21 @@ def rk4_rollout(
                     stage_features(ys, lane, every_state, features)
                 for t in range(6):
                     if modelled[t]:
-                        for j in range(n_slots):
-                            for lane in range(n):
-                                features[9 + j, lane] = held[t, j, lane]
-                        eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, n)
+                        tree = regs[t]
+                        for i in range(9):
+                            if used[t, i]:
+                                for lane in range(n):
+                                    tree[i, lane] = features[i, lane]
+                        run_program(prog[t], n_ops[t], tree, n)
                     for lane in range(n):
                         slope[lag + t, lane] = 0.0
                         if not modelled[t]:
                             a[t, lane] = acc[starts[lane] + k, t]
                         elif alphas[t] < 1.0:
                             a[t, lane] = ys[lag + t, lane]
-                            slope[lag + t, lane] = rates[t] * (pred[lane] - a[t, lane])
+                            slope[lag + t, lane] = rates[t] * (regs[t, root[t], lane] - a[t, lane])
                         else:
-                            a[t, lane] = pred[lane]
+                            a[t, lane] = regs[t, root[t], lane]
                 for lane in range(n):
                     body_derivative(
                         ys,
