@@ -12,9 +12,13 @@ from gpquad.engine.tree.operators import DIV, SUB, VAR_BASE
 INPUTS = ("u_P", "u_R", "u_Y", "u_T")
 
 
-def _tree(text):
+def _tree(text, taps=2):
+    """The tree of `text`, with one delay per input column of _data(taps=taps)."""
     expr, delays = parse_equation(text, INPUTS)
-    return from_sympy(expr, delays, INPUTS)
+    tree = from_sympy(expr, delays, INPUTS)
+    tiled = np.zeros(len(INPUTS) * taps, dtype=tree.delays.dtype)
+    tiled[: len(tree.delays)] = tree.delays
+    return Tree(tree.codes, tree.values, tiled)
 
 
 def _data(n=400, seed=0, taps=2):
@@ -49,3 +53,15 @@ def test_the_selection_keeps_the_flyable_and_falls_back_to_all():
     plain = _tree("-0.6*w + 2.0*u_T")
     assert without_poles([crossing, plain], states, inputs, samples) == [plain]
     assert without_poles([crossing], states, inputs, samples) == [crossing]
+
+
+def test_a_tree_without_a_delay_for_every_input_column_is_refused():
+    """The kernel reads one delay per input column: a tree with fewer (the bad case, which
+    read past its delays) is an error, not a read of whatever memory follows."""
+    import pytest
+
+    states, inputs = _data(taps=2)
+    expr, delays = parse_equation("w/(u_T - 0.55)", INPUTS)
+    short = from_sympy(expr, delays, INPUTS)  # 4 delays for 8 input columns
+    with pytest.raises(ValueError, match="4 input delays, the data 8 inputs"):
+        crosses_pole(short, states, inputs, np.arange(10, 400))
