@@ -2,7 +2,7 @@
 (world z up, body z along the thrust), with the checks that keep a bad log from giving
 coefficients.
 
-From each `gpquad.data.motors.MotorLog` (NED/FRD): world vectors turned by
+From each `gpquad.data.motor_log.MotorLog` (NED/FRD): world vectors turned by
 C_w = [[0, 1, 0], [1, 0, 0], [0, 0, -1]] (NED -> ENU), body vectors by C_b = diag(1, -1, -1)
 (FRD -> FLU), attitude R = C_w R_ned C_b. Segments are the runs of valid, in-flight samples of
 at least `data.min_segment_s`. The thesis's causal moving average
