@@ -591,10 +591,11 @@ def test_solve3_agrees_with_numpy_solve(seed):
     np.testing.assert_allclose(m @ x, b, rtol=1e-9, atol=1e-10)
 
 
+@pytest.mark.parametrize("scheme", ["rk4", "euler"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed):
-    """The RK4 rollout flies its windows as the lanes of one evaluation: every window's
-    states and position equal, to the bit, those of the window flown alone (six random
+def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed, scheme):
+    """The rollouts fly their windows as the lanes of one evaluation: every window's states
+    (and RK4's position) equal, to the bit, those of the window flown alone (six random
     trees, lags, taps, input noise). A kernel that let one lane read another's inputs or
     state (the bad case: the held inputs of the first window for all) would differ."""
     from gpquad.engine.tree.variation import VariationParams, random_tree
@@ -611,7 +612,7 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed)
     noise = rng.normal(0.0, 0.05, (len(starts), 40, 4))
 
     def fly(which):
-        pos = np.empty((len(which), 41, 3))
+        pos = np.empty((len(which), 41, 3)) if scheme == "rk4" else np.zeros((len(which), 0, 3))
         states = rollout(
             codes,
             values,
@@ -623,9 +624,9 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed)
             starts[which],
             40,
             noise[which],
-            ks.RK4,
+            ks.scheme_code(scheme),
             2,
-            pos,
+            pos if scheme == "rk4" else None,
         )
         return states, pos
 

@@ -40,7 +40,13 @@ from gpquad.engine.kernels.step import (
     lag_rate_kernel,
     wrap_angle,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, compile_program, eval_lanes, run_program
+from gpquad.engine.kernels.tree_eval import (
+    STACK_ROWS,
+    eval_lanes,
+    hold_inputs,
+    model_programs,
+    run_program,
+)
 from gpquad.engine.numba_config import njit
 
 #: Row of the lag state after the body's rows.
@@ -272,9 +278,7 @@ def rk4_rollout(
     """
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
-    n_in = inputs.shape[1]
     n_slots = delays.shape[1]
-    noisy = input_noise.shape[0] > 0
     keep_pos = pos.shape[0] > 0
     lag = PLANT_ROWS  # each target's lag state: row lag + t
     n_rows = PLANT_ROWS + 6
@@ -283,18 +287,7 @@ def rk4_rollout(
     features = np.empty((9, n))
     # each tree's leaves (the states, then its input slots), then one row per node
     # (tree_eval.compile_program); the inputs are held over a sample, written once
-    n_leaves = 9 + n_slots
-    regs = np.zeros((6, n_leaves + codes.shape[1], n))
-    prog = np.empty((6, codes.shape[1], 4), dtype=np.int64)
-    n_ops = np.zeros(6, dtype=np.int64)
-    root = np.zeros(6, dtype=np.int64)
-    used = np.zeros((6, n_leaves), dtype=np.bool_)
-    for t in range(6):
-        if modelled[t]:
-            n_ops[t], root[t] = compile_program(
-                codes[t], values[t], sizes[t], n_leaves, regs[t], prog[t]
-            )
-            used[t] = read_leaves(codes[t], sizes[t], n_leaves)
+    regs, prog, n_ops, root, used = model_programs(codes, values, sizes, modelled, 9 + n_slots, n)
     a = np.empty((6, n))
     rates = np.empty(6)
     for t in range(6):
@@ -324,17 +317,7 @@ def rk4_rollout(
                     pos[lane, k, i] = y[X + i, lane]
         if k == n_steps:
             break
-        for t in range(6):
-            if modelled[t]:
-                for j in range(n_slots):
-                    if not used[t, 9 + j]:
-                        continue
-                    c = j % n_in
-                    for lane in range(n):
-                        u = inputs[starts[lane] + k - delays[t, j], c]
-                        if noisy and k - delays[t, j] >= 0:
-                            u += input_noise[lane, k - delays[t, j], c]
-                        regs[t, 9 + j, lane] = u
+        hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
         for _ in range(substeps):
             for stage in range(N_STAGES):
                 for lane in range(n):

@@ -7,7 +7,7 @@ import numpy as np
 from gpquad.engine.kernels.fitness_rk4 import rk4_rollout
 from gpquad.engine.kernels.quaternion import euler_from_quat
 from gpquad.engine.kernels.step import RK4, euler_step
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.kernels.tree_eval import hold_inputs, model_programs, run_program
 from gpquad.engine.numba_config import njit
 
 
@@ -84,67 +84,85 @@ def euler_rollout(
     n_steps,
     input_noise,
 ):
-    """rollout flown by eq. 2."""
+    """rollout flown by eq. 2, every window at once: each tree a register program over the
+    windows (tree_eval.model_programs), each window's arithmetic that of it flown alone."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
-    n_in = inputs.shape[1]
-    n_slots = delays.shape[1]
-    noisy = input_noise.shape[0] > 0
+    regs, prog, n_ops, root, used = model_programs(
+        codes, values, sizes, modelled, 9 + delays.shape[1], n
+    )
     out = np.empty((n, n_steps + 1, 9))
-    features = np.empty((9 + n_slots, 1))
-    stack = np.empty((STACK_ROWS, 1))
-    pred = np.empty(1)
-    a = np.empty(6)
-    applied = np.empty(6)  # the lagged accelerations
+    a = np.empty((6, n))
+    applied = np.empty((6, n))  # the lagged accelerations
+    quat = np.empty((4, n))
+    vel = np.empty((3, n))
+    rates = np.empty((3, n))
     for lane in range(n):
         s = starts[lane]
         for t in range(6):
-            applied[t] = acc[s - 1, t] if s > 0 else 0.0
-        q0, q1, q2, q3 = quat_d[s, 0], quat_d[s, 1], quat_d[s, 2], quat_d[s, 3]
-        vel = states[s, 3:6].copy()
-        rates = states[s, 6:9].copy()
-        for k in range(n_steps + 1):
-            idx = s + k
-            phi, theta, psi = euler_from_quat(q0, q1, q2, q3)
+            applied[t, lane] = acc[s - 1, t] if s > 0 else 0.0
+        for i in range(4):
+            quat[i, lane] = quat_d[s, i]
+        for i in range(3):
+            vel[i, lane] = states[s, 3 + i]
+            rates[i, lane] = states[s, 6 + i]
+    for k in range(n_steps + 1):
+        for lane in range(n):
+            phi, theta, psi = euler_from_quat(
+                quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+            )
             out[lane, k, 0], out[lane, k, 1], out[lane, k, 2] = phi, theta, psi
             for i in range(3):
-                out[lane, k, 3 + i] = vel[i]
-                out[lane, k, 6 + i] = rates[i]
-            if k == n_steps:
-                break
-            for i in range(9):
-                features[i, 0] = out[lane, k, i]
-            for t in range(6):
-                a[t] = acc[idx, t]
-                if modelled[t]:
-                    for j in range(n_slots):
-                        c = j % n_in
-                        u = inputs[idx - delays[t, j], c]
-                        if noisy and k - delays[t, j] >= 0:
-                            u += input_noise[lane, k - delays[t, j], c]
-                        features[9 + j, 0] = u
-                    eval_lanes(codes[t], values[t], sizes[t], features, stack, pred, 1)
-                    a[t] = pred[0]
-                    if alphas[t] < 1.0:
-                        applied[t] += alphas[t] * (pred[0] - applied[t])
-                        a[t] = applied[t]
-            (q0, q1, q2, q3, vel[0], vel[1], vel[2], rates[0], rates[1], rates[2]) = euler_step(
-                q0,
-                q1,
-                q2,
-                q3,
-                vel[0],
-                vel[1],
-                vel[2],
-                rates[0],
-                rates[1],
-                rates[2],
-                a[0],
-                a[1],
-                a[2],
-                a[3],
-                a[4],
-                a[5],
+                out[lane, k, 3 + i] = vel[i, lane]
+                out[lane, k, 6 + i] = rates[i, lane]
+        if k == n_steps:
+            break
+        hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
+        for t in range(6):
+            if modelled[t]:
+                tree = regs[t]
+                for i in range(9):
+                    if used[t, i]:
+                        for lane in range(n):
+                            tree[i, lane] = out[lane, k, i]
+                run_program(prog[t], n_ops[t], tree, n)
+            for lane in range(n):
+                if not modelled[t]:
+                    a[t, lane] = acc[starts[lane] + k, t]
+                elif alphas[t] < 1.0:
+                    applied[t, lane] += alphas[t] * (regs[t, root[t], lane] - applied[t, lane])
+                    a[t, lane] = applied[t, lane]
+                else:
+                    a[t, lane] = regs[t, root[t], lane]
+        for lane in range(n):
+            (
+                quat[0, lane],
+                quat[1, lane],
+                quat[2, lane],
+                quat[3, lane],
+                vel[0, lane],
+                vel[1, lane],
+                vel[2, lane],
+                rates[0, lane],
+                rates[1, lane],
+                rates[2, lane],
+            ) = euler_step(
+                quat[0, lane],
+                quat[1, lane],
+                quat[2, lane],
+                quat[3, lane],
+                vel[0, lane],
+                vel[1, lane],
+                vel[2, lane],
+                rates[0, lane],
+                rates[1, lane],
+                rates[2, lane],
+                a[0, lane],
+                a[1, lane],
+                a[2, lane],
+                a[3, lane],
+                a[4, lane],
+                a[5, lane],
                 dt,
                 True,
                 True,

@@ -164,3 +164,45 @@ def eval_on_samples(codes, values, size, delays, states, inputs, indices):
     out = np.empty(n)
     eval_lanes(codes, values, size, features, stack, out, n)
     return out
+
+
+@njit
+def model_programs(codes, values, sizes, modelled, n_leaves, n_lanes):
+    """The register programs of a full model's trees (one per target, compile_program), for
+    the rollouts: (regs (6, n_leaves + M, n_lanes), prog (6, M, 4), n_ops (6,), root (6,),
+    used (6, n_leaves) the leaves each tree reads); a target not modelled has none."""
+    regs = np.zeros((6, n_leaves + codes.shape[1], n_lanes))
+    prog = np.empty((6, codes.shape[1], 4), dtype=np.int64)
+    n_ops = np.zeros(6, dtype=np.int64)
+    root = np.zeros(6, dtype=np.int64)
+    used = np.zeros((6, n_leaves), dtype=np.bool_)
+    for t in range(6):
+        if modelled[t]:
+            n_ops[t], root[t] = compile_program(
+                codes[t], values[t], sizes[t], n_leaves, regs[t], prog[t]
+            )
+            for i in range(sizes[t]):
+                if codes[t, i] >= VAR_BASE:
+                    used[t, codes[t, i] - VAR_BASE] = True
+    return regs, prog, n_ops, root, used
+
+
+@njit
+def hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, n_state):
+    """Write each modelled tree's input slots (rows n_state + j of regs[t]) for sample k of
+    every window (lane): input j % n_inputs at the slot's delay, plus the window's
+    input_noise when it has any (shape (0, 0, 0): none)."""
+    n_in = inputs.shape[1]
+    noisy = input_noise.shape[0] > 0
+    for t in range(6):
+        if modelled[t]:
+            for j in range(delays.shape[1]):
+                if not used[t, n_state + j]:
+                    continue
+                c = j % n_in
+                d = delays[t, j]
+                for lane in range(starts.shape[0]):
+                    u = inputs[starts[lane] + k - d, c]
+                    if noisy and k - d >= 0:
+                        u += input_noise[lane, k - d, c]
+                    regs[t, n_state + j, lane] = u
