@@ -45,7 +45,7 @@ from gpquad.engine.kernels.tree_eval import (
     eval_lanes,
     hold_inputs,
     model_programs,
-    run_program,
+    run_model_tree,
 )
 from gpquad.engine.numba_config import njit
 
@@ -325,12 +325,7 @@ def rk4_rollout(
                     stage_features(ys, lane, every_state, features)
                 for t in range(6):
                     if modelled[t]:
-                        tree = regs[t]
-                        for i in range(9):
-                            if used[t, i]:
-                                for lane in range(n):
-                                    tree[i, lane] = features[i, lane]
-                        run_program(prog[t], n_ops[t], tree, n)
+                        run_model_tree(regs, prog, n_ops, used, t, features, n)
                     for lane in range(n):
                         slope[lag + t, lane] = 0.0
                         if not modelled[t]:

@@ -7,7 +7,7 @@ import numpy as np
 from gpquad.engine.kernels.fitness_rk4 import rk4_rollout
 from gpquad.engine.kernels.quaternion import euler_from_quat
 from gpquad.engine.kernels.step import RK4, euler_step
-from gpquad.engine.kernels.tree_eval import hold_inputs, model_programs, run_program
+from gpquad.engine.kernels.tree_eval import hold_inputs, model_programs, run_model_tree
 from gpquad.engine.numba_config import njit
 
 
@@ -92,6 +92,7 @@ def euler_rollout(
         codes, values, sizes, modelled, 9 + delays.shape[1], n
     )
     out = np.empty((n, n_steps + 1, 9))
+    features = np.empty((9, n))
     a = np.empty((6, n))
     applied = np.empty((6, n))  # the lagged accelerations
     quat = np.empty((4, n))
@@ -115,17 +116,14 @@ def euler_rollout(
             for i in range(3):
                 out[lane, k, 3 + i] = vel[i, lane]
                 out[lane, k, 6 + i] = rates[i, lane]
+            for i in range(9):
+                features[i, lane] = out[lane, k, i]
         if k == n_steps:
             break
         hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
         for t in range(6):
             if modelled[t]:
-                tree = regs[t]
-                for i in range(9):
-                    if used[t, i]:
-                        for lane in range(n):
-                            tree[i, lane] = out[lane, k, i]
-                run_program(prog[t], n_ops[t], tree, n)
+                run_model_tree(regs, prog, n_ops, used, t, features, n)
             for lane in range(n):
                 if not modelled[t]:
                     a[t, lane] = acc[starts[lane] + k, t]

@@ -206,3 +206,16 @@ def hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, n_
                     if noisy and k - d >= 0:
                         u += input_noise[lane, k - d, c]
                     regs[t, n_state + j, lane] = u
+
+
+@njit
+def run_model_tree(regs, prog, n_ops, used, t, features, n_lanes):
+    """Evaluate tree t of model_programs over the lanes at the state leaves `features`
+    (9, n_lanes) (its input slots written by hold_inputs); its value is
+    regs[t, root[t]]."""
+    tree = regs[t]
+    for i in range(features.shape[0]):
+        if used[t, i]:
+            for lane in range(n_lanes):
+                tree[i, lane] = features[i, lane]
+    run_program(prog[t], n_ops[t], tree, n_lanes)
