@@ -631,6 +631,7 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed,
         return states, pos
 
     together = fly(np.arange(len(starts)))
+    assert np.isfinite(together[0]).mean() > 0.5  # flown, not NaN that compares equal
     for w in range(len(starts)):
         alone = fly(np.array([w]))
         np.testing.assert_array_equal(together[0][w], alone[0][0])

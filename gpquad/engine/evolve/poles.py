@@ -33,10 +33,6 @@ def crosses_pole(tree: Tree, states: np.ndarray, inputs: np.ndarray, samples) ->
     """Whether a denominator of `tree` takes both signs, or comes within DIV_EPS of zero,
     at the data `samples` (one-step values; inputs at the tree's delays)."""
     samples = np.ascontiguousarray(samples, dtype=np.int64)
-    if len(tree.delays) != inputs.shape[1]:  # the kernel reads one delay per input column
-        raise ValueError(
-            f"the tree has {len(tree.delays)} input delays, the data {inputs.shape[1]} inputs"
-        )
     for start, end in denominators(tree):
         codes = np.ascontiguousarray(tree.codes[start:end])
         values = np.ascontiguousarray(tree.values[start:end])

@@ -7,6 +7,7 @@ leaf values for every lane; the result goes to out (n_lanes,).
 
 import numpy as np
 
+from gpquad.engine.kernels.divergence import read_leaves
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import ADD, CONST, DIV, DIV_EPS, MUL, SUB, VAR_BASE
 
@@ -149,10 +150,14 @@ def run_program(prog, n_ops, regs, n_lanes):
 
 @njit
 def eval_on_samples(codes, values, size, delays, states, inputs, indices):
-    """One-step tree values at data samples `indices` (no integration), shape (len(indices),)."""
+    """One-step tree values at data samples `indices` (no integration), shape (len(indices),).
+    `delays` holds one delay per input column (ValueError otherwise: it would be read past
+    its end)."""
     n = indices.shape[0]
     n_state = states.shape[1]
     n_in = inputs.shape[1]
+    if delays.shape[0] != n_in:
+        raise ValueError("eval_on_samples: the tree needs one delay per input column")
     features = np.empty((n_state + n_in, n))
     for lane in range(n):
         idx = indices[lane]
@@ -181,9 +186,7 @@ def model_programs(codes, values, sizes, modelled, n_leaves, n_lanes):
             n_ops[t], root[t] = compile_program(
                 codes[t], values[t], sizes[t], n_leaves, regs[t], prog[t]
             )
-            for i in range(sizes[t]):
-                if codes[t, i] >= VAR_BASE:
-                    used[t, codes[t, i] - VAR_BASE] = True
+            used[t] = read_leaves(codes[t], sizes[t], n_leaves)
     return regs, prog, n_ops, root, used
 
 
