@@ -58,7 +58,10 @@ def test_the_screen_keeps_the_missing_term(rigid_dataset, monkeypatch):  # noqa:
     assert {"q", "r"} <= {str(s) for s in _sym(found, ds).free_symbols}
     assert len(fitted) == 1 + term_search.SCREEN_KEEP  # c * model, then the kept insertions
 
-    monkeypatch.setattr(term_search, "gauss_newton_step", lambda ev, tree, *a: tree)
+    def unstepped(ev, model, terms, offered, starts):
+        return [tree for tree, _ in offered]
+
+    monkeypatch.setattr(term_search, "screen_steps", unstepped)
     worst, worst_err = improve_terms(ev, model, err, STARTS, _fit(ev), 13, 5, 0.01)
     assert worst_err > 1e-3 * err
 
@@ -91,3 +94,69 @@ def test_rivals_that_cannot_beat_the_chosen_equation_are_not_fitted(rigid_datase
     fitted.clear()
     fitted_rivals(ev, counting, smaller, [larger, exact], STARTS[:4], STARTS, 250)
     assert fitted == [larger.size, exact.size]
+
+
+@pytest.mark.parametrize(
+    ("target", "text", "angle_tangents", "att_weight"),
+    [
+        ("p_dot", "8.0*u_R(t-2) - 3.0*p + 0.5*q*r", False, 0.0),
+        ("p_dot", "8.0*u_R(t-2) - 3.0*p - 2.0*phi", True, 0.5),
+        ("a_x", "-0.5*u + 2.0*theta*theta", False, 0.0),
+    ],
+)
+def test_the_shared_flight_steps_every_candidate_as_its_own_flight(
+    rigid_dataset,  # noqa: F811
+    target,
+    text,
+    angle_tangents,
+    att_weight,
+):
+    """Every candidate's step from the one shared flight is the step of the candidate flown
+    alone (up to round-off), for each candidate that keeps the model's terms."""
+    from gpquad.engine.evolve.term_screen import screen_steps
+
+    ds = rigid_dataset
+    ev = Evaluator(ds, target, 100, "mse")
+    ev.angle_tangents, ev.att_weight = angle_tangents, att_weight
+    model = _tree(text, ds)
+    offered = term_search.insertion_candidates(model, 13, 5)
+    assert sum(new is not None for _, new in offered) > 100
+    shared = screen_steps(ev, model, term_search.model_terms(model), offered, STARTS[:3])
+    compared = 0
+    for (tree, _), step in zip(offered, shared, strict=True):
+        alone = gauss_newton_step(ev, tree, STARTS[:3], 100)
+        assert (alone is None) == (step is None)
+        if alone is None:
+            continue
+        errors = ev.mean_errors([step, alone], STARTS[:3])
+        assert errors[0] == pytest.approx(errors[1], rel=1e-6, abs=1e-12)
+        _, jac, _ = residuals_and_jacobian(ev, tree, STARTS[:3], 100)
+        if np.linalg.matrix_rank(jac) == jac.shape[1]:  # else another step as good
+            np.testing.assert_allclose(step.values, alone.values, rtol=1e-6, atol=1e-8)
+            compared += 1
+    assert compared > 100
+
+
+def test_a_shared_flight_with_the_wrong_columns_is_caught(rigid_dataset, monkeypatch):  # noqa: F811
+    """The bad case for the test above: columns read back in the wrong order give other
+    steps."""
+    import gpquad.engine.evolve.term_screen as term_screen
+
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 100, "mse")
+    model = _tree("8.0*u_R(t-2) - 3.0*p + 0.5*q*r", ds)
+    offered = term_search.insertion_candidates(model, 13, 5)
+    right = term_screen.screen_steps(ev, model, term_search.model_terms(model), offered, STARTS[:3])
+    untagged = term_screen._untagged
+
+    def reversed_tags(prefix, delays):
+        tree, tags = untagged(prefix, delays)
+        return tree, tags[::-1]
+
+    monkeypatch.setattr(term_screen, "_untagged", reversed_tags)
+    wrong = term_screen.screen_steps(ev, model, term_search.model_terms(model), offered, STARTS[:3])
+    differ = sum(
+        a is not None and b is not None and not np.allclose(a.values, b.values, rtol=1e-6)
+        for a, b in zip(right, wrong, strict=True)
+    )
+    assert differ > 100

@@ -103,7 +103,16 @@ def gauss_newton_step(ev: Evaluator, tree: Tree, starts, n_steps: int) -> Tree |
     of one LM iteration); None when a window diverges, the flight is not finite or the step
     is singular."""
     res, jac, diverged = residuals_and_jacobian(ev, tree, starts, n_steps)
-    if diverged or not np.all(np.isfinite(res)) or not np.all(np.isfinite(jac)):
+    if diverged:
+        return None
+    return step_from(tree, res, jac)
+
+
+def step_from(tree: Tree, res: np.ndarray, jac: np.ndarray) -> Tree | None:
+    """`tree` after one undamped Gauss-Newton step on residuals `res` with Jacobian `jac`
+    (one column per constant of the tree, in prefix order; see gauss_newton_step); None
+    when they are not finite or the step is singular."""
+    if not np.all(np.isfinite(res)) or not np.all(np.isfinite(jac)):
         return None
     free = identifiable(jac)
     if free.size == 0:

@@ -3,8 +3,8 @@
 The hill climbers rarely build a small bilinear coupling such as 0.9 q r in p_dot: the
 mutant that adds it must also get its coefficient right to be accepted. Here every
 candidate `model + c x_i` and `model + c x_i x_j` (x over the states and inputs) is
-screened by the error after one Gauss-Newton step through the integrator from c = 0, the
-SCREEN_KEEP best have all their constants re-fitted (Levenberg-Marquardt through the
+screened by the error after one Gauss-Newton step through the integrator from c = 0 (all
+of them from one shared flight, gpquad.engine.evolve.term_screen), the SCREEN_KEEP best have all their constants re-fitted (Levenberg-Marquardt through the
 integrator, or the configured fit), and the best one replaces the model when it lowers the
 error by more than `min_gain` (relative). Final selection (BIC) removes what the data do not
 support.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.gradient_fit import gauss_newton_step
+from gpquad.engine.evolve.term_screen import screen_steps
 from gpquad.engine.kernels.tree_eval import eval_on_samples
 from gpquad.engine.tree.encoding import Tree, shallow_sum, subtree_end, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, SUB, VAR_BASE
@@ -111,6 +111,15 @@ def regain_candidates(model: Tree, max_depth: int) -> list[Tree]:
 def term_candidates(
     model: Tree, variables, max_depth: int, contributions=None, taps: dict[int, int] | None = None
 ) -> list[Tree]:
+    """The trees of insertion_candidates (its notes)."""
+    return [
+        tree for tree, _ in insertion_candidates(model, variables, max_depth, contributions, taps)
+    ]
+
+
+def insertion_candidates(
+    model: Tree, variables, max_depth: int, contributions=None, taps: dict[int, int] | None = None
+) -> list[tuple[Tree, list | None]]:
     """model + 0 x_i, model + 0 x_i x_j and model + 0 x_i + 0 x_j for every allowed variable
     (an int n: the first n) and pair, within max_depth. A model too deep
     to take a new term makes room: with `contributions` (one per additive term of
@@ -120,7 +129,10 @@ def term_candidates(
     taps: the extra taps of the inputs (gpquad.engine.taps), variable -> its input's
     variable. A tap enters alone (c u_R(t-k)) or beside another tap of its input (a
     difference of two delays), never in a product or beside another variable: with 8
-    states and 4 inputs at 4 taps that is 192 candidates instead of 600 (one tap: 156)."""
+    states and 4 inputs at 4 taps that is 192 candidates instead of 600 (one tap: 156).
+
+    Each candidate comes as (tree, new): `new` is the list of the added terms when the tree
+    is shallow_sum(model_terms(model) + new), the model's own terms kept, else None."""
     variables = list(range(variables)) if isinstance(variables, int) else list(variables)
     taps = taps or {}
     plain = [v for v in variables if v not in taps]
@@ -157,16 +169,20 @@ def term_candidates(
     )
     for new in additions:
         prefix = shallow_sum(base + new)
+        kept_all = True
         dropped = 0
         while tree_depth([c for c, _ in prefix]) > max_depth and dropped < len(order) - 1:
             dropped += 1  # exchange the least contributing terms for the new ones
             keep = sorted(order[dropped:].tolist())
             prefix = shallow_sum([base[k] for k in keep] + new)
+            kept_all = False
         if tree_depth([c for c, _ in prefix]) > max_depth:  # the model as it is, plus the terms
             prefix = head + (new[0] if len(new) == 1 else [(ADD, 0.0)] + new[0] + new[1])
+            kept_all = False
         codes = [c for c, _ in prefix]
         if tree_depth(codes) <= max_depth:
-            out.append(Tree.from_lists(codes, [v for _, v in prefix], model.delays))
+            tree = Tree.from_lists(codes, [v for _, v in prefix], model.delays)
+            out.append((tree, new if kept_all else None))
     return out
 
 
@@ -185,25 +201,24 @@ def improve_terms(
 ) -> tuple[Tree, float]:
     """Best of the regain candidates and the single-term insertions (constants fitted by
     fit(tree, error, starts, n_steps); of the insertions only the SCREEN_KEEP with the
-    lowest error after one gauss_newton_step, in their order of term_candidates);
+    lowest error after one Gauss-Newton step (gpquad.engine.evolve.term_screen), in their
+    order of term_candidates);
     kept if its error < (1 - min_gain) * error. regain_fit (default fit) fits the
     candidates of regain_candidates: a gain that starts at 1 for a loop whose gain is 17
     sits in another basin of the long-window error, which a growing horizon leaves.
     allows(codes) -> bool filters the insertions (the degree limit)."""
     regain = regain_candidates(model, max_depth)
-    insertions = [
-        t
-        for t in term_candidates(
+    offered = [
+        (t, new)
+        for t, new in insertion_candidates(
             model, n_variables, max_depth, term_contributions(ev, model, suite), taps
         )
         if allows is None or allows(t.codes)
     ]
+    insertions = [t for t, _ in offered]
     if len(insertions) > SCREEN_KEEP:
-        stepped = {}
-        for k, tree in enumerate(insertions):
-            step = gauss_newton_step(ev, tree, suite, ev.n_steps)
-            if step is not None:
-                stepped[k] = step
+        steps = screen_steps(ev, model, model_terms(model), offered, suite)
+        stepped = {k: step for k, step in enumerate(steps) if step is not None}
         errors = np.full(len(insertions), np.inf)
         if stepped:
             errors[list(stepped)] = ev.mean_errors(list(stepped.values()), suite)
