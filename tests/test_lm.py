@@ -308,3 +308,37 @@ def test_stall_rule_stops_once_the_steps_stop_gaining():
     stalled, sums = fitted(curve, curve_jac, [0.1, 20.0], STALL)
     assert min(all_sums[1 : k + 2]) >= all_sums[0]  # k + 1 rejected trials first
     assert tight <= stalled <= tight * (1.0 + 1e-6)
+
+
+def test_trust_region_stall_rule_stops_the_joint_refits_crawl():
+    """The joint refit's stall rule (joint_fit.JOINT_STALL) on trust_region: residuals that
+    decay without end beside one no constant can fit, each step gaining less of the sum
+    (the joint refit's long tails); with the rule the fit stops in fewer evaluations, at
+    the last step taken, within the rule's fraction of the fit without it, and for the
+    rule's reason. Without the rule (the bad case) it runs on."""
+    from gpquad.engine.evolve.lm import forward_difference, trust_region
+    from gpquad.models.joint_fit import JOINT_STALL
+
+    def crawl(x):
+        return np.array([np.exp(-x[0]), 0.5 * np.exp(-x[1]), 1.0])
+
+    def fitted(stall):
+        sums = []
+        value, jac = forward_difference(crawl)
+
+        def counted(x):  # the fit's own residual calls, not the Jacobian's columns
+            r = value(x)
+            sums.append(float(r @ r))
+            return r
+
+        x = trust_region(counted, np.zeros(2), jac, 500, 1e-15, stall)
+        return float(crawl(x) @ crawl(x)), sums
+
+    tight, unstopped = fitted(None)
+    stalled, sums = fitted(JOINT_STALL)
+    taken = [v for i, v in enumerate(sums) if v < min(sums[:i], default=np.inf)]
+    k, drop = JOINT_STALL
+    assert stalled == taken[-1]
+    assert taken[-1 - k] - taken[-1] <= drop * taken[-1 - k]  # why it stopped
+    assert tight <= stalled <= tight * (1.0 + drop)
+    assert len(unstopped) >= len(sums) + 3

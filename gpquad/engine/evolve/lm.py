@@ -166,25 +166,50 @@ def levenberg_marquardt(
     return x
 
 
-def trust_region(fun, x0: np.ndarray, jac, max_nfev: int, ftol: float) -> np.ndarray:
+class _Stalled(Exception):
+    """Raised inside trust_region's residual function when its stall rule stops the fit."""
+
+
+def trust_region(
+    fun, x0: np.ndarray, jac, max_nfev: int, ftol: float, stall: tuple[int, float] | None = None
+) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with scipy's trust-region reflective method (no
     bounds, exact SVD steps) and the variables scaled, fixed, by the first Jacobian's column
     norms; at most max_nfev residual evaluations (jac's are not counted); stops when a step
-    lowers the sum by less than the fraction ftol. Returns x, whose sum is never above
+    lowers the sum by less than the fraction ftol, or, with `stall` = (k, drop), once the
+    last k steps taken together lowered it by at most that fraction (as
+    levenberg_marquardt's rule: a step is taken when it lowers the sum, and the fit stops
+    before the Jacobian at the last one is computed). Returns x, whose sum is never above
     x0's (a step is taken only when it lowers the sum)."""
     from scipy.optimize import least_squares  # the joint refit's only: searches need none
 
     x0 = np.asarray(x0, dtype=float)
-    fit = least_squares(
-        fun,
-        x0,
-        jac=jac,
-        method="trf",
-        tr_solver="exact",
-        x_scale=1.0 / column_norms(jac(x0)),
-        ftol=ftol,
-        max_nfev=int(max_nfev),
-    )
+    taken: list[tuple[float, np.ndarray]] = []  # (sum, x) of the start and each step taken
+
+    def watched(x):
+        f = np.asarray(fun(x), dtype=float)
+        cost = float(f @ f)
+        if not taken or cost < taken[-1][0]:
+            taken.append((cost, np.array(x, dtype=float)))
+            if stall is not None and len(taken) > stall[0]:
+                before = taken[-1 - stall[0]][0]
+                if before - cost <= stall[1] * before:
+                    raise _Stalled
+        return f
+
+    try:
+        fit = least_squares(
+            watched,
+            x0,
+            jac=jac,
+            method="trf",
+            tr_solver="exact",
+            x_scale=1.0 / column_norms(jac(x0)),
+            ftol=ftol,
+            max_nfev=int(max_nfev),
+        )
+    except _Stalled:
+        return taken[-1][1]
     return np.asarray(fit.x, dtype=float)
 
 
