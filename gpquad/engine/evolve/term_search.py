@@ -4,9 +4,10 @@ The hill climbers rarely build a small bilinear coupling such as 0.9 q r in p_do
 mutant that adds it must also get its coefficient right to be accepted. Here every
 candidate `model + c x_i` and `model + c x_i x_j` (x over the states and inputs) is
 screened by the error after one Gauss-Newton step through the integrator from c = 0 (all
-of them from one shared flight, gpquad.engine.evolve.term_screen), the SCREEN_KEEP best have all their constants re-fitted (Levenberg-Marquardt through the
-integrator, or the configured fit), and the best one replaces the model when it lowers the
-error by more than `min_gain` (relative). Final selection (BIC) removes what the data do not
+of them from one shared flight, gpquad.engine.evolve.term_screen), the SCREEN_KEEP best
+have all their constants re-fitted (Levenberg-Marquardt through the integrator, or the
+configured fit), and the best one replaces the model when it lowers the error by more than
+`min_gain` (relative). Final selection (BIC) removes what the data do not
 support.
 """
 
