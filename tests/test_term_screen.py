@@ -160,3 +160,30 @@ def test_a_shared_flight_with_the_wrong_columns_is_caught(rigid_dataset, monkeyp
         for a, b in zip(right, wrong, strict=True)
     )
     assert differ > 100
+
+
+def test_a_term_the_model_has_is_stepped_from_the_shared_flight(rigid_dataset, monkeypatch):  # noqa: F811
+    """A candidate that adds a term the model already has (c p beside -3 p) has two equal
+    Jacobian columns; the screen merges them and solves its normal equations instead of
+    taking the pivoted QR of its columns. Without the merge (the bad case) those
+    candidates fall back to it."""
+    import gpquad.engine.evolve.term_screen as term_screen
+
+    ds = rigid_dataset
+    ev = Evaluator(ds, "p_dot", 100, "mse")
+    model = _tree("8.0*u_R(t-2) - 3.0*p", ds)
+    offered = term_search.insertion_candidates(model, 13, 5)
+    fallbacks = []
+    real = term_screen.step_from
+
+    def counted(tree, res, jac):
+        fallbacks.append(tree)
+        return real(tree, res, jac)
+
+    monkeypatch.setattr(term_screen, "step_from", counted)
+    terms = term_search.model_terms(model)
+    merged = term_screen.screen_steps(ev, model, terms, offered, STARTS[:3])
+    assert fallbacks == [] and all(step is not None for step in merged)
+    monkeypatch.setattr(term_screen, "SAME_COLUMN", 2.0)
+    term_screen.screen_steps(ev, model, terms, offered, STARTS[:3])
+    assert len(fallbacks) >= 12  # every candidate that repeats p or u_R(t-2)

@@ -9,8 +9,9 @@ by the states are multiplied by c = 0). So one sensitivity flight of
 model' + sum_k c_k t_k over every distinct new term, all c_k = 0, gives every such
 candidate's residuals and Jacobian: the numbers of the candidate's own flight up to
 round-off (the additions come in another order). Each candidate's step then solves the
-normal equations of its columns, from the Gram matrix of the whole flight's Jacobian; a
-candidate whose columns are nearly dependent takes gradient_fit.step_from's pivoted QR.
+normal equations of its columns, from the Gram matrix of the whole flight's Jacobian (a
+new term the model already has moves one of the two equal columns' constants); a candidate
+whose columns are nearly dependent otherwise takes gradient_fit.step_from's pivoted QR.
 The model's own constants that the residuals cannot tell apart are held fixed in every
 candidate. A candidate that drops a term of the model to make room under the depth limit
 flies alone.
@@ -31,6 +32,10 @@ from gpquad.engine.evolve.gradient_fit import (
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, population_stack_height
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.operators import CONST
+
+#: |cosine| between two Jacobian columns above which they are the same column up to
+#: round-off (a new term that the model already has).
+SAME_COLUMN = 1.0 - 1e-15
 
 
 def _tagged(term, label) -> list:
@@ -112,8 +117,9 @@ def _free(jac: np.ndarray, cols: list[int]) -> np.ndarray:
 def normal_step(tree: Tree, gram: np.ndarray, moment: np.ndarray, free) -> Tree | None:
     """`tree` after the Gauss-Newton step in its constants `free` (positions in the prefix
     order of its constants) from its Jacobian's Gram matrix J^T J and J^T r (the normal
-    equations, on unit columns); None unless every free column is identifiable with room
-    to spare (the condition of gradient_fit.identifiable's shortcut), where
+    equations, on unit columns). Of two columns equal up to round-off (SAME_COLUMN) the
+    first one's constant moves. None unless the columns left are identifiable with room to
+    spare (the condition of gradient_fit.identifiable's shortcut), where
     gradient_fit.step_from (pivoted QR) decides instead."""
     gram, moment = gram[np.ix_(free, free)], moment[free]
     if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(moment))):
@@ -122,10 +128,17 @@ def normal_step(tree: Tree, gram: np.ndarray, moment: np.ndarray, free) -> Tree 
     if not np.all(norms > 0):
         return None
     unit = gram / np.outer(norms, norms)
+    # a new term the model already has: its column is one of the model's, and only one of
+    # the two moves (which one does not change the stepped equation)
+    kept: list[int] = []
+    for j in range(len(free)):
+        if all(abs(unit[i, j]) < SAME_COLUMN for i in kept):
+            kept.append(j)
+    unit, moment, norms = unit[np.ix_(kept, kept)], moment[kept], norms[kept]
     eigen = np.linalg.eigvalsh(unit)
     if not eigen[0] > GRAM_FULL_RANK * eigen[-1]:
         return None
     h = -np.linalg.solve(unit, moment / norms) / norms
     values = tree.values.copy()
-    values[np.flatnonzero(tree.codes == CONST)[free]] += h
+    values[np.flatnonzero(tree.codes == CONST)[np.asarray(free)[kept]]] += h
     return Tree(tree.codes, values, tree.delays)
