@@ -612,7 +612,7 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed,
     noise = rng.normal(0.0, 0.05, (len(starts), 40, 4))
 
     def fly(which):
-        pos = np.empty((len(which), 41, 3)) if scheme == "rk4" else np.zeros((len(which), 0, 3))
+        pos = np.empty((len(which), 41, 3)) if scheme == "rk4" else None
         states = rollout(
             codes,
             values,
@@ -626,7 +626,7 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed,
             noise[which],
             ks.scheme_code(scheme),
             2,
-            pos if scheme == "rk4" else None,
+            pos,
         )
         return states, pos
 
@@ -635,4 +635,5 @@ def test_windows_flown_together_are_each_window_flown_alone(short_dataset, seed,
     for w in range(len(starts)):
         alone = fly(np.array([w]))
         np.testing.assert_array_equal(together[0][w], alone[0][0])
-        np.testing.assert_array_equal(together[1][w], alone[1][0])
+        if scheme == "rk4":  # the position is flown by RK4 only
+            np.testing.assert_array_equal(together[1][w], alone[1][0])

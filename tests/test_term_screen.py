@@ -147,13 +147,15 @@ def test_a_shared_flight_with_the_wrong_columns_is_caught(rigid_dataset, monkeyp
     model = _tree("8.0*u_R(t-2) - 3.0*p + 0.5*q*r", ds)
     offered = term_search.insertion_candidates(model, 13, 5)
     right = term_screen.screen_steps(ev, model, term_search.model_terms(model), offered, STARTS[:3])
-    untagged = term_screen._untagged
+    constant_tags = term_screen._constant_tags
+    calls = []
 
-    def reversed_tags(prefix, delays):
-        tree, tags = untagged(prefix, delays)
-        return tree, tags[::-1]
+    def reversed_once(prefix):  # the shared flight's columns (the first call) misread
+        calls.append(1)
+        tags = constant_tags(prefix)
+        return tags[::-1] if len(calls) == 1 else tags
 
-    monkeypatch.setattr(term_screen, "_untagged", reversed_tags)
+    monkeypatch.setattr(term_screen, "_constant_tags", reversed_once)
     wrong = term_screen.screen_steps(ev, model, term_search.model_terms(model), offered, STARTS[:3])
     differ = sum(
         a is not None and b is not None and not np.allclose(a.values, b.values, rtol=1e-6)

@@ -184,15 +184,17 @@ def trust_region(
     from scipy.optimize import least_squares  # the joint refit's only: searches need none
 
     x0 = np.asarray(x0, dtype=float)
-    taken: list[tuple[float, np.ndarray]] = []  # (sum, x) of the start and each step taken
+    sums: list[float] = []  # of the start and of each step taken
+    last = [x0]  # the point of the last step taken
 
     def watched(x):
         f = np.asarray(fun(x), dtype=float)
         cost = float(f @ f)
-        if not taken or cost < taken[-1][0]:
-            taken.append((cost, np.array(x, dtype=float)))
-            if stall is not None and len(taken) > stall[0]:
-                before = taken[-1 - stall[0]][0]
+        if not sums or cost < sums[-1]:
+            sums.append(cost)
+            last[0] = np.array(x, dtype=float)
+            if stall is not None and len(sums) > stall[0]:
+                before = sums[-1 - stall[0]]
                 if before - cost <= stall[1] * before:
                     raise _Stalled
         return f
@@ -209,7 +211,7 @@ def trust_region(
             max_nfev=int(max_nfev),
         )
     except _Stalled:
-        return taken[-1][1]
+        return last[0]
     return np.asarray(fit.x, dtype=float)
 
 

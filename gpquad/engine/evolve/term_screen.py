@@ -29,7 +29,6 @@ from gpquad.engine.evolve.gradient_fit import (
     residuals_and_jacobian,
     step_from,
 )
-from gpquad.engine.kernels.tree_eval import STACK_ROWS, population_stack_height
 from gpquad.engine.tree.encoding import Tree, shallow_sum
 from gpquad.engine.tree.operators import CONST
 
@@ -44,18 +43,14 @@ def _tagged(term, label) -> list:
     return [(code, (label, k, value)) for k, (code, value) in enumerate(term)]
 
 
-def _untagged(prefix, delays) -> tuple[Tree, list]:
-    """The tree of a tagged prefix list (the sum's own nodes untagged) and the tag of each
-    of its constants, in order."""
-    codes = [code for code, _ in prefix]
-    values = [tag[2] if isinstance(tag, tuple) else tag for _, tag in prefix]
-    tree = Tree.from_lists(codes, values, delays)
-    tags = [tag[:2] for code, tag in prefix if code == CONST]
-    return tree, tags
+def _value(tag) -> float:
+    """The value under a tag of _tagged (the sum's own nodes carry theirs untagged)."""
+    return tag[2] if isinstance(tag, tuple) else tag
 
 
-def _key(term) -> tuple:
-    return tuple(term)
+def _constant_tags(prefix) -> list:
+    """The tag (label, position) of each constant of a tagged prefix list, in order."""
+    return [tag[:2] for code, tag in prefix if code == CONST]
 
 
 def screen_steps(
@@ -64,7 +59,7 @@ def screen_steps(
     """Each candidate after one Gauss-Newton step (gradient_fit.gauss_newton_step) on the
     windows `starts`, None where that gives none. candidates: (tree, new) as
     term_search.insertion_candidates makes them from `model`, whose terms
-    (term_search.model_terms) are `terms`."""
+    (term_search.model_terms) are `terms`: a tree with `new` is shallow_sum(terms + new)."""
     steps: list[Tree | None] = [None] * len(candidates)
     shared = [k for k, (_, new) in enumerate(candidates) if new is not None]
     for k, (tree, new) in enumerate(candidates):
@@ -76,31 +71,25 @@ def screen_steps(
     added: dict[tuple, list] = {}
     for k in shared:
         for term in candidates[k][1]:
-            added.setdefault(_key(term), _tagged(term, ("new", _key(term))))
-    flown, tags = _untagged(shallow_sum(base + list(added.values())), model.delays)
-    if population_stack_height(flown.codes[None, :], np.array([flown.size])) > STACK_ROWS:
-        for k in shared:  # too many terms to fly as one tree
-            steps[k] = gauss_newton_step(ev, candidates[k][0], starts, ev.n_steps)
-        return steps
-    column = {tag: j for j, tag in enumerate(tags)}
+            added.setdefault(tuple(term), _tagged(term, ("new", tuple(term))))
+    prefix = shallow_sum(base + list(added.values()))
+    flown = Tree.from_lists(
+        [code for code, _ in prefix], [_value(tag) for _, tag in prefix], model.delays
+    )
+    column = {tag: j for j, tag in enumerate(_constant_tags(prefix))}
     res, jac, diverged = residuals_and_jacobian(ev, flown, starts, ev.n_steps)
     if diverged:  # every candidate flies this trajectory at c = 0
         return steps
     gram, moment = jac.T @ jac, jac.T @ res
     # the model's constants the residuals cannot tell apart stay fixed, as step_from would
     # hold them in every candidate
-    model_cols = [j for j, tag in enumerate(tags) if tag[0][0] == "model"]
-    held = {tags[model_cols[j]] for j in set(range(len(model_cols))) - set(_free(jac, model_cols))}
+    own = [tag for tag in column if tag[0][0] == "model"]
+    held = set(own) - {own[i] for i in _free(jac, [column[tag] for tag in own])}
     for k in shared:
         tree, new = candidates[k]
-        own, own_tags = _untagged(
-            shallow_sum(base + [added[_key(term)] for term in new]), tree.delays
-        )
-        if own.codes.tolist() != tree.codes.tolist():  # not the sum it says it is
-            steps[k] = gauss_newton_step(ev, tree, starts, ev.n_steps)
-            continue
-        cols = [column[tag] for tag in own_tags]
-        free = [j for j, tag in enumerate(own_tags) if tag not in held]
+        tags = _constant_tags(shallow_sum(base + [added[tuple(term)] for term in new]))
+        cols = [column[tag] for tag in tags]
+        free = [j for j, tag in enumerate(tags) if tag not in held]
         steps[k] = normal_step(tree, gram[np.ix_(cols, cols)], moment[cols], free)
         if steps[k] is None:
             steps[k] = step_from(tree, res, jac[:, cols])
