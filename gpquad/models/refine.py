@@ -18,7 +18,8 @@ of the roll and pitch set-points at several delays, filtered by the motors
    psi) and input taps at delays 0..max_delay, and every tap alone, is screened by how much
    of the one-step residual it explains beyond the equation's terms; the SCREENED best are
    fitted through the integrator (all constants, from the equation's own and the term's
-   one-step coefficient on its residual), and the best is kept while it lowers the
+   one-step coefficient on its residual) by one LM fit, the FINALISTS best of them again
+   with a growing horizon (RefineProblem.fit), and the best is kept while it lowers the
    training error by more than term_min_gain. With `mirror_inputs`, terms of the wrong
    left-right parity are not offered (gpquad.models.symmetry);
 3. of the equations on that path (the found one first), the one with the lowest validation
@@ -62,6 +63,10 @@ from gpquad.models.symmetry import wrong_parity
 
 #: Candidates fitted through the integrator per step (the best by the one-step screen).
 SCREENED = 6
+#: Of those, the ones fitted with the growing horizon as well (the best by their direct
+#: fit): the winner of a step was among the best two by the direct fit in every step measured
+#: (docs/decisions/2026-11-27-whole-benchmark.md).
+FINALISTS = 2
 #: Errors below this fraction of the zero equation's count as flown exactly, the
 #: selection's resolution (selection.RSE_RESOLUTION): a found equation there is kept as
 #: found, and a gain is term_min_gain of max(error, NEGLIGIBLE * zero error). Below it
@@ -112,6 +117,13 @@ def screen(
         0.0,
     )
     return [int(k) for k in np.argsort(-score, kind="stable")[:SCREENED] if score[k] > 0]
+
+
+def finalists_of(errors) -> list[int]:
+    """Indices of the FINALISTS lowest finite errors, in the order given."""
+    errors = np.asarray(errors, dtype=float)
+    order = np.argsort(np.where(np.isfinite(errors), errors, np.inf), kind="stable")
+    return sorted(int(i) for i in order[:FINALISTS] if np.isfinite(errors[i]))
 
 
 def warm_start(expr: sp.Expr, term: sp.Expr, column: np.ndarray, residual: np.ndarray) -> sp.Expr:
@@ -201,11 +213,13 @@ def refine_equation(equation, dataset, evolution, flipped=(), workers: int = 1):
         best = None
         screened = screen(problem, expr, residual, columns, offered)
         starts = [warm_start(expr, candidates[k], columns[:, k], residual) for k in screened]
-        for k, (fitted, fitted_error) in zip(
-            screened, thread_map(problem.fit, starts, workers), strict=True
-        ):
+        ranked = thread_map(problem.direct_fit, starts, workers)
+        finalists = finalists_of([r.error for r in ranked])
+        pairs = [(starts[i], ranked[i]) for i in finalists]
+        fits = thread_map(lambda pair: problem.fit(*pair), pairs, workers)
+        for i, (fitted, fitted_error) in zip(finalists, fits, strict=True):
             if best is None or fitted_error < best[1]:
-                best = (fitted, fitted_error, candidates[k])
+                best = (fitted, fitted_error, candidates[screened[i]])
         if best is None or not best[1] < error - gain(error):
             break
         expr, error = best[0], best[1]

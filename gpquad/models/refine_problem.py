@@ -4,13 +4,14 @@ delay, the evaluators that fit it and judge it, its training windows and samples
 from __future__ import annotations
 
 import copy
+from typing import NamedTuple
 
 import numpy as np
 import sympy as sp
 
 from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.evaluator import Evaluator
-from gpquad.engine.evolve.gradient_fit import continued_constants
+from gpquad.engine.evolve.gradient_fit import continued_constants, gauss_newton_constants
 from gpquad.engine.evolve.lm import FTOL, STALL
 from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.windows import spread, tile
@@ -26,6 +27,15 @@ FIT_STEPS = 40
 #: Training samples of the one-step screen and the least-squares starts (evenly spread):
 #: the library's columns then take at most 560 x 20000 numbers whatever the log's length.
 SCREEN_SAMPLES = 20000
+
+
+class Fitted(NamedTuple):
+    """RefineProblem.direct_fit's result: the fitted expression and its training error, and
+    its first fit (tree, error), which `RefineProblem.fit` continues from."""
+
+    expr: sp.Expr
+    error: float
+    first: tuple[Tree, float]
 
 
 def monomials(expr: sp.Expr) -> list[sp.Expr]:
@@ -172,22 +182,46 @@ class RefineProblem:
         self.judge.set_lag(self.ev.lag)  # the equation's lag, whichever evaluator judges
         return self._window_error(self.judge, tree, starts, steps)
 
-    def fit(self, expr: sp.Expr) -> tuple[sp.Expr, float]:
+    def fit(self, expr: sp.Expr, direct: Fitted | None = None) -> tuple[sp.Expr, float]:
         """(expr with its constants fitted through the integrator, training error): fitted in
         the search's scheme, then, while the fitted loop needs more steps per sample
-        (`fitting`), polished in the finer scheme from there."""
-        ev, short = self.ev, self.short
+        (`fitting`), polished in the finer scheme from there. direct: `direct_fit(expr)`,
+        when made already: its first fit is not made again."""
+        return self._fit(expr, True, None if direct is None else direct.first)[:2]
+
+    def direct_fit(self, expr: sp.Expr) -> Fitted:
+        """`fit` without the growing horizon in the search's scheme (its direct LM fit alone,
+        about half of fit's work), with that first fit kept for `fit(expr, direct=...)`."""
+        return Fitted(*self._fit(expr, False, None))
+
+    def _fit(self, expr: sp.Expr, grow: bool, first: tuple[Tree, float] | None):
+        """(fitted expr, its error, the first (direct) fit in the search's scheme)."""
+        ev, short = self.ev, self.short if grow else []
+        made = first
         while True:
             tree = self.tree(expr)
 
             def error_of(t: Tree, ev=ev) -> float:
                 return self._window_error(ev, t, self.starts, self.steps)
 
-            start = error_of(tree)
+            if first is None:
+                start = error_of(tree)
+                first = gauss_newton_constants(
+                    ev,
+                    tree,
+                    start if np.isfinite(start) else np.inf,
+                    self.starts,
+                    self.steps,
+                    error_of,
+                    FIT_STEPS,
+                    FTOL,
+                    STALL,
+                )
+                made = made or first
             fitted, error = continued_constants(
                 ev,
                 tree,
-                start if np.isfinite(start) else np.inf,
+                np.inf,
                 self.starts,
                 self.steps,
                 error_of,
@@ -195,11 +229,12 @@ class RefineProblem:
                 short,
                 FTOL,
                 STALL,
+                direct=first,
             )
             expr = self.expr(fitted)
             finer = self.fitting(expr)
             if finer.substeps <= ev.substeps:
-                return expr, float(error)
+                return expr, float(error), made
             # polished in the finer scheme from the coarse fit: already in the loop's basin,
             # it needs no growing horizon
-            ev, short = finer, []
+            ev, short, first = finer, [], None

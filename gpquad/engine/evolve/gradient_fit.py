@@ -207,11 +207,13 @@ def continued_constants(
     short_windows,
     ftol: float = SEARCH_FTOL,
     stall: tuple[int, float] | None = None,
+    direct: tuple[Tree, float] | None = None,
 ) -> tuple[Tree, float]:
     """LM fit with a growing horizon: the direct fit on (starts, n_steps), and a fit that
     starts on each (short_starts, short_steps) of `short_windows` in turn (each from the
     last result) before the full windows; the better of the two (by error_of), if better
-    than `error`.
+    than `error`. direct: the direct fit's result (tree, error), when it was made already
+    (the refinement ranks its candidates by it).
 
     Short windows are nearly the one-step problem, whose error has one basin for a model
     linear in its constants; the long-window error of a stiff closed loop has many, and a
@@ -219,7 +221,7 @@ def continued_constants(
     ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish);
     stall: its stall rule (lm.STALL in the refinement), both passed to every fit.
     """
-    best, best_error = gauss_newton_constants(
+    best, best_error = direct or gauss_newton_constants(
         ev, model, error, starts, n_steps, error_of, max_steps, ftol, stall
     )
     if not short_windows:

@@ -1,0 +1,95 @@
+"""The refinement's term steps fit every screened candidate once (its direct LM fit) and
+only the best FINALISTS of them with the growing horizon as well (gpquad.models.refine)."""
+
+import numpy as np
+import pytest
+import sympy as sp
+from conftest import truth_dataset
+from test_refine import FLIP, R_DOT, TRUTH, evolution
+from test_stability import model_of
+
+from gpquad.models import refine as refine_module
+from gpquad.models import refine_problem
+from gpquad.models.refine import finalists_of, refine_equation, warm_start
+from gpquad.models.refine_problem import Fitted, RefineProblem
+
+TERM = sp.Symbol("u_P__tap2", real=True) * sp.Symbol("u_R__tap1", real=True)
+
+
+@pytest.fixture(scope="module")
+def dataset():
+    return truth_dataset({"r_dot": R_DOT}, duration_s=120.0, seed=11)
+
+
+@pytest.fixture(scope="module")
+def found(dataset):
+    return model_of({"r_dot": TRUTH["r_dot"]}, dataset).equations["r_dot"]
+
+
+def start(problem, found, scale: float) -> sp.Expr:
+    """The found equation with its constants scaled, the missing term warm-started."""
+    expr = problem.canonical(found)
+    expr = expr.xreplace({c: c * scale for c in expr.atoms(sp.Float)})
+    return warm_start(expr, TERM, problem.values(TERM), problem.residual(expr))
+
+
+def test_a_fit_continued_from_its_direct_fit_is_the_fit_made_whole(dataset, found):
+    """fit(expr, direct_fit(expr)) repeats no work and gives fit(expr) to the bit; given
+    another first fit (the bad case) it continues from that one."""
+    problem = RefineProblem(found, dataset, evolution())
+    expr = start(problem, found, 0.7)
+    whole = problem.fit(expr)
+    direct = problem.direct_fit(expr)
+    calls = []
+    original = refine_problem.gauss_newton_constants
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    refine_problem.gauss_newton_constants = counted
+    try:
+        continued = problem.fit(expr, direct)
+    finally:
+        refine_problem.gauss_newton_constants = original
+    assert continued[1] == whole[1]
+    assert sp.srepr(continued[0]) == sp.srepr(whole[0])
+    assert not calls  # the direct fit was not made again
+    assert direct.error >= whole[1]  # the growing horizon can only add a better fit
+    # the bad case: another first fit, better than the growing horizon's, is what it returns
+    other = problem.tree(start(problem, found, 1.3))
+    fake = Fitted(expr, 0.0, (other, 0.0))
+    assert sp.srepr(problem.fit(expr, fake)[0]) == sp.srepr(problem.expr(other))
+
+
+def test_the_finalists_are_the_lowest_finite_errors_in_their_order():
+    assert refine_module.FINALISTS == 2
+    assert finalists_of([3.0, 1.0, np.inf, 2.0, np.nan, 0.5]) == [1, 5]
+    assert finalists_of([1.0, 1.0, 1.0]) == [0, 1]
+    assert finalists_of([np.inf, 4.0]) == [1]
+    assert finalists_of([np.nan, np.inf]) == []
+
+
+def test_a_step_fits_only_its_finalists_whole_and_finds_the_same_term(dataset, found, monkeypatch):
+    """With every screened candidate fitted whole (FINALISTS = SCREENED) the refinement
+    finds the same term and constants; with the default, no step fits more than FINALISTS
+    candidates with the growing horizon."""
+    whole_fits = []
+    original = RefineProblem.fit
+
+    def counted(self, expr, direct=None):
+        if direct is not None:
+            whole_fits.append(1)
+        return original(self, expr, direct)
+
+    monkeypatch.setattr(RefineProblem, "fit", counted)
+    refined, report = refine_equation(found, dataset, evolution(1), FLIP)
+    assert report["added"] == ["u_P(t-2)*u_R(t-1)"]
+    assert 1 <= len(whole_fits) <= refine_module.FINALISTS  # one step: 6 screened
+    whole_fits.clear()
+    default = refine_module.FINALISTS
+    monkeypatch.setattr(refine_module, "FINALISTS", refine_module.SCREENED)
+    everyone, everyone_report = refine_equation(found, dataset, evolution(1), FLIP)
+    assert len(whole_fits) > default  # the bad case: all six fitted whole
+    assert everyone_report["added"] == report["added"]
+    assert np.array_equal(everyone.tree.values, refined.tree.values)
