@@ -217,7 +217,7 @@ class RefineProblem:
                     FTOL,
                     STALL,
                 )
-                made = made or first
+                made = first if made is None else made
             fitted, error = continued_constants(
                 ev,
                 tree,

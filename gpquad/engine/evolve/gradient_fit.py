@@ -221,9 +221,11 @@ def continued_constants(
     ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish);
     stall: its stall rule (lm.STALL in the refinement), both passed to every fit.
     """
-    best, best_error = direct or gauss_newton_constants(
-        ev, model, error, starts, n_steps, error_of, max_steps, ftol, stall
-    )
+    if direct is None:
+        direct = gauss_newton_constants(
+            ev, model, error, starts, n_steps, error_of, max_steps, ftol, stall
+        )
+    best, best_error = direct
     if not short_windows:
         return best, best_error
     tree = model
