@@ -196,45 +196,48 @@ class RefineProblem:
 
     def _fit(self, expr: sp.Expr, grow: bool, first: tuple[Tree, float] | None):
         """(fitted expr, its error, the first (direct) fit in the search's scheme)."""
-        ev, short = self.ev, self.short if grow else []
-        made = first
-        while True:
-            tree = self.tree(expr)
-
-            def error_of(t: Tree, ev=ev) -> float:
-                return self._window_error(ev, t, self.starts, self.steps)
-
-            if first is None:
-                start = error_of(tree)
-                first = gauss_newton_constants(
-                    ev,
-                    tree,
-                    start if np.isfinite(start) else np.inf,
-                    self.starts,
-                    self.steps,
-                    error_of,
-                    FIT_STEPS,
-                    FTOL,
-                    STALL,
-                )
-                made = first if made is None else made
-            fitted, error = continued_constants(
-                ev,
-                tree,
-                np.inf,
-                self.starts,
-                self.steps,
-                error_of,
-                FIT_STEPS,
-                short,
-                FTOL,
-                STALL,
-                direct=first,
-            )
-            expr = self.expr(fitted)
-            finer = self.fitting(expr)
-            if finer.substeps <= ev.substeps:
-                return expr, float(error), made
+        tree = self.tree(expr)
+        if first is None:
+            first = self._direct(self.ev, tree)
+        fitted, error = continued_constants(
+            self.ev,
+            tree,
+            np.inf,  # read by the direct fit only, which is made
+            self.starts,
+            self.steps,
+            self._error_of(self.ev),
+            FIT_STEPS,
+            self.short if grow else [],
+            FTOL,
+            STALL,
+            direct=first,
+        )
+        expr, ev = self.expr(fitted), self.ev
+        while (finer := self.fitting(expr)).substeps > ev.substeps:
             # polished in the finer scheme from the coarse fit: already in the loop's basin,
             # it needs no growing horizon
-            ev, short, first = finer, [], None
+            ev = finer
+            fitted, error = self._direct(ev, self.tree(expr))
+            expr = self.expr(fitted)
+        return expr, float(error), first
+
+    def _error_of(self, ev: Evaluator):
+        """The training windows' error of a tree flown by `ev`."""
+        return lambda t: self._window_error(ev, t, self.starts, self.steps)
+
+    def _direct(self, ev: Evaluator, tree: Tree) -> tuple[Tree, float]:
+        """The LM fit of the tree's constants on the training windows, flown by `ev`, from
+        its constants (kept when no better)."""
+        error_of = self._error_of(ev)
+        start = error_of(tree)
+        return gauss_newton_constants(
+            ev,
+            tree,
+            start if np.isfinite(start) else np.inf,
+            self.starts,
+            self.steps,
+            error_of,
+            FIT_STEPS,
+            FTOL,
+            STALL,
+        )
