@@ -55,7 +55,7 @@ def test_a_fit_continued_from_its_direct_fit_is_the_fit_made_whole(dataset, foun
     assert direct.error >= whole[1]  # the growing horizon can only add a better fit
     # the bad case: another first fit, better than the growing horizon's, is what it returns
     other = problem.tree(start(problem, found, 1.3))
-    fake = Fitted(expr, 0.0, (other, 0.0))
+    fake = Fitted(problem.expr(other), 0.0, (other, 0.0))
     assert sp.srepr(problem.fit(expr, fake)[0]) == sp.srepr(problem.expr(other))
 
 
@@ -89,3 +89,29 @@ def test_a_step_fits_only_its_finalists_whole_and_finds_the_same_term(dataset, f
     assert len(whole_fits) > default  # the bad case: all six fitted whole
     assert everyone_report["added"] == report["added"]
     assert np.array_equal(everyone.tree.values, refined.tree.values)
+
+
+def test_a_finalist_whose_direct_fit_stays_best_is_not_polished_again(dataset, found, monkeypatch):
+    """Where the growing horizon does not beat the direct fit, the finalist's result is its
+    direct fit as `direct_fit` polished it, and no fit in the finer scheme is made again;
+    where it does (the bad case for reuse), that fit is polished."""
+    problem = RefineProblem(found, dataset, evolution())
+    expr = start(problem, found, 0.7)
+    finer = problem._evaluator("rk4", 2)
+    monkeypatch.setattr(problem, "fitting", lambda e: finer)
+    direct = problem.direct_fit(expr)
+    polishes = []
+    original = problem._direct
+
+    def recorded(ev, tree):
+        polishes.append(ev.substeps)
+        return original(ev, tree)
+
+    monkeypatch.setattr(problem, "_direct", recorded)
+    monkeypatch.setattr(refine_problem, "continued_constants", lambda *a, direct, **k: direct)
+    assert problem.fit(expr, direct) == (direct.expr, direct.error)
+    assert not polishes
+    grown = problem.tree(start(problem, found, 0.9))
+    monkeypatch.setattr(refine_problem, "continued_constants", lambda *a, direct, **k: (grown, 1.0))
+    problem.fit(expr, direct)
+    assert polishes == [2]

@@ -184,34 +184,37 @@ class RefineProblem:
 
     def fit(self, expr: sp.Expr, direct: Fitted | None = None) -> tuple[sp.Expr, float]:
         """(expr with its constants fitted through the integrator, training error): fitted in
-        the search's scheme, then, while the fitted loop needs more steps per sample
-        (`fitting`), polished in the finer scheme from there. direct: `direct_fit(expr)`,
-        when made already: its first fit is not made again."""
-        return self._fit(expr, True, None if direct is None else direct.first)[:2]
-
-    def direct_fit(self, expr: sp.Expr) -> Fitted:
-        """`fit` without the growing horizon in the search's scheme (its direct LM fit alone,
-        about half of fit's work), with that first fit kept for `fit(expr, direct=...)`."""
-        return Fitted(*self._fit(expr, False, None))
-
-    def _fit(self, expr: sp.Expr, grow: bool, first: tuple[Tree, float] | None):
-        """(fitted expr, its error, the first (direct) fit in the search's scheme)."""
-        tree = self.tree(expr)
-        if first is None:
-            first = self._direct(self.ev, tree)
+        the search's scheme (the better of a direct LM fit and one with a growing horizon),
+        then, while the fitted loop needs more steps per sample (`fitting`), polished in the
+        finer scheme from there. direct: `direct_fit(expr)`, when made already: nothing it
+        did is done again (where its first fit stays the better one, it is the result)."""
+        first = self._direct(self.ev, self.tree(expr)) if direct is None else direct.first
         fitted, error = continued_constants(
             self.ev,
-            tree,
+            self.tree(expr),
             np.inf,  # read by the direct fit only, which is made
             self.starts,
             self.steps,
             self._error_of(self.ev),
             FIT_STEPS,
-            self.short if grow else [],
+            self.short,
             FTOL,
             STALL,
             direct=first,
         )
+        if direct is not None and fitted is first[0]:  # polished already
+            return direct.expr, direct.error
+        return self._polished(fitted, error)
+
+    def direct_fit(self, expr: sp.Expr) -> Fitted:
+        """`fit` without the growing horizon (its direct LM fit in the search's scheme,
+        polished as `fit` polishes), with that first fit kept for `fit(expr, direct=...)`."""
+        first = self._direct(self.ev, self.tree(expr))
+        return Fitted(*self._polished(*first), first)
+
+    def _polished(self, fitted: Tree, error: float) -> tuple[sp.Expr, float]:
+        """(expr, training error) of a fit in the search's scheme, polished in the finer
+        scheme while the fitted loop needs more steps per sample (`fitting`)."""
         expr, ev = self.expr(fitted), self.ev
         while (finer := self.fitting(expr)).substeps > ev.substeps:
             # polished in the finer scheme from the coarse fit: already in the loop's basin,
@@ -219,7 +222,7 @@ class RefineProblem:
             ev = finer
             fitted, error = self._direct(ev, self.tree(expr))
             expr = self.expr(fitted)
-        return expr, float(error), first
+        return expr, float(error)
 
     def _error_of(self, ev: Evaluator):
         """The training windows' error of a tree flown by `ev`."""
