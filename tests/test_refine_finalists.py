@@ -35,7 +35,8 @@ def start(problem, found, scale: float) -> sp.Expr:
 
 def test_a_fit_continued_from_its_direct_fit_is_the_fit_made_whole(dataset, found, monkeypatch):
     """fit(expr, direct_fit(expr)) repeats no work and gives fit(expr) to the bit; given
-    another first fit (the bad case) it continues from that one."""
+    another direct fit that the growing horizon does not beat (the bad case), that one is
+    the result: nothing is fitted from expr again."""
     problem = RefineProblem(found, dataset, evolution())
     expr = start(problem, found, 0.7)
     whole = problem.fit(expr)

@@ -186,13 +186,15 @@ class RefineProblem:
         """(expr with its constants fitted through the integrator, training error): fitted in
         the search's scheme (the better of a direct LM fit and one with a growing horizon),
         then, while the fitted loop needs more steps per sample (`fitting`), polished in the
-        finer scheme from there. direct: `direct_fit(expr)`, when made already: nothing it
-        did is done again (where its first fit stays the better one, it is the result)."""
-        first = self._direct(self.ev, self.tree(expr)) if direct is None else direct.first
+        finer scheme from there. direct: this problem's `direct_fit(expr)` at its current
+        lag, when made already: nothing it did is done again (where its first fit stays the
+        better one, it is the result)."""
+        tree = self.tree(expr)
+        first = self._direct(self.ev, tree) if direct is None else direct.first
         fitted, error = continued_constants(
             self.ev,
-            self.tree(expr),
-            np.inf,  # read by the direct fit only, which is made
+            tree,
+            np.inf,  # not read: the direct fit is given
             self.starts,
             self.steps,
             self._error_of(self.ev),
