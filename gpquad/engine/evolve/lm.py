@@ -37,8 +37,9 @@ ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
 #: The refinement's stall rule (steps, relative drop): its fits stop once that many taken
 #: steps together lowered the sum by at most that fraction of it. Measured on the
-#: refinement's fits (docs/decisions/2026-11-26-refine-stall.md).
-STALL = (3, 1e-4)
+#: refinement's fits (docs/decisions/2026-11-26-refine-stall.md,
+#: docs/decisions/2026-11-27-refine-ranking.md).
+STALL = (2, 1e-3)
 
 
 def column_norms(j: np.ndarray) -> np.ndarray:
