@@ -98,3 +98,36 @@ def test_a_search_that_is_exact_stops_and_the_paper_goes_on():
     never = dataclasses.replace(ev, stall_iterations=0)
     full = evolve(Coevolution(dataset, "p_dot", never), co.init_state(1), ev.iterations)
     assert full.iteration == 6
+
+
+def test_the_final_selections_fits_stop_when_they_stop_gaining(monkeypatch):
+    """Every LM fit of the final selection (by BIC, the default) runs with lm.STALL and the
+    search's own fits without it; the chosen equation still flies the truth
+    p_dot = -4.15 p + 10.3 u_R(t-1) to within the selection's resolution."""
+    from gpquad.engine.evolve import coevolution
+    from gpquad.engine.evolve.lm import STALL
+
+    dataset = truth_dataset({}, 60.0, seed=2)
+    ev = dataclasses.replace(
+        config_from_dict({}).evolution,
+        targets=("p_dot",),
+        iterations=1,
+        model_generations=30,
+        input_taps=1,
+    )
+    assert ev.integrator != "euler" and ev.selection == "bic"  # both schemes are pruned in
+    co = Coevolution(dataset, "p_dot", ev)
+    rules = []
+    fit = coevolution.continued_constants
+
+    def recorded(*args, stall=None, **kwargs):
+        rules.append(stall)
+        return fit(*args, stall=stall, **kwargs)
+
+    monkeypatch.setattr(coevolution, "continued_constants", recorded)
+    state = evolve(co, co.init_state(1), ev.iterations)
+    assert rules and set(rules) == {None}  # the search's fits: no stall rule
+    rules.clear()
+    tree, train, _ = co.best(state)
+    assert rules and set(rules) == {STALL}
+    assert exact(train, target_spread(co), co.evaluator.squared)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
+from gpquad.engine.evolve.lm import STALL
 from gpquad.engine.evolve.local_search import fit_constants, prune
 from gpquad.engine.evolve.poles import without_poles
 from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
@@ -84,7 +85,8 @@ class FinalChoice:
         the training and validation windows among it and the front's climbers
         (gpquad.engine.evolve.selection). The pruning flies the search's scheme; with another
         configured `integrator` the pruned equation is pruned again in it, the front's
-        constants are fitted through it, and the choice is made in it."""
+        constants are fitted through it, and the choice is made in it. Every fit here stops
+        when it stops gaining (lm.STALL)."""
         cfg = self.cfg
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
@@ -92,7 +94,7 @@ class FinalChoice:
         def pruned_in(scheme: str, substeps: int, tree: Tree):
             ev, fit = self._mse_fitter(scheme, substeps)
             constant_of = lambda t, a, b: self.subtree_mean(t, a, b, samples)  # noqa: E731
-            regain = self.regain_fitter(cfg.gradient_steps, ev)
+            regain = self.regain_fitter(cfg.gradient_steps, ev, stall=STALL)
             return ev, fit, prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain)
 
         # BIC over every window, training and validation: a criterion made for the data the
@@ -130,7 +132,7 @@ class FinalChoice:
             integrator=integrator,
             substeps=substeps,
         )
-        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse)
+        fit = self.gradient_fitter(cfg.gradient_steps, ev_mse, stall=STALL)
         if fit is None:
 
             def fit(tree, err, starts, n_steps):

@@ -218,10 +218,12 @@ class Coevolution(FinalChoice):
             state.models[i] = fold_constants(candidates[i])
             state.model_errors[i] = errors[i]
 
-    def gradient_fitter(self, steps: int, ev: Evaluator | None = None, short_windows=None):
+    def gradient_fitter(
+        self, steps: int, ev: Evaluator | None = None, short_windows=None, stall=None
+    ):
         """fit(tree, error, starts, n_steps) by Levenberg-Marquardt, or None (Nelder-Mead).
         Errors are those of `ev` (default: the run's evaluator); short_windows (default none)
-        start each fit on a growing horizon."""
+        start each fit on a growing horizon; `stall`: the LM's stall rule (default none)."""
         if self.cfg.constant_fit != "lm":
             return None
         ev = self.evaluator if ev is None else ev
@@ -232,7 +234,7 @@ class Coevolution(FinalChoice):
                 return float(ev.window_errors([t], starts, n_steps=n_steps).mean())
 
             return continued_constants(
-                ev, tree, error, starts, n_steps, error_of, steps, short_windows
+                ev, tree, error, starts, n_steps, error_of, steps, short_windows, stall=stall
             )
 
         return fit
@@ -291,10 +293,10 @@ class Coevolution(FinalChoice):
             for j in range(n_in)
         }
 
-    def regain_fitter(self, steps: int, ev: Evaluator | None = None):
+    def regain_fitter(self, steps: int, ev: Evaluator | None = None, stall=None):
         """The LM fit with a growing horizon (SEED_HORIZONS),
         for the few candidates whose gains start far from their values; None without LM."""
-        return self.gradient_fitter(steps, ev, short_windows=self.regain_windows)
+        return self.gradient_fitter(steps, ev, short_windows=self.regain_windows, stall=stall)
 
     def iterate(self, state: RunState) -> RunState:
         """One full iteration; returns the same state object, advanced."""
