@@ -342,3 +342,87 @@ def test_trust_region_stall_rule_stops_the_joint_refits_crawl():
     assert taken[-1 - k] - taken[-1] <= drop * taken[-1 - k]  # why it stopped
     assert tight <= stalled <= tight * (1.0 + drop)
     assert len(unstopped) >= len(sums) + 3
+
+
+def test_broyden_jacobian_asks_for_differences_every_refresh_and_keeps_the_secant():
+    """lm.broyden_jacobian (the joint refit's Jacobian): the forward-difference Jacobian at
+    the first point and at every `refresh`-th new point, exactly; in between the last one
+    updated so that it maps the last move to the residuals' change (the secant equation)
+    and is unchanged across the move, with one residual evaluation per new point and
+    nothing else; a point asked again in a row gets the same matrix. The stale matrix (the
+    bad case: no update) breaks the secant equation on this nonlinear residual."""
+    from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference
+
+    t = np.linspace(0.0, 3.0, 25)
+    calls = []
+
+    def fun(p):
+        calls.append(p.copy())
+        return p[0] * np.exp(-p[1] * t) + p[2] * t**2 - 1.0
+
+    value, fd = forward_difference(fun)
+    asked = []
+    jac = broyden_jacobian(value, lambda x: asked.append(x.copy()) or fd(x), refresh=3)
+    rng = np.random.default_rng(4)
+    points = [np.array([1.0, 0.5, 0.1])]
+    for _ in range(6):
+        points.append(points[-1] + 0.05 * rng.standard_normal(3))
+    matrices = []
+    for k, x in enumerate(points):
+        value(x)  # the fit flies a point before it asks for the Jacobian there
+        before = len(calls)
+        j = jac(x)
+        assert jac(x) is j  # asked again: the same matrix, no evaluation
+        matrices.append(j)
+        if k % 3 == 0:
+            assert len(calls) == before + 3  # one rollout per constant
+            np.testing.assert_array_equal(j, fd(x))
+        else:
+            assert len(calls) == before  # the update flies nothing
+            dx = x - points[k - 1]
+            df = fun(x) - fun(points[k - 1])
+            np.testing.assert_allclose(j @ dx, df, rtol=1e-10, atol=1e-12)
+            across = np.cross(dx, rng.standard_normal(3))  # a direction orthogonal to dx
+            np.testing.assert_allclose(j @ across, matrices[k - 1] @ across, atol=1e-12)
+            assert not np.allclose(matrices[k - 1] @ dx, df, rtol=1e-3)  # stale: no secant
+    assert [list(a) for a in asked] == [list(points[k]) for k in (0, 3, 6)]
+    with pytest.raises(ValueError):
+        broyden_jacobian(value, fd, 0)
+
+
+def test_trust_region_with_broyden_updates_fits_with_fewer_jacobians():
+    """trust_region with Broyden's updates (refresh JACOBIAN_REFRESH, the joint refit's)
+    fits y = a exp(-b t) + c from a far start to the truth, the same bits when fitted again,
+    with at most half the forward-difference Jacobians of a fit that makes one at every
+    point it asks (the bad case), and some updates in between."""
+    from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference, trust_region
+    from gpquad.models.joint_fit import JACOBIAN_REFRESH
+
+    t = np.linspace(0.0, 4.0, 60)
+    truth = np.array([2.5, 1.3, -0.4])
+    y = truth[0] * np.exp(-truth[1] * t) + truth[2]
+
+    def fit(refresh):
+        value, fd = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
+        made, asked = set(), set()
+
+        def counted(x):  # the forward-difference Jacobians made, one per distinct point
+            made.add(np.asarray(x).tobytes())
+            return fd(x)
+
+        jac = counted if refresh == 1 else broyden_jacobian(value, counted, refresh)
+
+        def watched(x):
+            asked.add(np.asarray(x).tobytes())
+            return jac(x)
+
+        x = trust_region(value, np.array([1.0, 0.5, 0.0]), watched, 400, 1e-14)
+        return x, len(made), len(asked)
+
+    every, n_every, _ = fit(1)
+    updated, n_updated, n_asked = fit(JACOBIAN_REFRESH)
+    np.testing.assert_allclose(every, truth, rtol=1e-6)
+    np.testing.assert_allclose(updated, truth, rtol=1e-6)
+    assert n_asked > n_updated  # some Jacobians were updates
+    assert n_updated <= n_every // 2
+    assert np.array_equal(fit(JACOBIAN_REFRESH)[0], updated)

@@ -11,7 +11,8 @@ of the full model, every state integrated:
 over the measured states s of (u, v, w, p, q, r): the sum of the benchmark's RSEs. It is a
 trust-region fit (scipy's trust-region reflective method through
 `gpquad.engine.evolve.lm.trust_region`, whose result does not depend on earlier fits in
-the process, as MINPACK's LM did; forward-difference Jacobian: one rollout per constant)
+the process, as MINPACK's LM did; a forward-difference Jacobian, one rollout per
+constant, at every JACOBIAN_REFRESH-th step and Broyden's update of it in between)
 on non-overlapping training windows of a growing horizon (JOINT_HORIZONS_S, each fit
 starting from the last, so that the short windows keep it in the basin of the
 per-equation constants); each later fit keeps the shorter windows'
@@ -61,7 +62,7 @@ from typing import Any
 import numpy as np
 
 from gpquad.data.score import readers_scheme
-from gpquad.engine.evolve.lm import forward_difference, trust_region
+from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference, trust_region
 from gpquad.engine.evolve.selection import RSE_RESOLUTION
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
@@ -90,6 +91,10 @@ FTOL = 1e-5
 #: (lm.STALL): a fit stops once that many steps taken together lowered the objective by at
 #: most that fraction of it (docs/decisions/2026-11-27-joint-stall.md).
 JOINT_STALL = (3, 1e-3)
+#: The fit's Jacobian is made by forward differences (one rollout per constant) at every
+#: JACOBIAN_REFRESH-th point it asks for one, and by Broyden's secant update of the last
+#: one in between (lm.broyden_jacobian; docs/decisions/2026-11-27-jacobians.md).
+JACOBIAN_REFRESH = 5
 #: A residual entry is clipped to this many state SDs, so that a window that diverges
 #: while a constant is perturbed gives a large, finite error rather than NaN.
 RESIDUAL_CLIP = 1e3
@@ -270,6 +275,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
             return np.concatenate([o.residuals(m) for o in objectives])
 
         value, jacobian = forward_difference(residuals, workers)
+        jacobian = broyden_jacobian(value, jacobian, JACOBIAN_REFRESH)
         x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL, JOINT_STALL)
         staged.append((float(seconds), x))
         reached = value(x)

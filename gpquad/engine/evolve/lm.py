@@ -16,7 +16,8 @@ The joint refit (80 constants, forward-difference Jacobian) uses scipy's trust-r
 reflective solver (`trust_region`, numpy code with no state outside the call: the same
 constants in a fresh process and after other fits), whose LAPACK SVD is fast at that size.
 Without an analytic Jacobian, `forward_difference` gives one (scipy's '2-point' step) whose
-result is also a function of the inputs alone.
+result is also a function of the inputs alone; `broyden_jacobian` asks for it at every few
+points only and updates it by Broyden's secant update in between.
 """
 
 from __future__ import annotations
@@ -35,10 +36,11 @@ FTOL = XTOL = 1.49012e-8
 RADIUS_FACTOR = 100.0
 ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
-#: The refinement's stall rule (steps, relative drop): its fits stop once that many taken
-#: steps together lowered the sum by at most that fraction of it. Measured on the
-#: refinement's fits (docs/decisions/2026-11-26-refine-stall.md,
-#: docs/decisions/2026-11-27-refine-ranking.md).
+#: The stall rule (steps, relative drop) of the refinement's fits and of the search's final
+#: selection: a fit stops once that many taken steps together lowered the sum by at most
+#: that fraction of it. Measured on the refinement's fits
+#: (docs/decisions/2026-11-26-refine-stall.md, docs/decisions/2026-11-27-refine-ranking.md)
+#: and on the final selection (docs/decisions/2026-11-27-jacobians.md).
 STALL = (2, 1e-3)
 
 
@@ -248,3 +250,40 @@ def forward_difference(fun, workers: int = 1):
         return np.column_stack(thread_map(column, range(x.size), workers))
 
     return value, (lambda x: remembered("jac", x, jacobian))
+
+
+def broyden_jacobian(value, jacobian, refresh: int):
+    """jac(x) for trust_region that asks `jacobian` (say forward_difference's, one rollout
+    per constant) at the first point and at every `refresh`-th new point after it, and in
+    between updates the last matrix by Broyden's rank-one secant update,
+    J + (f(x) - f(x_last) - J dx) dx^T / (dx^T dx) with dx = x - x_last, x_last the last
+    point asked: the updated J maps dx to the change of the residuals exactly, leaves J
+    unchanged across dx, and costs no evaluation beyond value(x), which the fit has made
+    already. The same point asked again in a row gets the same matrix; an update that is not
+    finite is replaced by `jacobian`'s. The result is a function of the sequence of points
+    asked."""
+    if refresh < 1:
+        raise ValueError("refresh must be at least 1")
+    last: dict = {}
+
+    def jac(x):
+        x = np.array(x, dtype=float)
+        if "x" in last and np.array_equal(last["x"], x):
+            return last["j"]
+        f = np.array(value(x), dtype=float)
+        j = None
+        if "x" in last and last["age"] + 1 < refresh:
+            dx = x - last["x"]
+            step = float(dx @ dx)
+            if step > 0.0:
+                j = last["j"] + np.outer(f - last["f"] - last["j"] @ dx, dx / step)
+                if not np.all(np.isfinite(j)):
+                    j = None
+        if j is None:
+            j, age = np.array(jacobian(x), dtype=float), 0
+        else:
+            age = last["age"] + 1
+        last.update(x=x, f=f, j=j, age=age)
+        return j
+
+    return jac
