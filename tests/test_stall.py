@@ -79,18 +79,25 @@ def test_an_exact_error_is_below_the_selections_resolution():
     assert not exact(float("inf"), 1.0, False) and not exact(float("nan"), 1.0, False)
 
 
-def test_a_search_that_is_exact_stops_and_the_paper_goes_on():
-    """On eq. 2 data of the truth p_dot = -4.15 p + 10.3 u_R(t-1) the search reaches the
-    truth's error (rounding) and stops at once; with the rule off (the bad case) it runs
-    every iteration."""
+def _truth_search(iterations: int):
+    """Eq. 2 data of the truth p_dot = -4.15 p + 10.3 u_R(t-1), and the default engine for
+    p_dot with `iterations` iterations of 30 generations."""
     dataset = truth_dataset({}, 60.0, seed=2)
     ev = dataclasses.replace(
         config_from_dict({}).evolution,
         targets=("p_dot",),
-        iterations=6,
+        iterations=iterations,
         model_generations=30,
         input_taps=1,
     )
+    return dataset, ev
+
+
+def test_a_search_that_is_exact_stops_and_the_paper_goes_on():
+    """On eq. 2 data of the truth p_dot = -4.15 p + 10.3 u_R(t-1) the search reaches the
+    truth's error (rounding) and stops at once; with the rule off (the bad case) it runs
+    every iteration."""
+    dataset, ev = _truth_search(6)
     co = Coevolution(dataset, "p_dot", ev)
     state = evolve(co, co.init_state(1), ev.iterations)
     assert state.iteration < 4
@@ -107,14 +114,7 @@ def test_the_final_selections_fits_stop_when_they_stop_gaining(monkeypatch):
     from gpquad.engine.evolve import coevolution
     from gpquad.engine.evolve.lm import STALL
 
-    dataset = truth_dataset({}, 60.0, seed=2)
-    ev = dataclasses.replace(
-        config_from_dict({}).evolution,
-        targets=("p_dot",),
-        iterations=1,
-        model_generations=30,
-        input_taps=1,
-    )
+    dataset, ev = _truth_search(1)
     assert ev.integrator != "euler" and ev.selection == "bic"  # both schemes are pruned in
     co = Coevolution(dataset, "p_dot", ev)
     rules = []
