@@ -245,12 +245,9 @@ def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
 
 
 def test_fit_reports_where_its_time_went(model, tmp_path):
-    """model.profile: each searched equation's seconds, each equation's own finishing steps'
-    (made beside the searches of the others) and each finishing step's, the same keys
-    whether the fit kept a run folder or not; a fit of one equation finishes it after its
-    search ("equations")."""
+    """model.profile: each searched equation's seconds and each finishing step's, the same
+    keys whether the fit kept a run folder or not."""
     assert set(model.profile["search"]) == set(FAST["targets"])
-    assert set(model.profile["equations"]) == set(FAST["targets"])
     assert set(model.profile["finish"]) == {"symmetrize", "refine", "repair", "joint_fit"}
     assert all(s > 0 for s in model.profile["search"].values())
     assert gpquad.Model(model.discovered).profile is None  # a loaded model was not timed here
@@ -262,7 +259,6 @@ def test_fit_reports_where_its_time_went(model, tmp_path):
         **{**FAST, "targets": ["p_dot"]},
     )
     assert set(two.profile["search"]) == {"p_dot"} and set(two.profile["finish"]) <= {
-        "equations",
         "symmetrize",
         "refine",
         "repair",

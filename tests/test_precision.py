@@ -140,7 +140,7 @@ def test_the_finishing_steps_fit_the_printed_terms(dataset, monkeypatch):
         return model
 
     monkeypatch.setitem(finish.STEPS, "repair", step)
-    evolution = type("E", (), {"finish": ("repair",), "max_delay": 5})()
+    evolution = type("E", (), {"finish": ("repair",)})()
     finish.finish_model(model, dataset, evolution)
     assert {s.name for s in seen[0]} == {"p", "u_R"}
     unfinished = finish.finish_model(model, dataset, type("E", (), {"finish": ()})())

@@ -84,8 +84,7 @@ def aggregate(cells: list[dict]) -> dict:
 def fit_profile(cell: dict) -> dict[str, float] | None:
     """Where a gpquad cell's fit time went (seconds, summed over a per-vehicle cell's fits):
     "searches" (each equation's search, summed: CPU-like, they run side by side), the
-    slowest search, "equations" (each equation's own finishing steps made beside the
-    searches, summed) and each finishing step's wall time; None for a cell without it."""
+    slowest search, and each finishing step's wall time; None for a cell without it."""
     profile = cell.get("fit_profile_s")
     if not profile:
         return None
@@ -94,8 +93,6 @@ def fit_profile(cell: dict) -> dict[str, float] | None:
     for fit in fits:
         out["searches"] += sum(fit["search"].values())
         out["slowest search"] += max(fit["search"].values(), default=0.0)
-        if fit.get("equations"):
-            out["equations"] = out.get("equations", 0.0) + sum(fit["equations"].values())
         for step, seconds in fit["finish"].items():
             out[step] = out.get(step, 0.0) + seconds
     return out

@@ -155,15 +155,6 @@ def model_rows(model, dataset) -> np.ndarray:
     return sample_rows(dataset.train or dataset.validation, max_delay)
 
 
-def finish_rows(equation, dataset, max_delay: int) -> np.ndarray:
-    """The training samples (else validation) on which the finish compares an equation's
-    terms: those of any equation with delays up to max_delay (the search's), so that each
-    equation is finished on the same samples whatever the others' delays; the same as
-    model_rows when an equation uses the longest delay."""
-    longest = max(max_delay, max(equation.delays.values(), default=0))
-    return sample_rows(dataset.train or dataset.validation, longest)
-
-
 def without_negligible(model, dataset):
     """The model with each equation without its negligible terms (without_negligible_terms);
     the finishing steps start from it, so that they fit the terms that will be printed."""

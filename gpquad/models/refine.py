@@ -292,25 +292,16 @@ def refine(model, dataset, evolution, flipped=(), workers: int = 1) -> tuple[obj
     def one(target):
         return refine_equation(model.equations[target], dataset, evolution, flipped, workers)
 
-    return kept_refinements(
-        model, dict(zip(targets, thread_map(one, targets, workers), strict=True)), dataset, flipped
-    )
-
-
-def kept_refinements(model, done: dict, dataset, flipped=()) -> tuple[object, dict]:
-    """refine's (model, report) from its equations' refine_equation results, {target:
-    (equation, report entry)} (the model's refined targets): the refinements the full
-    model flies worse reverted (keep_what_flies)."""
+    results = thread_map(one, targets, workers)
     equations, report = dict(model.equations), {}
-    for target in model.equations:
-        if target in done:
-            equations[target], report[target] = done[target][0], dict(done[target][1])
-    kept, reverted = keep_what_flies(
+    for target, (equation, entry) in zip(targets, results, strict=True):
+        equations[target], report[target] = equation, entry
+    refined, reverted = keep_what_flies(
         dataclasses.replace(model, equations=equations), model, dataset, flipped
     )
     for target in reverted:
         report[target]["reverted"] = True
-    return kept, report
+    return refined, report
 
 
 def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[str]]:

@@ -67,38 +67,23 @@ def refit(equation, tree, dataset, evolution):
     return gauss_newton_constants(ev, tree, start_error, starts, steps, error_of, REFIT_STEPS, FTOL)
 
 
-def symmetrize_equation(equation, dataset, evolution, flipped):
-    """(equation, report entry): the equation without its wrong-parity terms, constants
-    refitted, and {"dropped": [term texts], "error_after": training error after the
-    refit}; (the equation itself, None) when it has no such term."""
-    found = without_wrong_parity(equation, frozenset(flipped))
-    if found is None:
-        return equation, None
-    expr, dropped = found
-    tree = from_sympy(expr, equation.used_delays(), equation.input_names)
-    tree, error = refit(equation, tree, dataset, evolution)
-    symmetric = dataclasses.replace(
-        equation, tree=tree, error=float(error), validation_error=np.nan
-    )
-    return symmetric, {"dropped": dropped, "error_after": float(error)}
-
-
-def symmetrized(model, done: dict):
-    """(model, report) from each equation's symmetrize_equation result, {target: (equation,
-    entry)}: the report lists the equations that lost a term, in the model's order."""
-    equations = {t: done[t][0] for t in model.equations}
-    report = {t: done[t][1] for t in model.equations if done[t][1] is not None}
-    return dataclasses.replace(model, equations=equations), report
-
-
 def symmetrize(model, dataset, evolution, flipped):
     """(model, report): every equation without its wrong-parity terms, constants refitted;
     report {target: {"dropped": [term texts], "error_after": training error after the
     refit}} for the equations that lost a term."""
-    done = {
-        t: symmetrize_equation(e, dataset, evolution, flipped) for t, e in model.equations.items()
-    }
-    return symmetrized(model, done)
+    equations, report = dict(model.equations), {}
+    for target, equation in model.equations.items():
+        found = without_wrong_parity(equation, frozenset(flipped))
+        if found is None:
+            continue
+        expr, dropped = found
+        tree = from_sympy(expr, equation.used_delays(), equation.input_names)
+        tree, error = refit(equation, tree, dataset, evolution)
+        equations[target] = dataclasses.replace(
+            equation, tree=tree, error=float(error), validation_error=np.nan
+        )
+        report[target] = {"dropped": dropped, "error_after": float(error)}
+    return dataclasses.replace(model, equations=equations), report
 
 
 def symmetrized_summary(report: dict) -> str:

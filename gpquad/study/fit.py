@@ -8,17 +8,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import sys
-import threading
 import time
 from pathlib import Path
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.threads import one_blas_thread
 from gpquad.engine.variables import TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.models.finish import finish_equation, finish_model
+from gpquad.models.finish import finish_model
 from gpquad.models.joint_fit import joint_fit_summary
 from gpquad.models.refine import refined_summary
 from gpquad.models.stability import stability_summary
@@ -30,7 +28,6 @@ from gpquad.study.search import Progress, identify
 from gpquad.study.store import HistoryWriter, write_json
 
 FINISH_WORDS = {
-    "equations": "finishing each equation",
     "symmetrize": "symmetric equations",
     "refine": "refining the rate equations",
     "repair": "full-model stability repair",
@@ -109,7 +106,6 @@ def search_equations(
     run_dir: Path | None = None,
     resuming: bool = False,
     jobs: int = 1,
-    on_found=None,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
@@ -120,8 +116,7 @@ def search_equations(
     run folder each finished target is recorded (its history rows appended in target order,
     its record written) once every target before it is, so history.csv is the same bytes as
     with jobs = 1; a target interrupted in a worker restarts on resume (no per-iteration
-    checkpoint there). `on_found(equation)` is called as each search in a worker ends (in
-    the order they end)."""
+    checkpoint there)."""
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
@@ -161,7 +156,7 @@ def search_equations(
             if history is not None:
                 history.truncate(history_end)
             _search_in_workers(
-                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, on_found
+                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
             )
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
@@ -196,23 +191,18 @@ def _record(
 
 
 def _search_in_workers(
-    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, on_found=None
+    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
 ) -> None:
     """The `pending` targets searched in `jobs` worker processes, each recorded in target
     order as soon as every target before it is (search_equations' notes)."""
     report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)
-    # the equations with a refinement first: theirs is the longest finish, made beside the
-    # other searches when on_found starts it (the equations are the same in any order)
-    first = sorted(pending, key=lambda t: cfg.evolution.refine_for(t) == 0)
     futures = workers.submit_all(
-        jobs, _identify_in_worker, [(dataset, t, cfg, run_dir is not None) for t in first]
+        jobs, _identify_in_worker, [(dataset, t, cfg, run_dir is not None) for t in pending]
     )
     for target, equation, rows, seconds in workers.completed(futures):
         ready[target] = (equation, rows, seconds)
-        if on_found is not None:
-            on_found(equation)
         while order and order[0] in ready:
             name = order.pop(0)
             equation, rows, seconds = ready.pop(name)
@@ -273,23 +263,15 @@ def finish(
     report: Progress | None = None,
     seconds: dict[str, float] | None = None,
     workers: int = 1,
-    early: dict | None = None,
 ) -> DiscoveredModel:
     """The finished model (cfg.evolution.finish), each step's summary line reported, and
     its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
     given, receives each step's wall time; `workers`: threads of the steps (the run's
-    jobs; the same model for any number); `early`: equations finished already
-    (gpquad.models.finish.finish_model)."""
+    jobs; the same model for any number)."""
     say = (lambda text: None) if report is None else report.say
     clock = StepClock(say)
     model = finish_model(
-        model,
-        dataset,
-        cfg.evolution,
-        cfg.vehicle,
-        on_step=clock.start,
-        workers=workers,
-        early=early,
+        model, dataset, cfg.evolution, cfg.vehicle, on_step=clock.start, workers=workers
     )
     clock.stop()
     if seconds is not None:
@@ -310,76 +292,6 @@ def finish(
     return model
 
 
-class EarlyFinish:
-    """Each equation's own finishing steps (gpquad.models.finish.finish_equation) started in
-    a thread of this process as soon as its search ends in a worker process, at most
-    `workers` at a time: the cores that the searches left leave free finish it while the
-    others search. The model is the same as when finish_model makes them. The threads are
-    daemons: an interrupted run does not wait for them."""
-
-    def __init__(self, dataset: Dataset, cfg: Config, workers: int):
-        self._arguments = (dataset, cfg.evolution, cfg.vehicle, workers)
-        self._slots = threading.Semaphore(workers)
-        self._threads: list[threading.Thread] = []
-        self._results: dict[str, object] = {}
-
-    def start(self, equation: Equation) -> None:
-        def run():
-            with self._slots:
-                try:
-                    self._results[equation.target] = finish_equation(equation, *self._arguments)
-                except BaseException as exc:  # raised again by results(), in the caller
-                    self._results[equation.target] = exc
-
-        thread = threading.Thread(target=run, name=f"finish {equation.target}", daemon=True)
-        thread.start()
-        self._threads.append(thread)
-
-    def results(self) -> dict:
-        """{target: EquationFinish} once every started one has ended."""
-        for thread in self._threads:
-            thread.join()
-        for result in self._results.values():
-            if isinstance(result, BaseException):
-                raise result
-        return dict(self._results)
-
-
-@one_blas_thread
-def search_and_finish(
-    dataset: Dataset,
-    cfg: Config,
-    report: Progress,
-    run_dir: Path | None = None,
-    resuming: bool = False,
-    jobs: int = 1,
-    searched=None,
-) -> tuple[DiscoveredModel, dict]:
-    """(model, profile): every target searched (search_equations), then the model finished;
-    with the searches in `jobs` > 1 processes each equation's own finishing steps start as
-    soon as its search ends (EarlyFinish). `searched()`, if given, is called between the
-    searches and the rest of the finish. profile: {"search": {target: s}, "equations":
-    {target: s}, "finish": {step: s}} (each search's own time, each equation's own
-    finishing steps' time beside the searches, each finishing step's wall time). A
-    KeyboardInterrupt in the searches carries the equations found so far (`equations`)."""
-    early = EarlyFinish(dataset, cfg, jobs) if jobs > 1 and cfg.evolution.finish else None
-    equations, timings = search_equations(
-        dataset, cfg, report, run_dir, resuming, jobs, early.start if early else None
-    )
-    if searched is not None:
-        searched()
-    made = early.results() if early is not None else {}
-    steps: dict[str, float] = {}
-    model = finish(
-        new_model(equations, dataset, cfg), dataset, cfg, report, steps, jobs, early=made
-    )
-    return model, {
-        "search": timings,
-        "equations": {t: e.seconds for t, e in made.items()},
-        "finish": steps,
-    }
-
-
 def fit_dataset(
     dataset: Dataset,
     cfg: Config,
@@ -389,11 +301,14 @@ def fit_dataset(
     jobs: int = 1,
     seconds: dict | None = None,
 ) -> DiscoveredModel:
-    """search_and_finish's model, without a progress line by default. Without a run folder
-    the searches may run in `jobs` processes (the same equations for any value). `seconds`,
-    if given, receives search_and_finish's profile."""
+    """Search every configured target and finish the model (module notes). Without a run
+    folder the searches may run in `jobs` processes (the same equations for any value).
+    `seconds`, if given, receives the fit's profile: {"search": {target: s}, "finish":
+    {step: s}} (each search's own time, each finishing step's wall time)."""
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
-    model, profile = search_and_finish(dataset, cfg, report, run_dir, resuming, jobs)
+    equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
+    steps: dict[str, float] = {}
+    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)
     if seconds is not None:
-        seconds.update(profile)
+        seconds.update(search=timings, finish=steps)
     return model

@@ -13,7 +13,7 @@ from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
-from gpquad.study.fit import new_model, search_and_finish, warn_unmeasured
+from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasured
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -189,51 +189,47 @@ def run_experiment(
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
     try:
-        model, profile = search_and_finish(
-            dataset,
-            cfg,
-            report,
-            run_dir,
-            resuming,
-            jobs,
-            searched=None if searched is None else lambda: searched(run_dir),
-        )
+        equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
     except KeyboardInterrupt as exc:
-        if hasattr(exc, "equations"):  # in the searches: what they found is kept
-            model = new_model(exc.equations, dataset, cfg)
-            write_model(run_dir, dataclasses.replace(model, interrupted=True))
-            print(
-                f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the "
-                "same command with the same --out resumes",
-                file=sys.stderr,
-            )
+        model = new_model(getattr(exc, "equations", {}), dataset, cfg)
+        write_model(run_dir, dataclasses.replace(model, interrupted=True))
+        print(
+            f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
+            "command with the same --out resumes",
+            file=sys.stderr,
+        )
         raise
+    if searched is not None:
+        searched(run_dir)
+    finish_seconds: dict[str, float] = {}
+    model = finish(
+        new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs
+    )
     write_model(run_dir, model)
     wall = time.time() - started
     info.update(
         finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         wall_time_s=wall,
         load_time_s=load_seconds,
-        target_time_s=profile["search"],
-        equation_finish_time_s=profile["equations"],
-        finish_time_s=profile["finish"],
+        target_time_s=timings,
+        finish_time_s=finish_seconds,
     )
     write_json(run_dir / "run.json", info)
     if seconds is not None:
-        seconds.update(profile)
-    report.say(time_profile(wall, load_seconds, profile))
+        seconds.update(search=timings, finish=finish_seconds)
+    report.say(time_profile(wall, load_seconds, timings, finish_seconds))
     if after is not None:
         after(model, dataset)
     return model
 
 
-def time_profile(wall: float, load: float, profile: dict) -> str:
-    """One line: where a run's wall time went (run.json keeps the numbers): loading, each
-    search, each equation's own finishing steps made beside the searches, each step."""
+def time_profile(
+    wall: float, load: float, searches: dict[str, float], finishing: dict[str, float]
+) -> str:
+    """One line: where a run's wall time went (run.json keeps the numbers)."""
     parts = (
         [f"loading {load:.1f}"]
-        + [f"{t} {s:.1f}" for t, s in profile["search"].items()]
-        + [f"finishing {t} {s:.1f}" for t, s in profile["equations"].items() if s >= 0.05]
-        + [f"{name} {s:.1f}" for name, s in profile["finish"].items()]
+        + [f"{t} {s:.1f}" for t, s in searches.items()]
+        + [f"{name} {s:.1f}" for name, s in finishing.items()]
     )
     return f"time: {wall:.1f} s in all; " + ", ".join(parts) + " (s)"
