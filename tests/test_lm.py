@@ -247,12 +247,17 @@ def test_search_tolerance_stops_earlier_within_its_relative_drop():
     assert costs["tight"] <= costs["search"] <= costs["tight"] * (1.0 + 10.0 * SEARCH_FTOL)
 
 
-def test_stall_rule_stops_once_the_steps_stop_gaining():
-    """lm.STALL (the refinement's): once k steps taken lowered the sum by at most the
-    fraction, the fit stops, in fewer evaluations than MINPACK's tolerances alone and at a
-    sum within a small fraction of theirs; rejected trials do not count, so a fit that
-    shrinks its radius from a plateau is not stopped there."""
-    from gpquad.engine.evolve.lm import STALL
+@pytest.mark.parametrize("rule", ["selection", "refinement"])
+def test_stall_rule_stops_once_the_steps_stop_gaining(rule):
+    """lm.STALL (the BIC selection's) and refine_problem.STALL (the refinement's): once k
+    steps taken lowered the sum by at most the fraction, the fit stops, in fewer
+    evaluations than MINPACK's tolerances alone and at a sum within a small fraction of
+    theirs; rejected trials do not count, so a fit that shrinks its radius from a plateau is
+    not stopped there."""
+    from gpquad.engine.evolve import lm
+    from gpquad.models import refine_problem
+
+    STALL = lm.STALL if rule == "selection" else refine_problem.STALL  # noqa: N806
 
     def fitted(fun, jac, x0, stall):
         sums = []

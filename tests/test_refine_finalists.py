@@ -116,3 +116,36 @@ def test_a_finalist_whose_direct_fit_stays_best_is_not_polished_again(dataset, f
     monkeypatch.setattr(refine_problem, "continued_constants", lambda *a, direct, **k: (grown, 1.0))
     problem.fit(expr, direct)
     assert polishes == [2]
+
+
+def test_every_refinement_fit_stops_by_the_refinements_stall_rule(dataset, found, monkeypatch):
+    """The direct fits and the growing horizon's (continued_constants) both get
+    refine_problem.STALL, not the selection's tighter lm.STALL: a stiff loop's polish
+    creeps on by a fraction of a percent a step (docs/decisions/2026-11-27-stiff-polish.md).
+    Bad case: a direct fit wired to lm.STALL is seen."""
+    from gpquad.engine.evolve import gradient_fit, lm
+
+    def rules_of_a_fit() -> set:
+        rules = []
+        original = gradient_fit.levenberg_marquardt
+
+        def recorded(*args, stall=None, **kwargs):
+            rules.append(stall)
+            return original(*args, stall=stall, **kwargs)
+
+        with monkeypatch.context() as patch:
+            patch.setattr(gradient_fit, "levenberg_marquardt", recorded)
+            problem = RefineProblem(found, dataset, evolution())
+            problem.fit(start(problem, found, 0.7))
+        assert len(rules) >= 2  # the direct fit and the growing horizon's
+        return set(rules)
+
+    assert refine_problem.STALL != lm.STALL
+    assert rules_of_a_fit() == {refine_problem.STALL}
+    direct = refine_problem.gauss_newton_constants
+    monkeypatch.setattr(
+        refine_problem,
+        "gauss_newton_constants",
+        lambda *args: direct(*args[:-1], lm.STALL),  # the stall rule is the last argument
+    )
+    assert rules_of_a_fit() != {refine_problem.STALL}

@@ -12,7 +12,7 @@ import sympy as sp
 from gpquad.data.score import readers_scheme
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import continued_constants, gauss_newton_constants
-from gpquad.engine.evolve.lm import FTOL, STALL
+from gpquad.engine.evolve.lm import FTOL
 from gpquad.engine.evolve.state import SEED_HORIZONS, SHORT_WINDOW_STEPS
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.kernels.tree_eval import eval_on_samples
@@ -24,6 +24,11 @@ from gpquad.models.stiffness import equation_substeps
 
 #: Levenberg-Marquardt evaluations per fit (each flies every training window once).
 FIT_STEPS = 40
+#: The fits' stall rule (gpquad.engine.evolve.lm.levenberg_marquardt): a fit stops once
+#: two steps taken together lowered the sum by at most 0.3 % of it. A stiff loop's polish
+#: in its finer scheme creeps on by 0.1-0.3 % a step for tens of steps
+#: (docs/decisions/2026-11-27-stiff-polish.md).
+STALL = (2, 3e-3)
 #: Training samples of the one-step screen and the least-squares starts (evenly spread):
 #: the library's columns then take at most 560 x 20000 numbers whatever the log's length.
 SCREEN_SAMPLES = 20000

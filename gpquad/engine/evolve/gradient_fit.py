@@ -219,8 +219,8 @@ def continued_constants(
     linear in its constants; the long-window error of a stiff closed loop has many, and a
     fit from small constants stops in the wrong one (tests/test_engine_gradient.py).
     ftol: the LM's relative-drop tolerance (SEARCH_FTOL in the search, lm.FTOL to finish);
-    stall: its stall rule (lm.STALL in the refinement and the BIC selection), both
-    passed to every fit.
+    stall: its stall rule (refine_problem.STALL in the refinement, lm.STALL in the BIC
+    selection), both passed to every fit.
     """
     if direct is None:
         direct = gauss_newton_constants(
