@@ -122,7 +122,7 @@ def test_every_refinement_fit_stops_by_the_refinements_stall_rule(dataset, found
     """The direct fits and the growing horizon's (continued_constants) both get
     refine_problem.STALL, not the selection's tighter lm.STALL: a stiff loop's polish
     creeps on by a fraction of a percent a step (docs/decisions/2026-11-27-stiff-polish.md).
-    Bad case: a direct fit wired to lm.STALL is seen."""
+    Bad cases: a direct fit, or a growing horizon, wired to lm.STALL is seen."""
     from gpquad.engine.evolve import gradient_fit, lm
 
     def rules_of_a_fit() -> set:
@@ -142,8 +142,16 @@ def test_every_refinement_fit_stops_by_the_refinements_stall_rule(dataset, found
 
     assert refine_problem.STALL != lm.STALL
     assert rules_of_a_fit() == {refine_problem.STALL}
+    grown = refine_problem.continued_constants
+    with monkeypatch.context() as patch:  # the growing horizon's fits wired to lm.STALL
+        patch.setattr(
+            refine_problem,
+            "continued_constants",
+            lambda *args, direct: grown(*args[:-1], lm.STALL, direct=direct),
+        )
+        assert rules_of_a_fit() != {refine_problem.STALL}
     direct = refine_problem.gauss_newton_constants
-    monkeypatch.setattr(
+    monkeypatch.setattr(  # the direct fits wired to lm.STALL
         refine_problem,
         "gauss_newton_constants",
         lambda *args: direct(*args[:-1], lm.STALL),  # the stall rule is the last argument

@@ -87,9 +87,9 @@ EVALS_PER_CONSTANT = 12
 #: this fit used before): ftol 1.5e-8 ran the whole budget (108952 rollouts, 556 s) to a
 #: validation error 0.004900; 1e-5 stopped after 3020 rollouts (15 s) at 0.004917.
 FTOL = 1e-5
-#: The fit's stall rule (steps, relative drop), of the same form as the refinement's
-#: (lm.STALL): a fit stops once that many steps taken together lowered the objective by at
-#: most that fraction of it (docs/decisions/2026-11-27-joint-stall.md).
+#: The fit's stall rule (steps, relative drop), of the same form as lm.STALL and
+#: refine_problem.STALL: a fit stops once that many steps taken together lowered the
+#: objective by at most that fraction of it (docs/decisions/2026-11-27-joint-stall.md).
 JOINT_STALL = (3, 1e-3)
 #: The fit's Jacobian is made by forward differences (one rollout per constant) at every
 #: JACOBIAN_REFRESH-th point it asks for one, and by Broyden's secant update of the last

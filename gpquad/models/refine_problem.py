@@ -25,9 +25,9 @@ from gpquad.models.stiffness import equation_substeps
 #: Levenberg-Marquardt evaluations per fit (each flies every training window once).
 FIT_STEPS = 40
 #: The fits' stall rule (gpquad.engine.evolve.lm.levenberg_marquardt): a fit stops once
-#: two steps taken together lowered the sum by at most 0.3 % of it. A stiff loop's polish
-#: in its finer scheme creeps on by 0.1-0.3 % a step for tens of steps
-#: (docs/decisions/2026-11-27-stiff-polish.md).
+#: two steps taken together lowered the sum by at most 0.3 % of it, the tail of a stiff
+#: loop's polish in its finer scheme, which creeps on for tens of steps; a term must earn
+#: 1 % (term_min_gain) (docs/decisions/2026-11-27-stiff-polish.md).
 STALL = (2, 3e-3)
 #: Training samples of the one-step screen and the least-squares starts (evenly spread):
 #: the library's columns then take at most 560 x 20000 numbers whatever the log's length.

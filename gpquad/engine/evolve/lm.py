@@ -38,11 +38,9 @@ ACCEPT_RATIO = 1e-4
 MU_ITERATIONS = 10
 #: The stall rule (steps, relative drop) of the search's final selection by BIC (the
 #: default; the paper preset's pruning keeps its fits as they were): a fit stops once that
-#: many taken steps together lowered the sum by at most that fraction of it. Measured on the
-#: refinement's fits (docs/decisions/2026-11-26-refine-stall.md,
-#: docs/decisions/2026-11-27-refine-ranking.md), which now stop at 3e-3
-#: (gpquad.models.refine_problem.STALL, docs/decisions/2026-11-27-stiff-polish.md), and on
-#: the final selection (docs/decisions/2026-11-27-jacobians.md).
+#: many taken steps together lowered the sum by at most that fraction of it
+#: (docs/decisions/2026-11-27-jacobians.md). The refinement has its own,
+#: gpquad.models.refine_problem.STALL.
 STALL = (2, 1e-3)
 
 
