@@ -157,3 +157,29 @@ def test_every_refinement_fit_stops_by_the_refinements_stall_rule(dataset, found
         lambda *args: direct(*args[:-1], lm.STALL),  # the stall rule is the last argument
     )
     assert rules_of_a_fit() != {refine_problem.STALL}
+
+
+def test_a_stiff_starts_first_fit_only_finds_its_basin(dataset, found, monkeypatch):
+    """Where the start's loop needs a finer scheme than the search's, its direct fit in the
+    search's scheme gets BASIN_STEPS evaluations and the polish in the finer scheme
+    FIT_STEPS; a start that needs no finer scheme gets FIT_STEPS (the bad case for the cut:
+    nothing polishes it after)."""
+    problem = RefineProblem(found, dataset, evolution())
+    expr = start(problem, found, 0.7)
+    budgets = []
+    original = refine_problem.gauss_newton_constants
+
+    def recorded(ev, *args):
+        budgets.append((ev.substeps, args[5]))  # (steps per sample, the fit's evaluations)
+        return original(ev, *args)
+
+    monkeypatch.setattr(refine_problem, "gauss_newton_constants", recorded)
+    problem.direct_fit(expr)
+    assert problem.fitting(expr) is problem.ev
+    assert budgets == [(1, refine_problem.FIT_STEPS)]
+    finer = problem._evaluator("rk4", 2)
+    monkeypatch.setattr(problem, "fitting", lambda e: finer)
+    budgets.clear()
+    problem.direct_fit(expr)
+    assert budgets == [(1, refine_problem.BASIN_STEPS), (2, refine_problem.FIT_STEPS)]
+    assert refine_problem.BASIN_STEPS < refine_problem.FIT_STEPS

@@ -29,6 +29,11 @@ FIT_STEPS = 40
 #: loop's polish in its finer scheme, which creeps on for tens of steps; a term must earn
 #: 1 % (term_min_gain) (docs/decisions/2026-11-27-stiff-polish.md).
 STALL = (2, 3e-3)
+#: LM evaluations of a direct fit in the search's scheme when the loop it starts from needs
+#: a finer one: there it only finds the basin that the polish in the finer scheme fits
+#: (a fine fit from the start does not find it, docs/decisions/2026-11-27-refine-ranking.md),
+#: while half its windows may diverge (docs/decisions/2026-11-27-stiff-polish.md).
+BASIN_STEPS = 20
 #: Training samples of the one-step screen and the least-squares starts (evenly spread):
 #: the library's columns then take at most 560 x 20000 numbers whatever the log's length.
 SCREEN_SAMPLES = 20000
@@ -195,7 +200,7 @@ class RefineProblem:
         lag, when made already: nothing it did is done again (where its first fit stays the
         better one, it is the result)."""
         tree = self.tree(expr)
-        first = self._direct(self.ev, tree) if direct is None else direct.first
+        first = self._first_fit(expr, tree) if direct is None else direct.first
         fitted, error = continued_constants(
             self.ev,
             tree,
@@ -216,8 +221,15 @@ class RefineProblem:
     def direct_fit(self, expr: sp.Expr) -> Fitted:
         """`fit` without the growing horizon (its direct LM fit in the search's scheme,
         polished as `fit` polishes), with that first fit kept for `fit(expr, direct=...)`."""
-        first = self._direct(self.ev, self.tree(expr))
+        first = self._first_fit(expr, self.tree(expr))
         return Fitted(*self._polished(*first), first)
+
+    def _first_fit(self, expr: sp.Expr, tree: Tree) -> tuple[Tree, float]:
+        """The direct LM fit in the search's scheme: of at most BASIN_STEPS evaluations when
+        `expr`'s loop needs a finer scheme (the fit there only finds the basin that the
+        polish fits), else FIT_STEPS."""
+        stiff = self.fitting(expr).substeps > self.ev.substeps
+        return self._direct(self.ev, tree, BASIN_STEPS if stiff else FIT_STEPS)
 
     def _polished(self, fitted: Tree, error: float) -> tuple[sp.Expr, float]:
         """(expr, training error) of a fit in the search's scheme, polished in the finer
@@ -235,9 +247,9 @@ class RefineProblem:
         """The training windows' error of a tree flown by `ev`."""
         return lambda t: self._window_error(ev, t, self.starts, self.steps)
 
-    def _direct(self, ev: Evaluator, tree: Tree) -> tuple[Tree, float]:
+    def _direct(self, ev: Evaluator, tree: Tree, steps: int = FIT_STEPS) -> tuple[Tree, float]:
         """The LM fit of the tree's constants on the training windows, flown by `ev`, from
-        its constants (kept when no better)."""
+        its constants (kept when no better), in at most `steps` evaluations."""
         error_of = self._error_of(ev)
         start = error_of(tree)
         return gauss_newton_constants(
@@ -247,7 +259,7 @@ class RefineProblem:
             self.starts,
             self.steps,
             error_of,
-            FIT_STEPS,
+            steps,
             FTOL,
             STALL,
         )
