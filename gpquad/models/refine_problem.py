@@ -27,7 +27,7 @@ FIT_STEPS = 40
 #: The fits' stall rule (gpquad.engine.evolve.lm.levenberg_marquardt): a fit stops once
 #: two steps taken together lowered the sum by at most 0.3 % of it, the tail of a stiff
 #: loop's polish in its finer scheme, which creeps on for tens of steps; a term must earn
-#: 1 % (term_min_gain) (docs/decisions/2026-11-27-stiff-polish.md).
+#: term_min_gain (1 % by default) (docs/decisions/2026-11-27-stiff-polish.md).
 STALL = (2, 3e-3)
 #: LM evaluations of a direct fit in the search's scheme when the loop it starts from needs
 #: a finer one: there it only finds the basin that the polish in the finer scheme fits
