@@ -27,6 +27,12 @@ from gpquad.study.config import Config
 from gpquad.study.search import Progress, identify
 from gpquad.study.store import HistoryWriter, write_json
 
+#: The order the searches go to the worker processes: by their mean seconds over the
+#: benchmark's fits, longest first (docs/decisions/2026-11-27-search-order.md). A worker
+#: takes the next search when its last ends, so the longest going last would leave the
+#: other core idle at the end; the equations are the same in any order.
+SEARCH_ORDER = ("r_dot", "p_dot", "q_dot", "a_z", "a_x", "a_y")
+
 FINISH_WORDS = {
     "symmetrize": "symmetric equations",
     "refine": "refining the rate equations",
@@ -175,19 +181,27 @@ def _record(
     done: Path | None,
     history,
     rows: list,
-    report: Progress,
-    seconds: float | None = None,
+    report: Progress | None,
 ) -> int:
     """A finished target: its rows appended to the history, its record written (in a run
-    folder) and its line reported; returns where the history now ends."""
+    folder) and, with a `report`, its line; returns where the history now ends."""
     end = 0
     if done is not None and history is not None:
         history.write(rows)
         end = history.size()
         write_json(done, {"equation": equation.to_dict(), "history_bytes": end})
-    took = "" if seconds is None else f"; {seconds:.1f} s"
-    report.say(f"  -> {equation.text()}  (validation error {equation.validation_error:.4g}{took})")
+    if report is not None:
+        _say_found(report, equation)
     return end
+
+
+def _say_found(report: Progress, equation: Equation, seconds: float | None = None) -> None:
+    """The line of a found equation (with its search's seconds, when searched in a worker)."""
+    took = "" if seconds is None else f"; {seconds:.1f} s"
+    who = "" if seconds is None else f"{equation.target}: "
+    report.say(
+        f"  -> {who}{equation.text()}  (validation error {equation.validation_error:.4g}{took})"
+    )
 
 
 def _search_in_workers(
@@ -199,17 +213,27 @@ def _search_in_workers(
     ready: dict[str, tuple] = {}
     order = list(pending)
     futures = workers.submit_all(
-        jobs, _identify_in_worker, [(dataset, t, cfg, run_dir is not None) for t in pending]
+        jobs,
+        _identify_in_worker,
+        [(dataset, t, cfg, run_dir is not None) for t in longest_first(pending)],
     )
     for target, equation, rows, seconds in workers.completed(futures):
-        ready[target] = (equation, rows, seconds)
+        ready[target] = (equation, rows)
+        equations[target], timings[target] = equation, seconds
+        _say_found(report, equation, seconds)
+        report.done += cfg.evolution.iterations
         while order and order[0] in ready:
             name = order.pop(0)
-            equation, rows, seconds = ready.pop(name)
+            equation, rows = ready.pop(name)
             done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
-            _record(equation, done, history, rows, report, seconds)
-            equations[name], timings[name] = equation, seconds
-            report.done += cfg.evolution.iterations
+            _record(equation, done, history, rows, None)
+
+
+def longest_first(targets) -> list[str]:
+    """`targets` in the order their searches are handed to the workers: the longest
+    first (SEARCH_ORDER), so that the workers finish together."""
+    rank = {t: i for i, t in enumerate(SEARCH_ORDER)}
+    return sorted(targets, key=lambda t: rank.get(t, len(rank)))
 
 
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:

@@ -1,0 +1,81 @@
+"""The searches go to the worker processes longest first (gpquad.study.fit.SEARCH_ORDER);
+each is reported as it arrives, and recorded (history, checkpoint) in target order."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from export_models import HAND_TRIM, equation
+
+from gpquad.engine.variables import TARGET_NAMES
+from gpquad.study import fit
+from gpquad.study.config import Config
+from gpquad.study.search import Progress
+from gpquad.study.store import HistoryWriter
+
+
+class Said:
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def write(self, text):
+        self.lines.extend(line for line in text.splitlines() if line.strip())
+
+    def flush(self):
+        pass
+
+
+def fake_workers(monkeypatch, arrival):
+    """Workers that record the order the searches were handed out, and return them in the
+    order `arrival` (a function of that order)."""
+    handed: list[str] = []
+
+    def submit_all(jobs, func, arguments):
+        handed.extend(args[1] for args in arguments)
+        return arguments
+
+    def completed(arguments):
+        for _, target, _, _ in arrival(list(arguments)):
+            eq = equation(target, ("*", 2.0, "p"), [0, 0, 0, 0], HAND_TRIM)
+            yield target, eq, [{"target": target, "iteration": 0, "generation": 0}], 1.0
+
+    monkeypatch.setattr(fit.workers, "submit_all", submit_all)
+    monkeypatch.setattr(fit.workers, "completed", completed)
+    return handed
+
+
+def test_longest_first_is_the_measured_order_and_keeps_every_target():
+    assert fit.longest_first(TARGET_NAMES) == list(fit.SEARCH_ORDER)
+    assert sorted(fit.SEARCH_ORDER) == sorted(TARGET_NAMES)
+    assert fit.longest_first(["a_y", "q_dot", "a_x"]) == ["q_dot", "a_x", "a_y"]
+
+
+@pytest.mark.parametrize("arrival", [lambda a: a, lambda a: a[::-1], lambda a: a[2:] + a[:2]])
+def test_searches_go_longest_first_and_are_recorded_in_target_order(tmp_path, monkeypatch, arrival):
+    handed = fake_workers(monkeypatch, arrival)
+    history = HistoryWriter(tmp_path / "history.csv")
+    (tmp_path / "checkpoints").mkdir()
+    said = Said()
+    report = Progress(True, 6, stream=said)
+    equations: dict = {}
+    timings: dict = {}
+    fit._search_in_workers(
+        None, Config(), report, tmp_path, history, list(TARGET_NAMES), 2, equations, timings
+    )
+    history.close()
+    assert handed == list(fit.SEARCH_ORDER)
+    # the history rows in target order, whatever the order they arrived in
+    rows = (tmp_path / "history.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[0] for r in rows] == list(TARGET_NAMES)
+    ends = [
+        json.loads((tmp_path / "checkpoints" / f"{t}.json").read_text())["history_bytes"]
+        for t in TARGET_NAMES
+    ]
+    assert ends == sorted(ends) and len(set(ends)) == 6
+    # each equation reported as it arrived, named, with its seconds
+    arrived = [args[1] for args in arrival([(None, t, None, None) for t in fit.SEARCH_ORDER])]
+    found = [line.split("-> ")[1].split(":")[0] for line in said.lines if "-> " in line]
+    assert found == arrived
+    assert report.done == 6 * Config().evolution.iterations
+    assert sorted(equations) == sorted(TARGET_NAMES) and set(timings) == set(TARGET_NAMES)
