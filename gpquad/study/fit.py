@@ -198,10 +198,7 @@ def _record(
 def _say_found(report: Progress, equation: Equation, seconds: float | None = None) -> None:
     """The line of a found equation (with its search's seconds, when searched in a worker)."""
     took = "" if seconds is None else f"; {seconds:.1f} s"
-    who = "" if seconds is None else f"{equation.target}: "
-    report.say(
-        f"  -> {who}{equation.text()}  (validation error {equation.validation_error:.4g}{took})"
-    )
+    report.say(f"  -> {equation.text()}  (validation error {equation.validation_error:.4g}{took})")
 
 
 def _search_in_workers(
