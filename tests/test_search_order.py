@@ -79,3 +79,18 @@ def test_searches_go_longest_first_and_are_recorded_in_target_order(tmp_path, mo
     assert found == arrived
     assert report.done == 6 * Config().evolution.iterations
     assert sorted(equations) == sorted(TARGET_NAMES) and set(timings) == set(TARGET_NAMES)
+
+
+def test_an_interrupted_search_keeps_what_arrived_in_target_order(monkeypatch):
+    """Interrupted after the last two searches handed out arrived (a_y, then a_x), the
+    equations found so far are those two, in target order."""
+
+    def arrival(arguments):
+        yield from arguments[::-1][:2]
+        raise KeyboardInterrupt
+
+    fake_workers(monkeypatch, arrival)
+    with pytest.raises(KeyboardInterrupt) as info:
+        fit.search_equations(None, Config(), Progress(False, 6), jobs=2)
+    found = info.value.equations  # type: ignore[attr-defined]
+    assert list(found) == [t for t in TARGET_NAMES if t in ("a_x", "a_y")]
