@@ -168,8 +168,8 @@ def search_equations(
         partial = getattr(exc, "partial", None)
         if partial is not None:
             equations[partial[0].target] = partial[0]
-        # in target order, as the searches' arrival order is not
-        exc.equations = {t: equations[t] for t in ev.targets if t in equations}  # type: ignore[attr-defined]
+        found = {t: equations[t] for t in ev.targets if t in equations}  # not arrival order
+        exc.equations = found  # type: ignore[attr-defined]
         raise
     finally:
         if history is not None:
