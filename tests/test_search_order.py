@@ -75,8 +75,9 @@ def test_searches_go_longest_first_and_are_recorded_in_target_order(tmp_path, mo
     assert ends == sorted(ends) and len(set(ends)) == 6
     # each equation reported as it arrived, named, with its seconds
     arrived = [args[1] for args in arrival([(None, t, None, None) for t in fit.SEARCH_ORDER])]
-    found = [line.split("-> ")[1].split(" =")[0] for line in said.lines if "-> " in line]
-    assert found == arrived
+    lines = [line for line in said.lines if "-> " in line]
+    assert [line.split("-> ")[1].split(" =")[0] for line in lines] == arrived
+    assert all(line.endswith("; 1.0 s)") for line in lines)
     assert report.done == 6 * Config().evolution.iterations
     assert sorted(equations) == sorted(TARGET_NAMES) and set(timings) == set(TARGET_NAMES)
 

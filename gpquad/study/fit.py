@@ -157,7 +157,8 @@ def search_equations(
                     history_start=history_end,
                 )
                 timings[target] = time.perf_counter() - t0
-                history_end = _record(equations[target], done, history, [], report)
+                history_end = _record(equations[target], done, history, [])
+                _say_found(report, equations[target])
         if pending:
             if history is not None:
                 history.truncate(history_end)
@@ -182,17 +183,14 @@ def _record(
     done: Path | None,
     history,
     rows: list,
-    report: Progress | None,
 ) -> int:
-    """A finished target: its rows appended to the history, its record written (in a run
-    folder) and, with a `report`, its line; returns where the history now ends."""
+    """A finished target: its rows appended to the history and its record written (in a
+    run folder); returns where the history now ends."""
     end = 0
     if done is not None and history is not None:
         history.write(rows)
         end = history.size()
         write_json(done, {"equation": equation.to_dict(), "history_bytes": end})
-    if report is not None:
-        _say_found(report, equation)
     return end
 
 
@@ -224,7 +222,7 @@ def _search_in_workers(
             name = order.pop(0)
             equation, rows = ready.pop(name)
             done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
-            _record(equation, done, history, rows, None)
+            _record(equation, done, history, rows)
 
 
 def longest_first(targets) -> list[str]:
