@@ -68,6 +68,7 @@ from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
+from gpquad.models.joint_jacobian import flown_with_sensitivities, has_sensitivities
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 from gpquad.models.stiffness import model_substeps
 
@@ -146,6 +147,19 @@ class FullModelError:
             r = (pred - self.data) * self.scale
         r = np.where(np.isfinite(r), r, RESIDUAL_CLIP)
         return np.clip(r, -RESIDUAL_CLIP, RESIDUAL_CLIP).ravel()
+
+    def jacobian_of(self, flown: np.ndarray, sens: np.ndarray) -> np.ndarray:
+        """The Jacobian of residuals_of(flown) from the sensitivities of u, v, w, p, q, r
+        (W, steps + 1, 6, n) flown with it (gpquad.models.joint_jacobian); zero rows where
+        a residual is clipped or not finite."""
+        rows = [c - SCORED_INDEX[0] for c in self.cols]
+        pred = flown[:, 1:, :][:, :, self.cols]
+        with np.errstate(invalid="ignore", over="ignore"):
+            r = (pred - self.data) * self.scale
+            jac = sens[:, 1:][:, :, rows, :] * self.scale[None, None, :, None]
+        live = np.isfinite(r) & (np.abs(r) < RESIDUAL_CLIP)
+        jac = np.where(live[..., None] & np.isfinite(jac), jac, 0.0)
+        return jac.reshape(-1, jac.shape[-1])
 
     def error(self, model) -> float:
         """Sum over the states of their RSE (the objective)."""
@@ -260,6 +274,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     x = x0.copy()
     objectives, staged = [], []
     rollouts = itertools.count()  # thread-safe: the Jacobian's columns may run in threads
+    sensitivities = itertools.count()  # sensitivity flights (RK4 models' Jacobians)
     # flown with as many RK4 steps per sample as its stiffest loop needs to be its ODE
     flown = dataclasses.replace(model, substeps=model_substeps(model, dataset))
     report["substeps"] = flown.substeps
@@ -274,7 +289,12 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
             m = with_constants(flown, slots, v)
             return np.concatenate([o.residuals(m) for o in objectives])
 
-        value, jacobian = forward_difference(residuals, workers)
+        if has_sensitivities(flown):
+            value, jacobian = _flown_jacobian(
+                residuals, flown, slots, dataset, tuple(objectives), workers, sensitivities
+            )
+        else:
+            value, jacobian = forward_difference(residuals, workers)
         jacobian = broyden_jacobian(value, jacobian, JACOBIAN_REFRESH)
         x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL, JOINT_STALL)
         staged.append((float(seconds), x))
@@ -282,6 +302,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         if float(reached @ reached) < len(objectives) * len(states) * RSE_RESOLUTION**2:
             break  # flown to round-off (selection's resolution): nothing left to drift
     report["rollouts"] = next(rollouts)
+    report["sensitivity_flights"] = next(sensitivities)
     # each horizon's fit is a candidate; the validation windows choose among them
     judged = []
     for seconds, x in staged or [(0.0, x0)]:  # (none without a training window: no change)
@@ -302,6 +323,31 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         time_s=time.perf_counter() - t0,
     )
     return (refitted if accepted else model), report
+
+
+def _flown_jacobian(residuals, flown, slots, dataset, objectives, workers, counter):
+    """(value, jac) for the trust region, as lm.forward_difference's, with jac(x) from one
+    sensitivity flight of each objective's windows (gpquad.models.joint_jacobian)."""
+    memo: dict = {}
+
+    def value(x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if memo.get("x") != key:
+            memo.update(x=key, f=np.asarray(residuals(np.array(x, dtype=float)), dtype=float))
+        return memo["f"]
+
+    def jacobian(x):
+        next(counter)
+        model = with_constants(flown, slots, np.array(x, dtype=float))
+        blocks = []
+        for o in objectives:
+            states, sens = flown_with_sensitivities(
+                model, dataset, slots, o.starts, o.steps, workers
+            )
+            blocks.append(o.jacobian_of(states, sens))
+        return np.concatenate(blocks)
+
+    return value, jacobian
 
 
 def drops_on_shorter_windows(dataset, states, judged_steps: int, before, refitted) -> bool:
