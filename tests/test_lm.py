@@ -24,7 +24,7 @@ REPLAY = """
 import hashlib, sys
 import numpy as np
 from scipy.optimize import least_squares
-from gpquad.engine.evolve.lm import levenberg_marquardt, trust_region
+from gpquad.engine.evolve.lm import levenberg_marquardt, normal_triangularize
 case = np.load(sys.argv[1])
 res, jac, free, x0 = case["res"], case["jac"], case["free"], case["x0"]
 def points(solver):
@@ -38,7 +38,7 @@ def points(solver):
     elif solver == "lm":
         levenberg_marquardt(fun, x0[free], jac_free, 3)
     else:
-        trust_region(fun, x0[free], jac_free, 3, 1e-8)
+        levenberg_marquardt(fun, x0[free], jac_free, 3, triangularize=normal_triangularize)
     return seen[:4]
 def other(m, n):
     rng = np.random.default_rng(1)
@@ -54,6 +54,15 @@ print(all(p == first for p in seen))
 """
 
 
+def joint_lm(fun, x0, jac, budget, ftol, stall=None):
+    """The joint refit's fit: gpquad's LM through the normal equations."""
+    from gpquad.engine.evolve.lm import normal_triangularize
+
+    return levenberg_marquardt(
+        fun, x0, jac, budget, ftol, stall=stall, triangularize=normal_triangularize
+    )
+
+
 def replay_is_stable(solver: str) -> bool:
     out = subprocess.run(
         [sys.executable, "-c", REPLAY, str(FIXTURE), solver],
@@ -64,10 +73,10 @@ def replay_is_stable(solver: str) -> bool:
     return out.stdout.strip() == "True"
 
 
-@pytest.mark.parametrize("solver", ["lm", "trust-region"])
+@pytest.mark.parametrize("solver", ["lm", "lm-normal"])
 def test_fits_do_not_depend_on_earlier_fits(solver):
-    """gpquad's LM (the search's constant fit, numba loops) and trust_region (the joint
-    refit's) step the same after unrelated fits of other sizes."""
+    """gpquad's LM (the search's constant fit, numba loops) and the joint refit's (through
+    the normal equations, BLAS) step the same after unrelated fits of other sizes."""
     assert replay_is_stable(solver)
 
 
@@ -126,13 +135,13 @@ def test_lm_without_analytic_jacobian_fits_a_nonlinear_problem():
     np.testing.assert_allclose(x, truth, rtol=1e-6)
 
 
-def test_trust_region_fits_a_nonlinear_problem_the_same_way_every_time():
-    """trust_region (the joint refit's solver) fits y = a exp(-b t) + c from a far start,
+def test_the_joint_fit_solves_a_nonlinear_problem_the_same_way_every_time():
+    """The joint refit's LM (normal_triangularize) fits y = a exp(-b t) + c from a far start,
     and gives the bit-identical x with its Jacobian callable wrapped and after other fits
     (what changed MINPACK's trial points in the joint refit)."""
     from scipy.optimize import least_squares
 
-    from gpquad.engine.evolve.lm import forward_difference, trust_region
+    from gpquad.engine.evolve.lm import forward_difference
 
     t = np.linspace(0.0, 4.0, 60)
     truth = np.array([2.5, 1.3, -0.4])
@@ -140,7 +149,7 @@ def test_trust_region_fits_a_nonlinear_problem_the_same_way_every_time():
 
     def fit(wrap):
         value, jac = forward_difference(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y)
-        return trust_region(
+        return joint_lm(
             value,
             np.array([1.0, 0.5, 0.0]),
             (lambda x: np.array(jac(x))) if wrap else jac,
@@ -174,12 +183,12 @@ def test_lm_takes_the_gauss_newton_step_on_the_engines_linearised_problem():
     assert float(res @ res) > 100.0 * float(fun(x) @ fun(x))
 
 
-@pytest.mark.parametrize("solver", ["lm", "trust-region"])
+@pytest.mark.parametrize("solver", ["lm", "lm-normal"])
 def test_fits_never_return_a_point_worse_than_the_start(solver):
     """Both fits are taken as they return: from starts near Rosenbrock's steep valley, with
     budgets of 1 to 4 evaluations (where a first step may overshoot), the sum of squares
     at the returned x is never above the start's; with 40 the minimum is reached."""
-    from gpquad.engine.evolve.lm import forward_difference, trust_region
+    from gpquad.engine.evolve.lm import forward_difference
 
     def rosenbrock(p):
         return np.array([10.0 * (p[1] - p[0] ** 2), 1.0 - p[0]])
@@ -188,7 +197,7 @@ def test_fits_never_return_a_point_worse_than_the_start(solver):
         value, jac = forward_difference(rosenbrock)
         if solver == "lm":
             return levenberg_marquardt(value, x0, jac, budget)
-        return trust_region(value, x0, jac, budget, 1e-8)
+        return joint_lm(value, x0, jac, budget, 1e-8)
 
     for start in ([-1.2, 1.0], [2.0, -3.0], [0.5, 5.0]):
         x0 = np.array(start)
@@ -315,13 +324,13 @@ def test_stall_rule_stops_once_the_steps_stop_gaining(rule):
     assert tight <= stalled <= tight * (1.0 + 1e-6)
 
 
-def test_trust_region_stall_rule_stops_the_joint_refits_crawl():
-    """The joint refit's stall rule (joint_fit.JOINT_STALL) on trust_region: residuals that
+def test_the_stall_rule_stops_the_joint_refits_crawl():
+    """The joint refit's stall rule (joint_fit.JOINT_STALL) on its LM: residuals that
     decay without end beside one no constant can fit, each step gaining less of the sum
     (the joint refit's long tails); with the rule the fit stops in fewer evaluations, at
     the last step taken, within the rule's fraction of the fit without it, and for the
     rule's reason. Without the rule (the bad case) it runs on."""
-    from gpquad.engine.evolve.lm import forward_difference, trust_region
+    from gpquad.engine.evolve.lm import forward_difference
     from gpquad.models.joint_fit import JOINT_STALL
 
     def crawl(x):
@@ -336,7 +345,7 @@ def test_trust_region_stall_rule_stops_the_joint_refits_crawl():
             sums.append(float(r @ r))
             return r
 
-        x = trust_region(counted, np.zeros(2), jac, 500, 1e-15, stall)
+        x = joint_lm(counted, np.zeros(2), jac, 500, 1e-15, stall)
         return float(crawl(x) @ crawl(x)), sums
 
     tight, unstopped = fitted(None)
@@ -395,12 +404,12 @@ def test_broyden_jacobian_asks_for_differences_every_refresh_and_keeps_the_secan
         broyden_jacobian(value, fd, 0)
 
 
-def test_trust_region_with_broyden_updates_fits_with_fewer_jacobians():
-    """trust_region with Broyden's updates (refresh JACOBIAN_REFRESH, the joint refit's)
+def test_broyden_updates_fit_with_fewer_jacobians():
+    """The joint refit's LM with Broyden's updates (refresh JACOBIAN_REFRESH, the joint refit's)
     fits y = a exp(-b t) + c from a far start to the truth, the same bits when fitted again,
     with at most half the forward-difference Jacobians of a fit that makes one at every
     point it asks (the bad case), and some updates in between."""
-    from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference, trust_region
+    from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference
     from gpquad.models.joint_fit import JACOBIAN_REFRESH
 
     t = np.linspace(0.0, 4.0, 60)
@@ -421,7 +430,7 @@ def test_trust_region_with_broyden_updates_fits_with_fewer_jacobians():
             asked.add(np.asarray(x).tobytes())
             return jac(x)
 
-        x = trust_region(value, np.array([1.0, 0.5, 0.0]), watched, 400, 1e-14)
+        x = joint_lm(value, np.array([1.0, 0.5, 0.0]), watched, 400, 1e-14)
         return x, len(made), len(asked)
 
     every, n_every, _ = fit(1)
@@ -431,3 +440,38 @@ def test_trust_region_with_broyden_updates_fits_with_fewer_jacobians():
     assert n_asked > n_updated  # some Jacobians were updates
     assert n_updated <= n_every // 2
     assert np.array_equal(fit(JACOBIAN_REFRESH)[0], updated)
+
+
+def test_normal_triangularize_gives_the_qr_step_and_falls_back_when_singular():
+    """normal_triangularize (the joint refit's) gives an R and Q^T f with the QR's R^T R
+    and R^T Q^T f, so the same damped steps; with two equal columns (a singular normal
+    matrix, the bad case for Cholesky) it gives the QR of kernels.triangularize itself."""
+    from gpquad.engine.evolve.lm import normal_triangularize
+    from gpquad.engine.kernels import least_squares as kernels
+
+    rng = np.random.default_rng(5)
+    jac = rng.standard_normal((3000, 6)) * np.array([1.0, 10.0, 0.1, 3.0, 1e3, 1e-2])
+    res = rng.standard_normal(3000)
+    scale = np.linalg.norm(jac, axis=0)
+
+    def factors(triangularize, j):
+        r, qtr = np.zeros((6, 6)), np.zeros(6)
+        triangularize(j, scale, res, r, qtr)
+        return r, qtr
+
+    r_qr, qtr_qr = factors(kernels.triangularize, jac)
+    r_ne, qtr_ne = factors(normal_triangularize, jac)
+    np.testing.assert_allclose(r_ne.T @ r_ne, r_qr.T @ r_qr, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(r_ne.T @ qtr_ne, r_qr.T @ qtr_qr, rtol=1e-10, atol=1e-10)
+    for mu in (0.0, 1e-3, 1.0):
+        h_qr, h_ne = np.zeros(6), np.zeros(6)
+        kernels.damped_step(r_qr, qtr_qr, mu, h_qr)
+        kernels.damped_step(r_ne, qtr_ne, mu, h_ne)
+        np.testing.assert_allclose(h_ne, h_qr, rtol=1e-8, atol=1e-12)
+    assert not np.array_equal(r_ne, r_qr)  # the normal equations' own factor
+
+    singular = jac.copy()
+    singular[:, 3] = singular[:, 1] * scale[3] / scale[1]  # equal once scaled
+    r_qr, qtr_qr = factors(kernels.triangularize, singular)
+    r_ne, qtr_ne = factors(normal_triangularize, singular)
+    assert np.array_equal(r_ne, r_qr) and np.array_equal(qtr_ne, qtr_qr)

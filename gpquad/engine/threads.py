@@ -1,7 +1,7 @@
 """BLAS on one thread inside the engine: results independent of --jobs.
 
 The engine's kernels are numba loops on one thread; its few LAPACK calls (the pivoted QR of
-`gradient_fit.identifiable`, the SVD of the joint refit's trust-region solver) are small, and
+`gradient_fit.identifiable`, the joint refit's normal equations and Cholesky) are small, and
 OpenBLAS may sum in another order on another number of threads. joblib's workers run BLAS on
 cpu_count // n_jobs threads, a process with --jobs 1 on all cores: the same seed could give
 other bits with another --jobs. On one thread the result is the same either way, and faster

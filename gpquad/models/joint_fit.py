@@ -8,11 +8,13 @@ of the full model, every state integrated:
 
     minimise  sum_s  sum_{w,k} (x_s[w,k] - data_s[w,k])^2 / sum_{w,k} (data_s - mean)^2
 
-over the measured states s of (u, v, w, p, q, r): the sum of the benchmark's RSEs. It is a
-trust-region fit (scipy's trust-region reflective method through
-`gpquad.engine.evolve.lm.trust_region`, whose result does not depend on earlier fits in
-the process, as MINPACK's LM did; a forward-difference Jacobian, one rollout per
-constant, at every JACOBIAN_REFRESH-th step and Broyden's update of it in between)
+over the measured states s of (u, v, w, p, q, r): the sum of the benchmark's RSEs. It is
+gpquad's Levenberg-Marquardt fit (`gpquad.engine.evolve.lm.levenberg_marquardt`, whose
+result does not depend on earlier fits in the process, as MINPACK's did; each Jacobian
+triangularised through its normal equations), with the Jacobian at every
+JACOBIAN_REFRESH-th step and Broyden's update of it in between: a continuous-time model's
+from one sensitivity flight of the full model (gpquad.models.joint_jacobian), an eq. 2
+model's by forward differences, one rollout per constant;
 on non-overlapping training windows of a growing horizon (JOINT_HORIZONS_S, each fit
 starting from the last, so that the short windows keep it in the basin of the
 per-equation constants); each later fit keeps the shorter windows'
@@ -62,7 +64,12 @@ from typing import Any
 import numpy as np
 
 from gpquad.data.score import readers_scheme
-from gpquad.engine.evolve.lm import broyden_jacobian, forward_difference, trust_region
+from gpquad.engine.evolve.lm import (
+    broyden_jacobian,
+    forward_difference,
+    levenberg_marquardt,
+    normal_triangularize,
+)
 from gpquad.engine.evolve.selection import RSE_RESOLUTION
 from gpquad.engine.evolve.windows import spread, tile
 from gpquad.engine.tree.encoding import Tree
@@ -80,13 +87,11 @@ JOINT_HORIZONS_S = (1.0, 10.0, 30.0)
 CHECK_HORIZON_S = 10.0
 #: At most this many windows per horizon (evenly spread over the training data).
 MAX_WINDOWS = 120
-#: The fit's budget per horizon: residual evaluations (not counting the n rollouts of each
-#: finite-difference Jacobian) as a multiple of (constants + 1).
+#: The fit's budget per horizon: residual evaluations (not counting the Jacobians) as a
+#: multiple of (constants + 1).
 EVALS_PER_CONSTANT = 12
-#: The fit stops when a step lowers the objective by less than this fraction (ftol).
-#: Measured on rotorpy-angle, hummingbird, seed 1 (80 constants, with MINPACK's LM, which
-#: this fit used before): ftol 1.5e-8 ran the whole budget (108952 rollouts, 556 s) to a
-#: validation error 0.004900; 1e-5 stopped after 3020 rollouts (15 s) at 0.004917.
+#: The fit stops when a step's actual and predicted drops of the objective are below this
+#: fraction (lm.levenberg_marquardt's ftol; docs/decisions/2026-11-27-joint-jacobian.md).
 FTOL = 1e-5
 #: The fit's stall rule (steps, relative drop), of the same form as lm.STALL and
 #: refine_problem.STALL: a fit stops once that many steps taken together lowered the
@@ -296,7 +301,15 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         else:
             value, jacobian = forward_difference(residuals, workers)
         jacobian = broyden_jacobian(value, jacobian, JACOBIAN_REFRESH)
-        x = trust_region(value, x, jacobian, EVALS_PER_CONSTANT * (x.size + 1), FTOL, JOINT_STALL)
+        x = levenberg_marquardt(
+            value,
+            x,
+            jacobian,
+            EVALS_PER_CONSTANT * (x.size + 1),
+            FTOL,
+            stall=JOINT_STALL,
+            triangularize=normal_triangularize,
+        )
         staged.append((float(seconds), x))
         reached = value(x)
         if float(reached @ reached) < len(objectives) * len(states) * RSE_RESOLUTION**2:

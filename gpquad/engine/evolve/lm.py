@@ -1,6 +1,5 @@
 """Least-squares fits whose result is a function of their inputs: gpquad's own
-Levenberg-Marquardt for the search's constant fits, scipy's trust-region reflective solver
-for the joint refit.
+Levenberg-Marquardt, for the search's constant fits and the joint refit.
 
 scipy 1.17.1's `least_squares(method="lm")` and `leastsq` (MINPACK) take other trial points
 for bit-identical inputs depending on which least-squares fits ran before in the process
@@ -12,12 +11,12 @@ scaled, fixed, by the first Jacobian's column norms), rewritten with every reduc
 and solve in numba loops of fixed order (gpquad.engine.kernels.least_squares): no BLAS, whose
 summation order may change with the thread count or memory alignment.
 
-The joint refit (80 constants, forward-difference Jacobian) uses scipy's trust-region
-reflective solver (`trust_region`, numpy code with no state outside the call: the same
-constants in a fresh process and after other fits), whose LAPACK SVD is fast at that size.
-Without an analytic Jacobian, `forward_difference` gives one (scipy's '2-point' step) whose
-result is also a function of the inputs alone; `broyden_jacobian` asks for it at every few
-points only and updates it by Broyden's secant update in between.
+The joint refit (up to 80 constants, 10^5 residuals) takes each Jacobian's R and Q^T f
+from the normal equations (`normal_triangularize`, BLAS on one thread in every finish).
+Its Jacobian is a sensitivity flight for a continuous-time model
+(gpquad.models.joint_jacobian); otherwise `forward_difference` gives one (scipy's
+'2-point' step) whose result is also a function of the inputs alone. `broyden_jacobian`
+asks for it at every few points only and updates it by Broyden's secant update in between.
 """
 
 from __future__ import annotations
@@ -42,6 +41,9 @@ MU_ITERATIONS = 10
 #: (docs/decisions/2026-11-27-jacobians.md). The refinement has its own,
 #: gpquad.models.refine_problem.STALL.
 STALL = (2, 1e-3)
+#: normal_triangularize takes the QR instead when its Cholesky factor's smallest diagonal
+#: entry is at most this fraction of the largest.
+NORMAL_PIVOT_RATIO = 1e-6
 
 
 def column_norms(j: np.ndarray) -> np.ndarray:
@@ -93,6 +95,7 @@ def levenberg_marquardt(
     ftol: float = FTOL,
     xtol: float = XTOL,
     stall: tuple[int, float] | None = None,
+    triangularize=None,
 ) -> np.ndarray:
     """Minimise sum(fun(x)^2) from x0 with the analytic Jacobian jac(x) (rows = residuals),
     at most max_nfev evaluations of fun after the one at x0; jac is asked only at x0 and at
@@ -110,7 +113,10 @@ def levenberg_marquardt(
     drops are at most ftol, or the radius is at most xtol of the scaled |x|, or, with
     `stall` = (k, drop), when the last k steps taken lowered the sum by at most that
     fraction of it (rejected trials do not count: a fit that shrinks its radius from a
-    plateau is not stopped). Returns x; its sum is never above x0's."""
+    plateau is not stopped). `triangularize` (default kernels.triangularize, loops of fixed
+    order) gives R and Q^T f of each Jacobian: normal_triangularize for tall ones. Returns
+    x; its sum is never above x0's."""
+    triangularize = kernels.triangularize if triangularize is None else triangularize
     x = np.array(x0, dtype=float)
     f = np.ascontiguousarray(fun(x), dtype=float)
     cost = kernels.sum_squares(f)
@@ -122,7 +128,7 @@ def levenberg_marquardt(
         return x
     scale = column_norms(j)
     r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
-    kernels.triangularize(j, scale, f, r, qtr)
+    triangularize(j, scale, f, r, qtr)
     radius = RADIUS_FACTOR * (_norm(x * scale) or 1.0)
     mu = 0.0
     costs = [cost]  # the sum after each step taken
@@ -161,7 +167,7 @@ def levenberg_marquardt(
             j = np.ascontiguousarray(jac(x), dtype=float)
             if not np.isfinite(kernels.sum_squares(j.ravel())):
                 break
-            kernels.triangularize(j, scale, f, r, qtr)
+            triangularize(j, scale, f, r, qtr)
         if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or radius <= xtol * _norm(
             x * scale
         ):
@@ -169,53 +175,29 @@ def levenberg_marquardt(
     return x
 
 
-class _Stalled(Exception):
-    """Raised inside trust_region's residual function when its stall rule stops the fit."""
+def normal_triangularize(jac, scale, res, r, qtr) -> None:
+    """kernels.triangularize's (R, the first n entries of Q^T res) for a tall Jacobian, from
+    the normal equations: R = the Cholesky factor of (jac / scale)^T (jac / scale), qtr =
+    R^-T (jac / scale)^T res. The LM step reads only R^T R and R^T qtr, which equal jac's
+    own; the cost is m n^2 / 2 in BLAS against m n^2 in loops (the joint refit's Jacobian:
+    108,000 x 43). Under gpquad.engine.threads.one_blas_thread, as every finish runs, the
+    result is a function of the inputs. Where the scaled normal matrix is close to singular
+    (the factor's diagonal spans more than NORMAL_PIVOT_RATIO, a condition above about
+    1e12), the Householder QR of kernels.triangularize is taken instead."""
+    from scipy.linalg import cho_factor, solve_triangular
 
-
-def trust_region(
-    fun, x0: np.ndarray, jac, max_nfev: int, ftol: float, stall: tuple[int, float] | None = None
-) -> np.ndarray:
-    """Minimise sum(fun(x)^2) from x0 with scipy's trust-region reflective method (no
-    bounds, exact SVD steps) and the variables scaled, fixed, by the first Jacobian's column
-    norms; at most max_nfev residual evaluations (jac's are not counted); stops when a step
-    lowers the sum by less than the fraction ftol, or, with `stall` = (k, drop), once the
-    last k steps taken together lowered it by at most that fraction (as
-    levenberg_marquardt's rule: a step is taken when it lowers the sum, and the fit stops
-    before the Jacobian at the last one is computed). Returns x, whose sum is never above
-    x0's (a step is taken only when it lowers the sum)."""
-    from scipy.optimize import least_squares  # the joint refit's only: searches need none
-
-    x0 = np.asarray(x0, dtype=float)
-    sums: list[float] = []  # of the start and of each step taken
-    last = [x0]  # the point of the last step taken
-
-    def watched(x):
-        f = np.asarray(fun(x), dtype=float)
-        cost = float(f @ f)
-        if not sums or cost < sums[-1]:
-            sums.append(cost)
-            last[0] = np.array(x, dtype=float)
-            if stall is not None and len(sums) > stall[0]:
-                before = sums[-1 - stall[0]]
-                if before - cost <= stall[1] * before:
-                    raise _Stalled
-        return f
-
+    scaled = np.asarray(jac, dtype=float) / scale
+    normal = scaled.T @ scaled
     try:
-        fit = least_squares(
-            watched,
-            x0,
-            jac=jac,
-            method="trf",
-            tr_solver="exact",
-            x_scale=1.0 / column_norms(jac(x0)),
-            ftol=ftol,
-            max_nfev=int(max_nfev),
-        )
-    except _Stalled:
-        return last[0]
-    return np.asarray(fit.x, dtype=float)
+        upper = np.triu(cho_factor(normal, lower=False, check_finite=True)[0])
+    except (np.linalg.LinAlgError, ValueError):
+        upper = None
+    diagonal = np.abs(np.diag(upper)) if upper is not None else np.zeros(1)
+    if upper is None or not diagonal.min() > NORMAL_PIVOT_RATIO * diagonal.max():
+        kernels.triangularize(np.ascontiguousarray(jac, dtype=float), scale, res, r, qtr)
+        return
+    r[:, :] = upper
+    qtr[:] = solve_triangular(upper, scaled.T @ res, trans="T", lower=False)
 
 
 def forward_difference(fun, workers: int = 1):
@@ -253,7 +235,7 @@ def forward_difference(fun, workers: int = 1):
 
 
 def broyden_jacobian(value, jacobian, refresh: int):
-    """jac(x) for trust_region that asks `jacobian` (say forward_difference's, one rollout
+    """jac(x) for levenberg_marquardt that asks `jacobian` (say forward_difference's, one rollout
     per constant) at the first point and at every `refresh`-th new point after it, and in
     between updates the last matrix by Broyden's rank-one secant update,
     J + (f(x) - f(x_last) - J dx) dx^T / (dx^T dx) with dx = x - x_last, x_last the last
