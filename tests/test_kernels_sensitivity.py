@@ -48,6 +48,7 @@ def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, le
         np.zeros((13, n_c)),
         gradient_work(tree.codes, tree.size, 13),
         grad,
+        np.arange(13),
     )
     assert value == pytest.approx(
         naive.eval_tree(tree.codes, tree.values, leaves), rel=1e-12, abs=1e-12

@@ -18,7 +18,7 @@ from gpquad.engine.kernels.tree_tangent import (
 from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
 
 
-def _gradient(tree, leaves, tangents):
+def _gradient(tree, leaves, tangents, n_tangent=None):
     n_c = int(np.count_nonzero(tree.codes == CONST))
     grad = np.empty(n_c)
     value = eval_with_gradient(
@@ -30,6 +30,7 @@ def _gradient(tree, leaves, tangents):
         np.ascontiguousarray(tangents, dtype=float).reshape(len(leaves), n_c),
         gradient_work(tree.codes, tree.size, len(leaves)),
         grad,
+        np.arange(len(leaves) if n_tangent is None else n_tangent),
     )
     return value, grad
 
@@ -78,3 +79,20 @@ def test_a_leafs_tangent_enters_through_its_adjoint():
     _, without = _gradient(tree, leaves, np.zeros((N_VARS, 2)))
     assert without == pytest.approx([p * p, 1.0])
     assert not np.allclose(grad, without)
+
+
+def test_only_the_moving_leaves_tangents_are_read():
+    """The kernels name the leaves whose tangents they follow (the states'): an input's row
+    is not read. A tangent in an input's row counts when its leaf is named (the bad case
+    for a kernel whose inputs had tangents) and not with the nine states."""
+    u = VAR_BASE + 9  # the first input
+    tree = as_tree([(MUL, 0.0), (CONST, 2.0), (MUL, 0.0), (VAR_BASE + 6, 0.0), (u, 0.0)])
+    leaves = np.arange(1.0, N_VARS + 1.0)
+    tangents = np.zeros((N_VARS, 1))
+    tangents[6, 0] = 1.0  # d p / d c
+    tangents[9, 0] = 5.0  # an input's row, not zero
+    _, every_row = _gradient(tree, leaves, tangents)
+    _, states_only = _gradient(tree, leaves, tangents, 9)
+    p, u_value = leaves[6], leaves[9]
+    assert states_only[0] == pytest.approx(p * u_value + 2.0 * u_value * 1.0)
+    assert every_row[0] == pytest.approx(states_only[0] + 2.0 * p * 5.0)

@@ -138,6 +138,7 @@ def rk4_rollout_sensitivities(
     da = np.zeros((6, n_c))
     held = np.zeros((6, n_slots))
     every_state = np.ones(9, dtype=np.bool_)
+    moving = np.arange(9)  # every state leaf is flown
     jac_euler = np.zeros((3, 4))
     dnum = np.empty(4)
     dden = np.empty(4)
@@ -204,6 +205,7 @@ def rk4_rollout_sensitivities(
                             leaf_tan,
                             works[t],
                             grads[t],
+                            moving,
                         )
                         if lagged[t]:
                             a[t] = ys[LAG_ROW + t, 0]

@@ -63,6 +63,7 @@ from gpquad.engine.kernels.tree_tangent import (
     eval_with_gradient,
     gradient_work,
     residual_rows,
+    tangent_leaves,
 )
 from gpquad.engine.numba_config import njit
 
@@ -170,6 +171,7 @@ def euler_window_residuals(
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
     work = gradient_work(codes, size, 9 + n_in)
+    moving = tangent_leaves(linear, target - 3, angle_tangents)
     grad = np.empty(n_c)
     sens = np.zeros((3, n_c))  # linear: d vel / d theta; angular: row 0 = d rate_k / d theta
     asens = np.zeros((3, n_c))  # angular: d (phi, theta, psi) / d theta
@@ -224,7 +226,9 @@ def euler_window_residuals(
                             tangents[i, c] = asens[i, c]
             for jj in range(n_in):
                 features[9 + jj] = inputs[idx - delays[jj], jj]
-            pred = eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad)
+            pred = eval_with_gradient(
+                codes, values, size, slot_of, features, tangents, work, grad, moving
+            )
             if lagged:
                 applied += alpha * (pred - applied)
                 pred = applied

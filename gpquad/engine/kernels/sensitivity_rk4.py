@@ -46,6 +46,7 @@ from gpquad.engine.kernels.tree_tangent import (
     eval_with_gradient,
     gradient_work,
     residual_rows,
+    tangent_leaves,
 )
 from gpquad.engine.numba_config import njit
 
@@ -88,6 +89,7 @@ def rk4_window_residuals(
     leaf = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
     work = gradient_work(codes, size, 9 + n_in)
+    moving = tangent_leaves(linear, axis, angle_tangents)
     grad = np.empty(n_c)
     y = np.empty((n_y, 1))
     ys = np.empty((n_y, 1))
@@ -154,7 +156,7 @@ def rk4_window_residuals(
                                 for i in range(3):
                                     tangents[i, c] = tan_s[TA + i, c]
                     pred = eval_with_gradient(
-                        codes, values, size, slot_of, leaf, tangents, work, grad
+                        codes, values, size, slot_of, leaf, tangents, work, grad, moving
                     )
                     f = ys[LAG, 0] if lagged else pred
                     for i in range(6):

@@ -45,6 +45,17 @@ def right_children(codes, size):
 
 
 @njit
+def tangent_leaves(linear, axis, angles):
+    """The leaves whose tangents a per-equation sensitivity kernel follows: a linear
+    target's u, v, w; an angular target's own rate, and the Euler angles when `angles`."""
+    if linear:
+        return np.array([3, 4, 5], dtype=np.int64)
+    if angles:
+        return np.array([0, 1, 2, 6 + axis], dtype=np.int64)
+    return np.array([6 + axis], dtype=np.int64)
+
+
+@njit
 def gradient_work(codes, size, n_terminals):
     """eval_with_gradient's work for one tree: (its right operands (right_children), node
     values, node adjoints (size,), leaf adjoints (n_terminals,))."""
@@ -52,15 +63,17 @@ def gradient_work(codes, size, n_terminals):
 
 
 @njit
-def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad):
+def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad, moving):
     """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)),
-    by reverse mode: O(size + leaves read x n_c), where forward mode (every node carrying
-    n_c derivatives) costs O(size x n_c).
+    by reverse mode: O(size + state leaves read x n_c), where forward mode (every node
+    carrying n_c derivatives) costs O(size x n_c).
 
     slot_of (size,): column of each CONST node (-1 otherwise); features (n_terminals,);
-    tangents (n_terminals, n_c): d(leaf)/d(constants); work: gradient_work(codes, size,
-    n_terminals). The value is the stack evaluation's to the bit (the same operations in
-    the same order). Returns the value."""
+    tangents (n_terminals, n_c): d(leaf)/d(constants), of which only the rows `moving`
+    (int64 leaf indices) are read: the leaves a flight integrates (an input, or a state
+    held from the data, has no tangent; `tangent_leaves` gives them); work:
+    gradient_work(codes, size, n_terminals). The value is the stack evaluation's to the bit
+    (the same operations in the same order). Returns the value."""
     right, node_value, node_adjoint, leaf_adjoint = work
     for i in range(size - 1, -1, -1):
         c = codes[i]
@@ -114,7 +127,8 @@ def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, g
                 else:
                     node_adjoint[left] = g / b
                     node_adjoint[r] = -g * node_value[i] / b
-    for k in range(leaf_adjoint.shape[0]):
+    for m in range(moving.shape[0]):
+        k = moving[m]
         g = leaf_adjoint[k]
         if g != 0.0:
             for j in range(n_c):
