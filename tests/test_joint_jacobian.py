@@ -154,3 +154,16 @@ def test_the_refit_of_a_continuous_time_model_flies_sensitivities(dataset):
     _, report = joint_fit.joint_refit(euler, dataset, horizons_s=(1.0,))
     assert report["sensitivity_flights"] == 0
     assert report["rollouts"] > report["constants"]
+
+
+def test_the_objectives_windows_in_threads_give_the_same_residuals(dataset):
+    """FullModelError flies its windows in chunks side by side: the same residuals to the
+    bit for 1, 2 and 3 threads."""
+    model = model_of(dataset)
+    states = joint_fit.measured_states(dataset)
+    starts, steps = joint_fit.horizon_starts(dataset, dataset.train, 2.0, 5, None)
+    one, *more = (
+        joint_fit.FullModelError(dataset, starts, steps, states, workers).residuals(model)
+        for workers in (1, 2, 3)
+    )
+    assert len(starts) >= 3 and all(np.array_equal(one, r) for r in more)

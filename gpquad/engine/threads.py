@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 
@@ -37,3 +38,9 @@ def thread_map(func, items, workers: int) -> list:
         with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
             return list(pool.map(func, items))
     return [func(item) for item in items]
+
+
+def chunks(n: int, workers: int) -> list[np.ndarray]:
+    """range(n) in at most `workers` contiguous, non-empty index chunks of nearly equal
+    size: windows flown side by side in threads (each window's arithmetic is its own)."""
+    return [c for c in np.array_split(np.arange(n), max(1, workers)) if len(c)]

@@ -72,6 +72,7 @@ from gpquad.engine.evolve.lm import (
 )
 from gpquad.engine.evolve.selection import RSE_RESOLUTION
 from gpquad.engine.evolve.windows import spread, tile
+from gpquad.engine.threads import chunks, thread_map
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
@@ -133,17 +134,27 @@ def with_constants(model, slots, x: np.ndarray):
 
 
 class FullModelError:
-    """Normalised residuals of a full model over fixed windows of a dataset."""
+    """Normalised residuals of a full model over fixed windows of a dataset; the windows
+    are flown in up to `workers` threads (each window's arithmetic is its own: the same
+    residuals for any number)."""
 
-    def __init__(self, dataset, starts: np.ndarray, steps: int, states: list[int]):
+    def __init__(self, dataset, starts: np.ndarray, steps: int, states: list[int], workers=1):
         self.dataset, self.starts, self.steps = dataset, starts, steps
         self.cols = [SCORED_INDEX[i] for i in states]
         idx = starts[:, None] + np.arange(1, steps + 1)[None, :]
         self.data = dataset.arrays.states[idx][:, :, self.cols]  # (W, steps, S)
         self.scale = 1.0 / np.sqrt(np.maximum(rse_denominator(self.data), 1e-300))
+        self.chunks = chunks(len(starts), workers)
 
     def residuals(self, model) -> np.ndarray:
-        return self.residuals_of(model.simulate(self.dataset, self.starts, self.steps))
+        if len(self.chunks) < 2:
+            return self.residuals_of(model.simulate(self.dataset, self.starts, self.steps))
+        parts = thread_map(
+            lambda chunk: model.simulate(self.dataset, self.starts[chunk], self.steps),
+            self.chunks,
+            len(self.chunks),
+        )
+        return self.residuals_of(np.concatenate(parts))
 
     def residuals_of(self, flown: np.ndarray) -> np.ndarray:
         """The residuals of states flown over the windows (W, steps + 1, 9)."""
@@ -272,7 +283,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
             judged_on=None, error_before=None, error_after=None, time_s=time.perf_counter() - t0
         )
         return model, report
-    judge = FullModelError(dataset, judge_starts, judge_steps, states)
+    judge = FullModelError(dataset, judge_starts, judge_steps, states, workers)
     read_before = as_flown_by_readers(model)
     before_w = judge.window_errors(read_before)
     before = float(before_w.sum())
@@ -287,7 +298,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         starts, steps = horizon_starts(dataset, dataset.train, seconds, history, MAX_WINDOWS)
         if len(starts) == 0:
             continue
-        objectives.append(FullModelError(dataset, starts, steps, states))
+        objectives.append(FullModelError(dataset, starts, steps, states, workers))
 
         def residuals(v, objectives=tuple(objectives)):
             next(rollouts)

@@ -10,7 +10,7 @@ import numpy as np
 from gpquad.engine.kernels.rollout_sensitivity import rk4_rollout_sensitivities
 from gpquad.engine.kernels.step import RK4, SCHEMES
 from gpquad.engine.lag import lag_alpha
-from gpquad.engine.threads import thread_map
+from gpquad.engine.threads import chunks, thread_map
 from gpquad.engine.tree.encoding import stack_rows
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import target_index
@@ -51,7 +51,6 @@ def flown_with_sensitivities(model, dataset, slots, starts, n_steps: int, worker
     columns = column_slots(model, slots, codes.shape[1])
     n_c = sum(len(idx) for _, idx in slots)
     starts = np.ascontiguousarray(starts, dtype=np.int64)
-    chunks = [c for c in np.array_split(np.arange(len(starts)), max(1, workers)) if len(c)]
 
     def fly(chunk):
         out = np.empty((len(chunk), n_steps + 1, 9))
@@ -73,7 +72,7 @@ def flown_with_sensitivities(model, dataset, slots, starts, n_steps: int, worker
         )
         return out, sens
 
-    parts = thread_map(fly, chunks, workers)
+    parts = thread_map(fly, chunks(len(starts), workers), workers)
     if not parts:
         return np.empty((0, n_steps + 1, 9)), np.empty((0, n_steps + 1, 6, n_c))
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
