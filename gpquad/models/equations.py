@@ -319,18 +319,11 @@ class DiscoveredModel:
         """
         return self._rollout(dataset.arrays, starts, n_steps, input_noise, missing_from_data=True)
 
-    def _rollout(
-        self,
-        arrays: FlightArrays,
-        starts,
-        n_steps: int,
-        input_noise,
-        missing_from_data: bool,
-        pos=None,
-    ) -> np.ndarray:
-        """The rollout kernel over `arrays`; targets without an equation take the data's
-        acceleration (missing_from_data) or zero. pos: as rollout's (RK4 only)."""
-        from gpquad.engine.kernels.rollout import rollout
+    def kernel_trees(self, dt: float, missing_from_data: bool = True):
+        """The rollout kernels' model arrays (codes, values, sizes, delays, modelled,
+        alphas): one tree per target (gpquad.engine.tree.encoding.stack_rows), which
+        targets a tree models (else the data's acceleration when missing_from_data, or the
+        constant-0 placeholder's zero), each equation's lag factor at sample period dt."""
         from gpquad.engine.lag import lag_alpha
 
         codes, values, sizes, delays = stack_rows(
@@ -343,15 +336,26 @@ class DiscoveredModel:
             modelled[:] = True  # the constant-0 placeholders give zero acceleration
         alphas = np.ones(6)
         for t, e in self.equations.items():
-            alphas[target_index(t)] = lag_alpha(e.lag, arrays.dt)
+            alphas[target_index(t)] = lag_alpha(e.lag, dt)
+        return codes, values, sizes, delays, modelled, alphas
+
+    def _rollout(
+        self,
+        arrays: FlightArrays,
+        starts,
+        n_steps: int,
+        input_noise,
+        missing_from_data: bool,
+        pos=None,
+    ) -> np.ndarray:
+        """The rollout kernel over `arrays`; targets without an equation take the data's
+        acceleration (missing_from_data) or zero. pos: as rollout's (RK4 only)."""
+        from gpquad.engine.kernels.rollout import rollout
+
+        trees = self.kernel_trees(arrays.dt, missing_from_data)
         noise = np.zeros((0, 0, 0)) if input_noise is None else np.ascontiguousarray(input_noise)
         return rollout(
-            codes,
-            values,
-            sizes,
-            delays,
-            modelled,
-            alphas,
+            *trees,
             arrays,
             np.ascontiguousarray(starts, dtype=np.int64),
             int(n_steps),

@@ -9,9 +9,7 @@ import numpy as np
 
 from gpquad.engine.kernels.rollout_sensitivity import rk4_rollout_sensitivities
 from gpquad.engine.kernels.step import RK4, SCHEMES
-from gpquad.engine.lag import lag_alpha
 from gpquad.engine.threads import chunks, thread_map
-from gpquad.engine.tree.encoding import stack_rows
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import target_index
 
@@ -40,15 +38,8 @@ def flown_with_sensitivities(model, dataset, slots, starts, n_steps: int, worker
     constants of `slots`. Targets without an equation take the data's accelerations, as
     DiscoveredModel.simulate. The windows are split among `workers` threads; each window's
     arithmetic is its own, so the result is the same for any number."""
-    codes, values, sizes, delays = stack_rows(
-        {target_index(t): e.tree for t, e in model.equations.items()}, 6
-    )
-    modelled = np.zeros(6, dtype=np.bool_)
-    modelled[[target_index(t) for t in model.equations]] = True
-    alphas = np.ones(6)
-    for t, e in model.equations.items():
-        alphas[target_index(t)] = lag_alpha(e.lag, dataset.dt)
-    columns = column_slots(model, slots, codes.shape[1])
+    trees = model.kernel_trees(dataset.dt)
+    columns = column_slots(model, slots, trees[0].shape[1])
     n_c = sum(len(idx) for _, idx in slots)
     starts = np.ascontiguousarray(starts, dtype=np.int64)
 
@@ -56,12 +47,7 @@ def flown_with_sensitivities(model, dataset, slots, starts, n_steps: int, worker
         out = np.empty((len(chunk), n_steps + 1, 9))
         sens = np.empty((len(chunk), n_steps + 1, 6, n_c))
         rk4_rollout_sensitivities(
-            codes,
-            values,
-            sizes,
-            delays,
-            modelled,
-            alphas,
+            *trees,
             columns,
             dataset.arrays,
             starts[chunk],

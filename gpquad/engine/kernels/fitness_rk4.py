@@ -71,6 +71,17 @@ def stage_features(ys, lane, used, features):
 
 
 @njit(inline="always")
+def body_from_data(y, lane, quat_d, states, idx):
+    """y's attitude, velocity and rate rows of `lane` set to the data's at sample idx: a
+    window's start."""
+    for i in range(4):
+        y[Q + i, lane] = quat_d[idx, i]
+    for i in range(3):
+        y[V + i, lane] = states[idx, 3 + i]
+        y[W + i, lane] = states[idx, 6 + i]
+
+
+@njit(inline="always")
 def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
     """y's attitude and rate rows of `lane` set to the data's at sample idx: a linear
     target's tree does not drive them, and integrating them over a window from noisy data
@@ -123,11 +134,7 @@ def rk4_tree_window_errors(
     for lane in range(n):
         s = starts[lane]
         y[LAG, lane] = acc[s - 1, target] if s > 0 else 0.0
-        for i in range(4):
-            y[Q + i, lane] = quat_d[s, i]
-        for i in range(3):
-            y[V + i, lane] = states[s, 3 + i]
-            y[W + i, lane] = states[s, 6 + i]
+        body_from_data(y, lane, quat_d, states, s)
     used = read_leaves(codes, size, 9 + n_in)
     uses_state = uses_leaves(codes, size, 0, 8)
     # rows flown: the attitude only where the tree reads an angle or the angle is scored,
@@ -301,11 +308,8 @@ def rk4_rollout(
         s = starts[lane]
         for t in range(6):
             y[lag + t, lane] = acc[s - 1, t] if s > 0 else 0.0
-        for i in range(4):
-            y[Q + i, lane] = quat_d[s, i]
+        body_from_data(y, lane, quat_d, states, s)
         for i in range(3):
-            y[V + i, lane] = states[s, 3 + i]
-            y[W + i, lane] = states[s, 6 + i]
             y[X + i, lane] = 0.0
     for k in range(n_steps + 1):
         for lane in range(n):

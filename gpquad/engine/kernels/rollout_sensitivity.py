@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from gpquad.engine.kernels.fitness_rk4 import stage_features
+from gpquad.engine.kernels.fitness_rk4 import body_from_data, stage_features
 from gpquad.engine.kernels.quaternion import renormalize
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
@@ -40,6 +40,7 @@ from gpquad.engine.kernels.step import (
     body_derivative,
     body_stage_state,
     lag_rate_kernel,
+    rk4_tangent_buffers,
 )
 from gpquad.engine.kernels.tree_tangent import eval_with_gradient, gradient_work
 from gpquad.engine.numba_config import njit
@@ -121,14 +122,7 @@ def rk4_rollout_sensitivities(
     works = []
     for t in range(6):
         works.append(gradient_work(codes[t], sizes[t], n_leaves))
-    y = np.empty((N_ROWS, 1))
-    ys = np.empty((N_ROWS, 1))
-    slope = np.zeros((N_ROWS, 1))
-    total = np.empty((N_ROWS, 1))
-    tan = np.zeros((N_ROWS, n_c))
-    tan_s = np.zeros((N_ROWS, n_c))
-    tan_slope = np.zeros((N_ROWS, n_c))
-    tan_total = np.zeros((N_ROWS, n_c))
+    y, ys, slope, total, tan, tan_s, tan_slope, tan_total = rk4_tangent_buffers(N_ROWS, N_ROWS, n_c)
     features = np.empty((9, 1))
     leaf = np.zeros(n_leaves)
     leaf_tan = np.zeros((n_leaves, n_c))
@@ -146,11 +140,7 @@ def rk4_rollout_sensitivities(
         s = starts[w]
         for t in range(6):
             y[LAG_ROW + t, 0] = acc[s - 1, t] if s > 0 else 0.0
-        for i in range(4):
-            y[Q + i, 0] = quat_d[s, i]
-        for i in range(3):
-            y[V + i, 0] = states[s, 3 + i]
-            y[W + i, 0] = states[s, 6 + i]
+        body_from_data(y, 0, quat_d, states, s)
         tan[:, :] = 0.0
         tan_slope[:, :] = 0.0
         slope[:, :] = 0.0

@@ -21,7 +21,12 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
 import numpy as np
 
 from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, read_leaves
-from gpquad.engine.kernels.fitness_rk4 import LAG, attitude_and_rates_from_data, stage_features
+from gpquad.engine.kernels.fitness_rk4 import (
+    LAG,
+    attitude_and_rates_from_data,
+    body_from_data,
+    stage_features,
+)
 from gpquad.engine.kernels.quaternion import euler_angle
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
@@ -38,6 +43,7 @@ from gpquad.engine.kernels.step import (
     euler_kinematics,
     finish_step,
     lag_rate_kernel,
+    rk4_tangent_buffers,
     stage_state,
     wrap_angle,
 )
@@ -91,14 +97,9 @@ def rk4_window_residuals(
     work = gradient_work(codes, size, 9 + n_in)
     moving = tangent_leaves(linear, axis, angle_tangents)
     grad = np.empty(n_c)
-    y = np.empty((n_y, 1))
-    ys = np.empty((n_y, 1))
-    slope = np.zeros((n_y, 1))
-    total = np.empty((n_y, 1))
-    tan = np.zeros((TANGENT_ROWS, n_c))
-    tan_s = np.zeros((TANGENT_ROWS, n_c))
-    tan_slope = np.zeros((TANGENT_ROWS, n_c))
-    tan_total = np.zeros((TANGENT_ROWS, n_c))
+    y, ys, slope, total, tan, tan_s, tan_slope, tan_total = rk4_tangent_buffers(
+        n_y, TANGENT_ROWS, n_c
+    )
     # the leaves computed at each stage: those the tree reads, and the angles the Euler
     # kinematics of the angles' tangents read
     used = read_leaves(codes, size, 9 + n_in)
@@ -116,11 +117,7 @@ def rk4_window_residuals(
     for w in range(starts.shape[0]):
         s = starts[w]
         y[LAG, 0] = acc[s - 1, target] if s > 0 else 0.0
-        for i in range(4):
-            y[Q + i, 0] = quat_d[s, i]
-        for i in range(3):
-            y[V + i, 0] = states[s, 3 + i]
-            y[W + i, 0] = states[s, 6 + i]
+        body_from_data(y, 0, quat_d, states, s)
         tan[:, :] = 0.0
         tan_slope[:, :] = 0.0
         alive = True

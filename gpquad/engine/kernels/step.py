@@ -283,6 +283,22 @@ def euler_kinematics(axis, phi, theta, q, r, column, jang):
 # rk4: classical Runge-Kutta on the continuous-time ODE
 
 
+@njit
+def rk4_tangent_buffers(n_rows, n_tangent_rows, n_c):
+    """The work of one lane of RK4 with tangents: the state, its stage state, slope and
+    weighted sum (n_rows, 1), and the same four for the tangents (n_tangent_rows, n_c)."""
+    return (
+        np.empty((n_rows, 1)),
+        np.empty((n_rows, 1)),
+        np.zeros((n_rows, 1)),
+        np.empty((n_rows, 1)),
+        np.zeros((n_tangent_rows, n_c)),
+        np.zeros((n_tangent_rows, n_c)),
+        np.zeros((n_tangent_rows, n_c)),
+        np.zeros((n_tangent_rows, n_c)),
+    )
+
+
 @njit(inline="always")
 def stage_state(y, k, node, h, out, lane, n_rows, first=0):
     """out[:n_rows, lane] = y + node h k (the stage's state; node 0 copies y)."""
