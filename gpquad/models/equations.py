@@ -319,7 +319,9 @@ class DiscoveredModel:
         """
         return self._rollout(dataset.arrays, starts, n_steps, input_noise, missing_from_data=True)
 
-    def kernel_trees(self, dt: float, missing_from_data: bool = True):
+    def kernel_trees(
+        self, dt: float, missing_from_data: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The rollout kernels' model arrays (codes, values, sizes, delays, modelled,
         alphas): one tree per target (gpquad.engine.tree.encoding.stack_rows), which
         targets a tree models (else the data's acceleration when missing_from_data, or the
