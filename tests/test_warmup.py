@@ -91,6 +91,48 @@ def test_after_the_warm_up_a_fit_compiles_nothing(tmp_path):
     assert "gpquad.engine.kernels.sensitivity_rk4.rk4_window_residuals" in cold
 
 
+JOINT_PROBE = PROBE.split("from gpquad.data.io import load_dataset")[0] + textwrap.dedent(
+    """
+    import dataclasses
+    from gpquad.models.joint_fit import joint_refit
+    from gpquad.models.reference_models import setpoint_model
+    from gpquad.study.warmup import synthetic_dataset
+
+    dataset = synthetic_dataset(seed=3)
+    model = setpoint_model(dataset.input_names, dataset.dt)
+    model = dataclasses.replace(model, integrator="rk4", substeps=2)
+    before = signatures()
+    joint_refit(model, dataset, horizons_s=(0.5,))
+    after = signatures()
+    new = {k: sorted(v - before.get(k, set())) for k, v in after.items()}
+    print(json.dumps({k: v for k, v in new.items() if v}))
+    """
+)
+
+
+def test_after_the_warm_up_the_joint_refit_compiles_nothing():
+    """The joint refit of a continuous-time model (its sensitivity flight, rollouts and LM)
+    finds every kernel compiled by the warm-up groups; without them (the bad case) it adds
+    the sensitivity flight."""
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+    def new_signatures(groups: str) -> dict:
+        proc = subprocess.run(
+            [sys.executable, "-c", JOINT_PROBE, groups],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+
+    assert new_signatures(",".join(GROUPS)) == {}
+    cold = new_signatures("")
+    assert "gpquad.engine.kernels.rollout_sensitivity.rk4_rollout_sensitivities" in cold
+
+
 def test_an_unknown_group_is_refused():
     with pytest.raises(ValueError, match="euler"):
         warm("gpu")

@@ -67,13 +67,16 @@ def synthetic_dataset(seed: int = 0):
 
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
-    seconds it took. "euler": the eq. 2 fitness and sensitivity kernels and the LM's; "rk4":
+    seconds it took. "euler": the eq. 2 fitness and sensitivity kernels, the LM's and the
+    joint refit's full-model sensitivity flight; "rk4":
     the RK4 fitness, sensitivity and full-model rollout kernels and the one-step tree
     evaluation (about the same compilation time each, and none compiled by both)."""
     from gpquad.engine.evolve.evaluator import Evaluator
     from gpquad.engine.evolve.gradient_fit import continued_constants, residuals_and_jacobian
     from gpquad.engine.kernels import least_squares
     from gpquad.engine.kernels.tree_eval import eval_on_samples
+    from gpquad.engine.tree.operators import CONST
+    from gpquad.models.joint_jacobian import flown_with_sensitivities
     from gpquad.models.reference_models import setpoint_model
 
     if group not in GROUPS:
@@ -99,6 +102,9 @@ def warm(group: str) -> float:
         continued_constants(ev, tree, float(errors[0]), starts, STEPS, error_of, 2, [])
     if group == "euler":  # the LM's trust-region branch, which a short fit may not reach
         least_squares.gradient_norm(np.eye(2), np.zeros(2))
+        # the joint refit's sensitivity flight (here: this group compiles less)
+        slots = [(t, np.flatnonzero(e.tree.codes == CONST)) for t, e in model.equations.items()]
+        flown_with_sensitivities(model, dataset, slots, starts, STEPS)
     if group == "rk4":
         samples = np.arange(1, STEPS, dtype=np.int64)
         arrays = dataset.arrays
