@@ -76,7 +76,7 @@ from gpquad.engine.threads import chunks, thread_map
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
-from gpquad.models.joint_jacobian import flown_with_sensitivities, has_sensitivities
+from gpquad.models.joint_jacobian import has_sensitivities, sensitivity_jacobian
 from gpquad.models.scoring import SCORED_INDEX, SCORED_STATES, rse_denominator
 from gpquad.models.stiffness import model_substeps
 
@@ -244,15 +244,17 @@ def judged_windows(dataset, model, seconds: float) -> tuple[np.ndarray, int, str
 def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     """(model, report): the model with its constants refitted jointly, or the model as it
     was when that does not lower the full-model error at the longest horizon. workers:
-    threads for the Jacobian's rollouts (the same result for any number).
+    threads for the flights' windows and the forward differences' columns (the same result
+    for any number).
 
     The fit flies the model with the RK4 steps per sample its stiffest loop needs
     (gpquad.models.stiffness.model_substeps); the model keeps its own scheme.
 
     report: {"accepted", "horizon_s", "judged_on" ("validation" or "training"),
     "error_before", "error_after" (sum of the measured states' RSE there), "states",
-    "constants", "rollouts" (full-model flights over the training windows, Jacobians
-    included), "substeps" (of the fit's flights), "stages" ({horizon: judged error of the
+    "constants", "rollouts" (full-model flights over the training windows, forward
+    differences' included), "sensitivity_flights" (a continuous-time model's Jacobians),
+    "substeps" (of the fit's flights), "stages" ({horizon: judged error of the
     fit that ended there}), "fitted_to_s" (the horizon of the fit judged best, the one
     kept if it is significantly better), "time_s"}.
     """
@@ -306,8 +308,14 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
             return np.concatenate([o.residuals(m) for o in objectives])
 
         if has_sensitivities(flown):
-            value, jacobian = _flown_jacobian(
-                residuals, flown, slots, dataset, tuple(objectives), workers, sensitivities
+            value, jacobian = sensitivity_jacobian(
+                residuals,
+                lambda v: with_constants(flown, slots, v),
+                slots,
+                dataset,
+                tuple(objectives),
+                workers,
+                sensitivities,
             )
         else:
             value, jacobian = forward_difference(residuals, workers)
@@ -347,31 +355,6 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
         time_s=time.perf_counter() - t0,
     )
     return (refitted if accepted else model), report
-
-
-def _flown_jacobian(residuals, flown, slots, dataset, objectives, workers, counter):
-    """(value, jac) for the trust region, as lm.forward_difference's, with jac(x) from one
-    sensitivity flight of each objective's windows (gpquad.models.joint_jacobian)."""
-    memo: dict = {}
-
-    def value(x):
-        key = np.asarray(x, dtype=float).tobytes()
-        if memo.get("x") != key:
-            memo.update(x=key, f=np.asarray(residuals(np.array(x, dtype=float)), dtype=float))
-        return memo["f"]
-
-    def jacobian(x):
-        next(counter)
-        model = with_constants(flown, slots, np.array(x, dtype=float))
-        blocks = []
-        for o in objectives:
-            states, sens = flown_with_sensitivities(
-                model, dataset, slots, o.starts, o.steps, workers
-            )
-            blocks.append(o.jacobian_of(states, sens))
-        return np.concatenate(blocks)
-
-    return value, jacobian
 
 
 def drops_on_shorter_windows(dataset, states, judged_steps: int, before, refitted) -> bool:

@@ -62,3 +62,31 @@ def flown_with_sensitivities(model, dataset, slots, starts, n_steps: int, worker
     if not parts:
         return np.empty((0, n_steps + 1, 9)), np.empty((0, n_steps + 1, 6, n_c))
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def sensitivity_jacobian(residuals, model_at, slots, dataset, objectives, workers, counter):
+    """(value, jac) for the joint refit's LM, as lm.forward_difference's: value(x) is
+    residuals(x) remembered at the last point asked, jac(x) the Jacobian of the
+    `objectives`' (joint_fit.FullModelError) residuals, concatenated, at the model
+    model_at(x), from one sensitivity flight of each objective's windows; `counter` is
+    advanced once per Jacobian."""
+    memo: dict = {}
+
+    def value(x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if memo.get("x") != key:
+            memo.update(x=key, f=np.asarray(residuals(np.array(x, dtype=float)), dtype=float))
+        return memo["f"]
+
+    def jacobian(x):
+        next(counter)
+        model = model_at(np.array(x, dtype=float))
+        blocks = []
+        for o in objectives:
+            states, sens = flown_with_sensitivities(
+                model, dataset, slots, o.starts, o.steps, workers
+            )
+            blocks.append(o.jacobian_of(states, sens))
+        return np.concatenate(blocks)
+
+    return value, jacobian
