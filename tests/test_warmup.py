@@ -64,13 +64,12 @@ input_taps = 1
 """
 
 
-def _new_signatures(tmp_path: Path, groups: str) -> dict:
-    config = tmp_path / "tiny.toml"
-    config.write_text(CONFIG)
+def _probe(script: str, *args: str) -> dict:
+    """The kernel signatures that `script` (run in a fresh process) reports as added."""
     root = str(Path(__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.run(
-        [sys.executable, "-c", PROBE, groups, str(config)],
+        [sys.executable, "-c", script, *args],
         env=env,
         capture_output=True,
         text=True,
@@ -78,6 +77,12 @@ def _new_signatures(tmp_path: Path, groups: str) -> dict:
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _new_signatures(tmp_path: Path, groups: str) -> dict:
+    config = tmp_path / "tiny.toml"
+    config.write_text(CONFIG)
+    return _probe(PROBE, groups, str(config))
 
 
 def test_after_the_warm_up_a_fit_compiles_nothing(tmp_path):
@@ -114,22 +119,8 @@ def test_after_the_warm_up_the_joint_refit_compiles_nothing():
     """The joint refit of a continuous-time model (its sensitivity flight, rollouts and LM)
     finds every kernel compiled by the warm-up groups; without them (the bad case) it adds
     the sensitivity flight."""
-    root = str(Path(__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
-
-    def new_signatures(groups: str) -> dict:
-        proc = subprocess.run(
-            [sys.executable, "-c", JOINT_PROBE, groups],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        assert proc.returncode == 0, proc.stderr[-3000:]
-        return json.loads(proc.stdout.strip().splitlines()[-1])
-
-    assert new_signatures(",".join(GROUPS)) == {}
-    cold = new_signatures("")
+    assert _probe(JOINT_PROBE, ",".join(GROUPS)) == {}
+    cold = _probe(JOINT_PROBE, "")
     assert "gpquad.engine.kernels.rollout_sensitivity.rk4_rollout_sensitivities" in cold
 
 
