@@ -13,7 +13,8 @@ the tangents go through every RK4 stage as the derivative of the stage's arithme
 - the Euler angles' tangents from the quaternion's, the trees' leaves; each tree's value and
   gradient by reverse mode (gpquad.engine.kernels.tree_tangent), a constant's own column
   where it is fitted (`slots`);
-- the rigid body's derivative: q_dot = q x omega / 2, V_dot = a - omega x V, omega_dot = a;
+- the rigid body's derivative: q_dot = q (0, omega) / 2 (quaternion product),
+  V_dot = a - omega x V, omega_dot = a;
   a lag's tau a_dot = f - a;
 - the step's first-order renormalisation q (1.5 - |q|^2 / 2).
 
@@ -52,7 +53,7 @@ N_ROWS = BODY_ROWS + 6
 
 @njit(inline="always")
 def _atan2_gradient(num, den, dnum, dden, out, row):
-    """out[row, :4] += d atan2(num, den) / dq from num's and den's gradients (4,)."""
+    """out[row, :4] = d atan2(num, den) / dq from num's and den's gradients (4,)."""
     scale = num * num + den * den
     if scale > 0.0:
         for i in range(4):
