@@ -49,7 +49,7 @@ def problem(dataset, model, seconds=2.0, fitted=None):
     states = joint_fit.measured_states(dataset)
     slots = [
         (t, idx)
-        for t, idx in joint_fit._slots(model)
+        for t, idx in joint_fit.constant_nodes(model)
         if len(idx) and (fitted is None or t in fitted)
     ]
     x0 = np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots])

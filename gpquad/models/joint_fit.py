@@ -112,7 +112,7 @@ SIGNIFICANCE = 2.0
 LARGE_DROP = 0.5
 
 
-def _slots(model) -> list[tuple[str, np.ndarray]]:
+def constant_nodes(model) -> list[tuple[str, np.ndarray]]:
     """(target, indices of its CONST nodes) for each target the model has an equation for."""
     return [
         (t, np.flatnonzero(model.equations[t].tree.codes == CONST))
@@ -169,11 +169,9 @@ class FullModelError:
         (W, steps + 1, 6, n) flown with it (gpquad.models.joint_jacobian); zero rows where
         a residual is clipped or not finite."""
         rows = [c - SCORED_INDEX[0] for c in self.cols]
-        pred = flown[:, 1:, :][:, :, self.cols]
+        live = np.abs(self.residuals_of(flown)).reshape(self.data.shape) < RESIDUAL_CLIP
         with np.errstate(invalid="ignore", over="ignore"):
-            r = (pred - self.data) * self.scale
             jac = sens[:, 1:][:, :, rows, :] * self.scale[None, None, :, None]
-        live = np.isfinite(r) & (np.abs(r) < RESIDUAL_CLIP)
         jac = np.where(live[..., None] & np.isfinite(jac), jac, 0.0)
         return jac.reshape(-1, jac.shape[-1])
 
@@ -263,7 +261,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     fitted_targets = {
         t for t in TARGET_NAMES if TARGET_STATE[t] in {SCORED_STATES[i] for i in states}
     }
-    slots = [(t, idx) for t, idx in _slots(model) if t in fitted_targets and len(idx)]
+    slots = [(t, idx) for t, idx in constant_nodes(model) if t in fitted_targets and len(idx)]
     x0 = (
         np.concatenate([model.equations[t].tree.values[idx] for t, idx in slots])
         if slots

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpquad.engine.evolve.lm import remember_last
 from gpquad.engine.kernels.rollout_sensitivity import rk4_rollout_sensitivities
 from gpquad.engine.kernels.step import RK4, SCHEMES
 from gpquad.engine.threads import chunks, thread_map
@@ -70,13 +71,7 @@ def sensitivity_jacobian(residuals, model_at, slots, dataset, objectives, worker
     `objectives`' (joint_fit.FullModelError) residuals, concatenated, at the model
     model_at(x), from one sensitivity flight of each objective's windows; `counter` is
     advanced once per Jacobian."""
-    memo: dict = {}
-
-    def value(x):
-        key = np.asarray(x, dtype=float).tobytes()
-        if memo.get("x") != key:
-            memo.update(x=key, f=np.asarray(residuals(np.array(x, dtype=float)), dtype=float))
-        return memo["f"]
+    value = remember_last(lambda v: np.asarray(residuals(v), dtype=float))
 
     def jacobian(x):
         next(counter)

@@ -75,7 +75,7 @@ def warm(group: str) -> float:
     from gpquad.engine.evolve.gradient_fit import continued_constants, residuals_and_jacobian
     from gpquad.engine.kernels import least_squares
     from gpquad.engine.kernels.tree_eval import eval_on_samples
-    from gpquad.engine.tree.operators import CONST
+    from gpquad.models.joint_fit import constant_nodes
     from gpquad.models.joint_jacobian import flown_with_sensitivities
     from gpquad.models.reference_models import setpoint_model
 
@@ -103,8 +103,7 @@ def warm(group: str) -> float:
     if group == "euler":  # the LM's trust-region branch, which a short fit may not reach
         least_squares.gradient_norm(np.eye(2), np.zeros(2))
         # the joint refit's sensitivity flight (here: this group compiles less)
-        slots = [(t, np.flatnonzero(e.tree.codes == CONST)) for t, e in model.equations.items()]
-        flown_with_sensitivities(model, dataset, slots, starts, STEPS)
+        flown_with_sensitivities(model, dataset, constant_nodes(model), starts, STEPS)
     if group == "rk4":
         samples = np.arange(1, STEPS, dtype=np.int64)
         arrays = dataset.arrays

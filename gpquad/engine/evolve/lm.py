@@ -200,6 +200,20 @@ def normal_triangularize(jac, scale, res, r, qtr) -> None:
     qtr[:] = solve_triangular(upper, scaled.T @ res, trans="T", lower=False)
 
 
+def remember_last(compute):
+    """f(x) = compute(x) (x as a float array), remembered at the last point asked: an LM
+    asks for the residuals or the Jacobian at one point several times."""
+    memo: dict[str, tuple[bytes, object]] = {}
+
+    def remembered(x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if "last" not in memo or memo["last"][0] != key:
+            memo["last"] = (key, compute(np.array(x, dtype=float)))
+        return memo["last"][1]
+
+    return remembered
+
+
 def forward_difference(fun, workers: int = 1):
     """(value, jac) for a residual function without an analytic Jacobian: value(x) is fun(x)
     remembered at the last point asked, jac(x) the forward-difference Jacobian there with
@@ -209,16 +223,7 @@ def forward_difference(fun, workers: int = 1):
     workers > 1: the columns are computed in that many threads (`fun` must be thread-safe
     and release the GIL for its work, as the numba kernels do); each column is the same
     function of x, so the Jacobian is the same for any number of workers."""
-    memo: dict[str, tuple[bytes, np.ndarray]] = {}
-
-    def remembered(name, x, compute):
-        key = np.asarray(x, dtype=float).tobytes()
-        if name not in memo or memo[name][0] != key:
-            memo[name] = (key, compute(np.array(x, dtype=float)))
-        return memo[name][1]
-
-    def value(x):
-        return remembered("f", x, lambda v: np.asarray(fun(v), dtype=float))
+    value = remember_last(lambda v: np.asarray(fun(v), dtype=float))
 
     def jacobian(x):
         f0 = value(x)
@@ -231,7 +236,7 @@ def forward_difference(fun, workers: int = 1):
 
         return np.column_stack(thread_map(column, range(x.size), workers))
 
-    return value, (lambda x: remembered("jac", x, jacobian))
+    return value, remember_last(jacobian)
 
 
 def broyden_jacobian(value, jacobian, refresh: int):
