@@ -33,11 +33,11 @@ from gpquad.engine.kernels.step import (
     V,
     W,
     X,
-    accumulate,
     body_derivative,
-    body_stage_state,
-    finish_step,
     lag_rate_kernel,
+    lanes_accumulate,
+    lanes_finish_step,
+    lanes_stage_state,
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import (
@@ -159,10 +159,10 @@ def rk4_tree_window_errors(
                     features[9 + j, lane] = inputs[idx - delays[j], j]
         for _ in range(substeps):
             for stage in range(N_STAGES):
-                for lane in range(n):
-                    if alive[lane]:
-                        body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows, first)
-                        if uses_state:
+                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows, first)
+                if uses_state:
+                    for lane in range(n):
+                        if alive[lane]:
                             stage_features(ys, lane, used, features)
                 eval_lanes(codes, values, size, features, stack, pred, n)
                 for lane in range(n):
@@ -186,10 +186,8 @@ def rk4_tree_window_errors(
                         a5 = f
                     body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
                     slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
-                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows, first)
-            for lane in range(n):
-                if alive[lane]:
-                    finish_step(y, total, h, lane, n_rows, first)
+                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows, first)
+            lanes_finish_step(y, total, h, n, n_rows, first)
 
         step_total = 0.0
         for lane in range(n):
@@ -324,8 +322,8 @@ def rk4_rollout(
         hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
         for _ in range(substeps):
             for stage in range(N_STAGES):
+                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows)
                 for lane in range(n):
-                    body_stage_state(y, slope, NODES[stage], h, ys, lane, n_rows)
                     stage_features(ys, lane, every_state, features)
                 for t in range(6):
                     if modelled[t]:
@@ -352,7 +350,6 @@ def rk4_rollout(
                         keep_pos,
                         slope,
                     )
-                    accumulate(total, slope, WEIGHTS[stage], stage, lane, n_rows)
-            for lane in range(n):
-                finish_step(y, total, h, lane, n_rows)
+                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows)
+            lanes_finish_step(y, total, h, n, n_rows)
     return out
