@@ -249,3 +249,55 @@ def test_attitude_jacobian_follows_finite_differences(short_dataset, target, tex
         worst_error(Evaluator(short_dataset, target, 50, attitude=1.0, angle_tangents=True)) < 0.05
     )
     assert worst_error(Evaluator(short_dataset, target, 50, attitude=1.0)) > 0.5
+
+
+@pytest.mark.parametrize("substeps", [1, 2])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_rk4_residuals_alone_are_the_sensitivity_flights_to_the_bit(short_dataset, seed, substeps):
+    """LM flies its trial points without the Jacobian (gradient_fit.residuals_only, the RK4
+    fitness kernel over lanes): their residuals equal the sensitivity flight's to the bit
+    (random trees of every target, lags, the attitude rows, windows that diverge beside
+    others and trees that diverge in every window), or LM would take other steps."""
+    from gpquad.engine.bench import prefix_tree
+    from gpquad.engine.evolve.gradient_fit import residuals_only
+    from gpquad.engine.tree.variation import VariationParams, random_tree
+
+    rng = np.random.default_rng(seed)
+    params = VariationParams(n_variables=9 + 4, n_inputs=4, max_depth=4)
+    starts = np.array([12, 150, 300, 301, 450, 650, 900], dtype=np.int64)
+    names = short_dataset.input_names
+    fixed = [
+        ("p_dot", prefix_tree(["*", 80.0, "*", "p", "p"], names)),  # blows up where p > 0
+        ("q_dot", prefix_tree(["+", "*", 1e3, "q", 1e4], names)),  # everywhere
+    ]
+    seen = {"mixed": 0, "all": 0}
+    for k in range(32):
+        target = TARGET_NAMES[int(rng.integers(6))]
+        tree = random_tree(rng, params)
+        if k < len(fixed):
+            target, tree = fixed[k]
+        ev = Evaluator(
+            short_dataset,
+            target,
+            40,
+            attitude=0.5 if k % 3 else 0.0,
+            lag=0.0 if k % 2 else 0.08,
+            integrator="rk4",
+            substeps=substeps,
+        )
+        if not np.any(tree.codes == CONST):
+            continue
+        alone = residuals_only(ev, tree, starts, 40)
+        with_jacobian, _, diverged = residuals_and_jacobian(ev, tree, starts, 40)
+        np.testing.assert_array_equal(alone, with_jacobian)
+        seen["mixed"] += 0 < diverged < len(starts)
+        seen["all"] += diverged == len(starts)
+    assert seen["mixed"] > 0 and seen["all"] > 0
+
+
+def test_residuals_alone_are_for_rk4_only(short_dataset):
+    from gpquad.engine.bench import prefix_tree
+    from gpquad.engine.evolve.gradient_fit import residuals_only
+
+    tree = prefix_tree(["*", -2.0, "p"], short_dataset.input_names)
+    assert residuals_only(Evaluator(short_dataset, "p_dot", 40), tree, [12], 40) is None

@@ -19,7 +19,9 @@ from scipy.linalg import qr
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.lm import column_norms, levenberg_marquardt
 from gpquad.engine.kernels import least_squares
+from gpquad.engine.kernels.fitness_rk4 import rk4_window_residuals_only
 from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
+from gpquad.engine.kernels.step import RK4
 from gpquad.engine.kernels.tree_eval import check_stack
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST
@@ -66,6 +68,34 @@ def residuals_and_jacobian(
     )
     ev.evaluations += len(starts)
     return res, jac, int(diverged)
+
+
+def residuals_only(ev: Evaluator, tree: Tree, starts, n_steps: int) -> np.ndarray | None:
+    """residuals_and_jacobian's residuals to the bit, without the Jacobian, from the RK4
+    fitness kernel (its windows flown as lanes: a quarter to a half of the sensitivity
+    flight's time); None for the eq. 2 scheme, whose sensitivity flight costs little more
+    than its residuals."""
+    if ev.scheme != RK4:
+        return None
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    check_stack(tree.codes, tree.size)
+    res = np.empty(len(starts) * n_steps * residual_rows(ev.target, ev.att_weight))
+    rk4_window_residuals_only(
+        tree.codes,
+        tree.values,
+        tree.size,
+        tree.delays,
+        ev.target,
+        ev.arrays,
+        starts,
+        int(n_steps),
+        ev.att_weight,
+        ev.alpha,
+        res,
+        ev.substeps,
+    )
+    ev.evaluations += len(starts)
+    return res
 
 
 def identifiable(jac: np.ndarray, rtol: float = IDENTIFIABLE_RTOL) -> np.ndarray:
@@ -149,22 +179,32 @@ def gauss_newton_constants(
     slots = np.flatnonzero(model.codes == CONST)
     if slots.size == 0 or max_steps == 0:
         return model, error
-    cache: dict = {}
+    cache: dict = {}  # the last point's (residuals, Jacobian or None)
 
     def with_values(x) -> Tree:
         values = model.values.copy()
         values[slots] = x
         return Tree(model.codes, values, model.delays)
 
-    def evaluate(x):
+    def evaluate(x, jacobian: bool = True):
+        """(residuals, Jacobian) at x; with jacobian False the Jacobian may be None: LM
+        asks for it at the points it takes only, a fraction of its trials, and where the
+        residuals alone cost less (residuals_only) they are flown alone."""
         key = x.tobytes()
-        if key not in cache:
+        found = cache.get(key)
+        if found is None or (jacobian and found[1] is None):
             cache.clear()
-            cache[key] = residuals_and_jacobian(ev, with_values(x), starts, n_steps)
-        return cache[key]
+            res = None if jacobian else residuals_only(ev, with_values(x), starts, n_steps)
+            if res is None:
+                res, jac, _ = residuals_and_jacobian(ev, with_values(x), starts, n_steps)
+                found = (res, jac)
+            else:
+                found = (res, None)
+            cache[key] = found
+        return found
 
     x0 = model.values[slots].copy()
-    res0, jac0, _ = evaluate(x0)
+    res0, jac0 = evaluate(x0)
     if not np.all(np.isfinite(res0)) or res0.size < slots.size or not np.all(np.isfinite(jac0)):
         return model, error
     free = identifiable(jac0)
@@ -178,7 +218,7 @@ def gauss_newton_constants(
 
     try:
         x_fit = levenberg_marquardt(
-            lambda x: evaluate(full(x))[0],
+            lambda x: evaluate(full(x), jacobian=False)[0],
             x0[free],
             lambda x: evaluate(full(x))[1][:, free],
             max_steps,

@@ -100,6 +100,7 @@ def tree_window_errors(
             bound,
             out,
             substeps,
+            np.empty(0),
         )
     return euler_tree_window_errors(
         codes,

@@ -21,7 +21,13 @@ sample before the window, with 1 / tau from alpha (gpquad.engine.kernels.step.la
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED, STATE_LIMIT, read_leaves, uses_leaves
+from gpquad.engine.kernels.divergence import (
+    DIVERGED,
+    DIVERGED_RESIDUAL,
+    STATE_LIMIT,
+    read_leaves,
+    uses_leaves,
+)
 from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
@@ -92,6 +98,40 @@ def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
         y[W + i, lane] = states[idx, 6 + i]
 
 
+@njit(inline="always")
+def diverged_rows(res, row, n_rows):
+    """A diverged window's residual rows at `row` (the sensitivity kernels' rule)."""
+    for extra in range(n_rows):
+        res[row + extra] = DIVERGED_RESIDUAL
+
+
+@njit
+def rk4_window_residuals_only(
+    codes, values, size, delays, target, flight, starts, n_steps, att_weight, alpha, res, substeps
+):
+    """The residuals of gpquad.engine.kernels.sensitivity_rk4.rk4_window_residuals without
+    the Jacobian, to the bit (the windows flown as lanes: a fraction of its cost); res
+    (n_windows * n_steps * residual_rows(target, att_weight),)."""
+    out = np.empty(starts.shape[0])
+    rk4_tree_window_errors(
+        codes,
+        values,
+        size,
+        delays,
+        target,
+        flight,
+        starts,
+        n_steps,
+        False,
+        att_weight,
+        alpha,
+        np.inf,
+        out,
+        substeps,
+        res,
+    )
+
+
 @njit
 def rk4_tree_window_errors(
     codes,
@@ -108,8 +148,12 @@ def rk4_tree_window_errors(
     bound,
     out,
     substeps,
+    res,
 ):
-    """gpquad.engine.kernels.fitness.tree_window_errors flown by RK4 (module notes)."""
+    """gpquad.engine.kernels.fitness.tree_window_errors flown by RK4 (module notes). res:
+    empty, or (n_windows * n_steps * rows,) to receive the residuals of
+    gpquad.engine.kernels.sensitivity_rk4 (rows = residual_rows(target, att_weight), the
+    same bits, diverged windows likewise) when bound is inf."""
     quat_d, states, acc, inputs, rot, dt = flight
     n = starts.shape[0]
     n_in = inputs.shape[1]
@@ -130,6 +174,8 @@ def rk4_tree_window_errors(
     total = np.empty((n_rows, n))
     err = np.zeros(n)
     alive = np.ones(n, dtype=np.bool_)
+    write = res.shape[0] > 0
+    n_res = 2 if att_err else 1
     n_alive = n
     for lane in range(n):
         s = starts[lane]
@@ -191,27 +237,38 @@ def rk4_tree_window_errors(
 
         step_total = 0.0
         for lane in range(n):
+            row = (lane * n_steps + k) * n_res
             if not alive[lane]:
                 step_total += err[lane]
+                if write:
+                    diverged_rows(res, row, n_res)
                 continue
             idx = starts[lane] + k
             x = y[V + target, lane] if linear else y[W + target - 3, lane]
             e = x - states[idx + 1, 3 + target]
+            if write:
+                res[row] = e
             e = e * e if squared else abs(e)
             if att_err:
                 a = target - 3
                 da = euler_angle(a, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane])
                 da = wrap_angle(da - states[idx + 1, a]) * att_weight
+                if write:
+                    res[row + 1] = da
                 e += da * da if squared else abs(da)
             if not abs(x) < STATE_LIMIT:  # also catches NaN
                 e = DIVERGED
                 alive[lane] = False
                 n_alive -= 1
+                if write:
+                    diverged_rows(res, row, n_res)
             err[lane] += e
             step_total += err[lane]
         if step_total > budget or n_alive == 0:
             for lane in range(n):
                 out[lane] = DIVERGED
+                for later in range(k + 1, n_steps if write else 0):
+                    diverged_rows(res, (lane * n_steps + later) * n_res, n_res)
             return True
     for lane in range(n):
         out[lane] = err[lane] / n_steps
@@ -252,6 +309,7 @@ def rk4_population_window_errors(
             bounds[i],
             out[i],
             substeps,
+            np.empty(0),
         )
 
 
