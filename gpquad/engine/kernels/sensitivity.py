@@ -167,6 +167,10 @@ def euler_window_residuals(
     need_phi = track_angles or uses_leaves(codes, size, 0, 0)
     need_theta = track_angles or uses_leaves(codes, size, 1, 1)
     need_psi = uses_leaves(codes, size, 2, 2)
+    # an angular target's attitude and velocity are stepped only where something reads them
+    # (the rates and their residuals do not depend on them)
+    move_att = need_phi or need_theta or need_psi or n_rows == 2
+    move_vel = uses_leaves(codes, size, 3, 5)
     slot_of = constant_slots(codes, size)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
@@ -276,8 +280,8 @@ def euler_window_residuals(
                     a4,
                     a5,
                     dt,
-                    True,
-                    True,
+                    move_vel,
+                    move_att,
                 )
                 phi1 = euler_phi(q0, q1, q2, q3) if need_phi else 0.0
                 theta1 = euler_theta(q0, q1, q2, q3) if need_theta else 0.0
