@@ -68,11 +68,15 @@ def synthetic_dataset(seed: int = 0):
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
     seconds it took. "euler": the eq. 2 fitness and sensitivity kernels, the LM's and the
-    joint refit's full-model sensitivity flight; "rk4":
-    the RK4 fitness, sensitivity and full-model rollout kernels and the one-step tree
-    evaluation (about the same compilation time each, and none compiled by both)."""
+    joint refit's full-model sensitivity flight; "rk4": the RK4 fitness (also as LM's
+    residuals), sensitivity and full-model rollout kernels and the one-step tree evaluation
+    (about the same compilation time each, and none compiled by both)."""
     from gpquad.engine.evolve.evaluator import Evaluator
-    from gpquad.engine.evolve.gradient_fit import continued_constants, residuals_and_jacobian
+    from gpquad.engine.evolve.gradient_fit import (
+        continued_constants,
+        residuals_and_jacobian,
+        residuals_only,
+    )
     from gpquad.engine.kernels import least_squares
     from gpquad.engine.kernels.tree_eval import eval_on_samples
     from gpquad.models.joint_fit import constant_nodes
@@ -94,6 +98,7 @@ def warm(group: str) -> float:
         errors = ev.window_errors([tree, tree], starts).mean(axis=1)
         if group == "rk4":
             residuals_and_jacobian(ev, tree, starts, STEPS)
+            residuals_only(ev, tree, starts, STEPS)  # LM's trial points
             continue
 
         def error_of(t, ev=ev):
