@@ -38,15 +38,20 @@ IDENTIFIABLE_RTOL = 1e-9
 GRAM_FULL_RANK = 1e-10
 
 
+def _flight_rows(ev: Evaluator, tree: Tree, starts, n_steps: int) -> tuple[np.ndarray, int]:
+    """(the window starts as the kernels take them, the residual rows of their flight)."""
+    check_stack(tree.codes, tree.size)
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    return starts, len(starts) * n_steps * residual_rows(ev.target, ev.att_weight)
+
+
 def residuals_and_jacobian(
     ev: Evaluator, tree: Tree, starts, n_steps: int
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Residuals (W * n_steps * rows,), Jacobian (same rows, n_constants), diverged windows;
     rows = 2 when the evaluator scores the attitude too (gpquad.engine.kernels.sensitivity)."""
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    check_stack(tree.codes, tree.size)
+    starts, rows = _flight_rows(ev, tree, starts, n_steps)
     n_c = int(np.count_nonzero(tree.codes == CONST))
-    rows = len(starts) * n_steps * residual_rows(ev.target, ev.att_weight)
     res = np.empty(rows)
     jac = np.empty((rows, n_c))
     diverged = window_residuals(
@@ -77,9 +82,8 @@ def residuals_only(ev: Evaluator, tree: Tree, starts, n_steps: int) -> np.ndarra
     than its residuals."""
     if ev.scheme != RK4:
         return None
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    check_stack(tree.codes, tree.size)
-    res = np.empty(len(starts) * n_steps * residual_rows(ev.target, ev.att_weight))
+    starts, rows = _flight_rows(ev, tree, starts, n_steps)
+    res = np.empty(rows)
     rk4_window_residuals_only(
         tree.codes,
         tree.values,
