@@ -47,11 +47,11 @@ from gpquad.engine.kernels.step import (
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import (
-    STACK_ROWS,
-    eval_lanes,
+    compile_program,
     hold_inputs,
     model_programs,
     run_model_tree,
+    run_program,
 )
 from gpquad.engine.numba_config import njit
 
@@ -165,9 +165,13 @@ def rk4_tree_window_errors(
     n_rows = BODY_ROWS + 1
     h = dt / substeps
 
-    features = np.zeros((9 + n_in, n))
-    stack = np.empty((STACK_ROWS, n))
-    pred = np.empty(n)
+    # the leaves, then one row per node: the tree as a register program over the lanes
+    # (tree_eval.compile_program: eval_lanes' operations, the same bits)
+    regs = np.zeros((9 + n_in + size, n))
+    prog = np.empty((size, 4), dtype=np.int64)
+    n_ops, root = compile_program(codes, values, size, 9 + n_in, regs, prog)
+    features = regs[: 9 + n_in]
+    pred = regs[root]
     y = np.empty((n_rows, n))
     ys = np.empty((n_rows, n))
     slope = np.zeros((n_rows, n))
@@ -210,7 +214,7 @@ def rk4_tree_window_errors(
                     for lane in range(n):
                         if alive[lane]:
                             stage_features(ys, lane, used, features)
-                eval_lanes(codes, values, size, features, stack, pred, n)
+                run_program(prog, n_ops, regs, n)
                 for lane in range(n):
                     if not alive[lane]:
                         continue
