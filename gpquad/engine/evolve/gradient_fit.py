@@ -19,7 +19,7 @@ from scipy.linalg import qr
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.lm import column_norms, levenberg_marquardt
 from gpquad.engine.kernels import least_squares
-from gpquad.engine.kernels.fitness_rk4 import rk4_window_residuals_only
+from gpquad.engine.kernels.fitness import population_window_errors
 from gpquad.engine.kernels.sensitivity import residual_rows, window_residuals
 from gpquad.engine.kernels.step import RK4
 from gpquad.engine.kernels.tree_eval import check_stack
@@ -84,19 +84,24 @@ def residuals_only(ev: Evaluator, tree: Tree, starts, n_steps: int) -> np.ndarra
         return None
     starts, rows = _flight_rows(ev, tree, starts, n_steps)
     res = np.empty(rows)
-    rk4_window_residuals_only(
-        tree.codes,
-        tree.values,
-        tree.size,
-        tree.delays,
+    codes, values, sizes, delays = ev.pack([tree])
+    population_window_errors(
+        codes,
+        values,
+        sizes,
+        delays,
         ev.target,
         ev.arrays,
         starts,
         int(n_steps),
+        False,
         ev.att_weight,
         ev.alpha,
-        res,
+        np.full(1, np.inf),
+        np.empty((1, len(starts))),
+        ev.scheme,
         ev.substeps,
+        res,
     )
     ev.evaluations += len(starts)
     return res

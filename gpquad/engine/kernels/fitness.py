@@ -310,8 +310,13 @@ def population_window_errors(
     out,
     scheme,
     substeps,
+    res=None,
 ):
-    """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows)."""
+    """tree_window_errors for each tree i of a population (codes (P, M) ...); out (P, n_windows).
+    res (RK4 and a one-tree population only, bound inf): receives the sensitivity kernel's
+    residuals of the windows, to the bit (gpquad.engine.kernels.fitness_rk4)."""
+    if res is not None and (scheme != RK4 or codes.shape[0] != 1):
+        raise ValueError("residuals are written for one tree flown by RK4 only")
     if scheme == RK4:
         rk4_population_window_errors(
             codes,
@@ -328,6 +333,7 @@ def population_window_errors(
             bounds,
             out,
             substeps,
+            np.empty(0) if res is None else res,
         )
     else:
         euler_population_window_errors(

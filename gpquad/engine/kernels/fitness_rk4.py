@@ -106,33 +106,6 @@ def diverged_rows(res, row, n_rows):
 
 
 @njit
-def rk4_window_residuals_only(
-    codes, values, size, delays, target, flight, starts, n_steps, att_weight, alpha, res, substeps
-):
-    """The residuals of gpquad.engine.kernels.sensitivity_rk4.rk4_window_residuals without
-    the Jacobian, to the bit (the windows flown as lanes: a fraction of its cost); res
-    (n_windows * n_steps * residual_rows(target, att_weight),)."""
-    out = np.empty(starts.shape[0])
-    rk4_tree_window_errors(
-        codes,
-        values,
-        size,
-        delays,
-        target,
-        flight,
-        starts,
-        n_steps,
-        False,
-        att_weight,
-        alpha,
-        np.inf,
-        out,
-        substeps,
-        res,
-    )
-
-
-@njit
 def rk4_tree_window_errors(
     codes,
     values,
@@ -295,8 +268,11 @@ def rk4_population_window_errors(
     bounds,
     out,
     substeps,
+    res,
 ):
-    """population_window_errors flown by RK4 (gpquad.engine.kernels.fitness_rk4)."""
+    """population_window_errors flown by RK4 (gpquad.engine.kernels.fitness_rk4); res:
+    empty, or a one-tree population's residuals (rk4_tree_window_errors: LM's trial points,
+    through the one compiled entry point of the fitness kernel)."""
     for i in range(codes.shape[0]):
         rk4_tree_window_errors(
             codes[i],
@@ -313,7 +289,7 @@ def rk4_population_window_errors(
             bounds[i],
             out[i],
             substeps,
-            np.empty(0),
+            res,
         )
 
 
