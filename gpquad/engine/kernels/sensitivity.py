@@ -46,7 +46,12 @@ Flat arrays only: codes, values, size, delays as the fitness kernel; flight is F
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, uses_leaves
+from gpquad.engine.kernels.divergence import (
+    DIVERGED_RESIDUAL,
+    STATE_LIMIT,
+    read_leaves,
+    uses_leaves,
+)
 from gpquad.engine.kernels.quaternion import euler_phi, euler_psi, euler_theta
 from gpquad.engine.kernels.sensitivity_rk4 import rk4_window_residuals
 from gpquad.engine.kernels.step import (
@@ -172,6 +177,7 @@ def euler_window_residuals(
     move_att = need_phi or need_theta or need_psi or n_rows == 2
     move_vel = uses_leaves(codes, size, 3, 5)
     slot_of = constant_slots(codes, size)
+    used = read_leaves(codes, size, 9 + n_in)
     features = np.zeros(9 + n_in)
     tangents = np.zeros((9 + n_in, n_c))
     work = gradient_work(codes, size, 9 + n_in)
@@ -228,8 +234,9 @@ def euler_window_residuals(
                     if angle_tangents:
                         for i in range(3):
                             tangents[i, c] = asens[i, c]
-            for jj in range(n_in):
-                features[9 + jj] = inputs[idx - delays[jj], jj]
+            for jj in range(n_in):  # the input leaves the tree reads
+                if used[9 + jj]:
+                    features[9 + jj] = inputs[idx - delays[jj], jj]
             pred = eval_with_gradient(
                 codes, values, size, slot_of, features, tangents, work, grad, moving
             )

@@ -131,8 +131,9 @@ def rk4_window_residuals(
             idx = s + k
             if linear and k > 0:
                 attitude_and_rates_from_data(y, 0, quat_d, states, idx)
-            for jj in range(n_in):
-                leaf[9 + jj] = inputs[idx - delays[jj], jj]
+            for jj in range(n_in):  # the input leaves the tree reads, held over the sample
+                if used[9 + jj]:
+                    leaf[9 + jj] = inputs[idx - delays[jj], jj]
             for _ in range(substeps):
                 for stage in range(N_STAGES):
                     node = NODES[stage]
