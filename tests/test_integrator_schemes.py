@@ -649,38 +649,22 @@ def test_windows_scored_together_are_each_window_scored_alone(short_dataset, see
     from gpquad.engine.tree.variation import VariationParams, random_tree
 
     rng = np.random.default_rng(seed)
-    arrays = short_dataset.arrays
     params = VariationParams(n_variables=9 + 4, n_inputs=4, max_depth=4)
     starts = np.array([12, 150, 300, 301, 450, 650, 900], dtype=np.int64)
     mixed = 0
     for k in range(24):
         tree = random_tree(rng, params)
-        target = int(rng.integers(6))
-        alpha = 1.0 if k % 2 else 0.6
-
-        def score(which, tree=tree, target=target, alpha=alpha):
-            out = np.empty(len(which))
-            tree_window_errors(
-                tree.codes,
-                tree.values,
-                tree.size,
-                tree.delays,
-                target,
-                arrays,
-                starts[which],
-                40,
-                False,
-                0.5,
-                alpha,
-                np.inf,
-                out,
-                ks.RK4,
-                substeps,
-            )
-            return out
-
-        together = score(np.arange(len(starts)))
-        alone = np.array([score(np.array([w]))[0] for w in range(len(starts))])
+        ev = Evaluator(
+            short_dataset,
+            TARGET_NAMES[int(rng.integers(6))],
+            40,
+            attitude=0.5,
+            lag=0.0 if k % 2 else 0.08,
+            integrator="rk4",
+            substeps=substeps,
+        )
+        together = ev.window_errors([tree], starts)[0]
+        alone = np.array([ev.window_errors([tree], starts[[w]])[0, 0] for w in range(len(starts))])
         np.testing.assert_array_equal(together, alone)
         mixed += bool(np.isinf(together).any() and np.isfinite(together).any())
     assert mixed > 0  # some window diverged while others flew on

@@ -78,8 +78,9 @@ def residuals_and_jacobian(
 def residuals_only(ev: Evaluator, tree: Tree, starts, n_steps: int) -> np.ndarray | None:
     """residuals_and_jacobian's residuals to the bit, without the Jacobian, from the RK4
     fitness kernel (its windows flown as lanes: a quarter to a half of the sensitivity
-    flight's time); None for the eq. 2 scheme, whose sensitivity flight costs little more
-    than its residuals."""
+    flight's time). None for the eq. 2 scheme: its fits take most of their trial points
+    (about 80 % in a search), where the Jacobian would be flown a second time, so LM flies
+    each trial with the Jacobian there (docs/decisions/2026-11-27-lanes-and-trials.md)."""
     if ev.scheme != RK4:
         return None
     starts, rows = _flight_rows(ev, tree, starts, n_steps)

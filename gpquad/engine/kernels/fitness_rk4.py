@@ -53,6 +53,7 @@ from gpquad.engine.kernels.tree_eval import (
     run_model_tree,
     run_program,
 )
+from gpquad.engine.kernels.tree_tangent import residual_rows
 from gpquad.engine.numba_config import njit
 
 #: Row of the lag state after the body's rows.
@@ -152,7 +153,7 @@ def rk4_tree_window_errors(
     err = np.zeros(n)
     alive = np.ones(n, dtype=np.bool_)
     write = res.shape[0] > 0
-    n_res = 2 if att_err else 1
+    n_res = residual_rows(target, att_weight)  # the sensitivity kernel's rows
     n_alive = n
     for lane in range(n):
         s = starts[lane]
@@ -244,8 +245,9 @@ def rk4_tree_window_errors(
         if step_total > budget or n_alive == 0:
             for lane in range(n):
                 out[lane] = DIVERGED
-                for later in range(k + 1, n_steps if write else 0):
-                    diverged_rows(res, (lane * n_steps + later) * n_res, n_res)
+                if write:  # every later step of every window, as the sensitivity kernel's
+                    for later in range(k + 1, n_steps):
+                        diverged_rows(res, (lane * n_steps + later) * n_res, n_res)
             return True
     for lane in range(n):
         out[lane] = err[lane] / n_steps

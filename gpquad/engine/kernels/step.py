@@ -318,17 +318,23 @@ def body_stage_state(y, k, node, h, out, lane, n_rows, first=0):
     y + c h k is off by O(h^2), which would cost the scheme two orders)."""
     stage_state(y, k, node, h, out, lane, n_rows, first)
     if node != 0.0 and first == Q:
-        q0, q1, q2, q3 = out[Q, lane], out[Q + 1, lane], out[Q + 2, lane], out[Q + 3, lane]
-        scale = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-        for i in range(4):
-            out[Q + i, lane] *= scale
+        unit_attitude(out, lane)
+
+
+@njit(inline="always")
+def unit_attitude(out, lane):
+    """out's attitude rows of `lane` divided by their norm (a stage state's)."""
+    q0, q1, q2, q3 = out[Q, lane], out[Q + 1, lane], out[Q + 2, lane], out[Q + 3, lane]
+    scale = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    for i in range(4):
+        out[Q + i, lane] *= scale
 
 
 @njit
 def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
-    """body_stage_state of lanes 0..n_lanes-1, row by row over the lanes (loops over lanes
-    vectorise; a lane at a time, the same arithmetic took four times as long in a kernel
-    of many lanes). The same bits per lane; a dead lane is stepped too, to no purpose."""
+    """body_stage_state of lanes 0..n_lanes-1, row by row over the lanes, so that the loops
+    over lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per
+    lane; a dead lane is stepped too, to no purpose."""
     if node == 0.0:
         for i in range(first, n_rows):
             for lane in range(n_lanes):
@@ -340,10 +346,7 @@ def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
             out[i, lane] = y[i, lane] + step * k[i, lane]
     if first == Q:
         for lane in range(n_lanes):
-            q0, q1, q2, q3 = out[Q, lane], out[Q + 1, lane], out[Q + 2, lane], out[Q + 3, lane]
-            scale = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-            for i in range(4):
-                out[Q + i, lane] *= scale
+            unit_attitude(out, lane)
 
 
 @njit
