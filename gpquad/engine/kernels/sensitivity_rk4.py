@@ -16,6 +16,11 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
   velocity leaves get zero tangent; the attitude is flown as a quaternion, so A is the
   kinematics' tangent, not the discrete map's (they agree to the scheme's order).
 - a lag: its state's sensitivity dl, dl_dot = (df - dl) / tau, and da = dl.
+
+The windows are flown LANES at a time, as lanes: their states step together, and the tree
+and its gradient are evaluated once per stage for all of them
+(gpquad.engine.kernels.tree_tangent.lanes_eval_with_gradient), each window's arithmetic
+its own (docs/decisions/2026-11-28-lm-tails-and-delay-screens.md).
 """
 
 import numpy as np
@@ -37,21 +42,20 @@ from gpquad.engine.kernels.step import (
     V,
     W,
     accumulate,
-    advance,
     body_derivative,
-    body_stage_state,
     euler_kinematics,
-    finish_step,
     lag_rate_kernel,
-    rk4_tangent_buffers,
-    stage_state,
+    lanes_accumulate,
+    lanes_finish_step,
+    lanes_stage_state,
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
-    eval_with_gradient,
-    gradient_work,
+    lanes_eval_with_gradient,
+    lanes_gradient_work,
     residual_rows,
+    right_children,
     tangent_leaves,
 )
 from gpquad.engine.numba_config import njit
@@ -59,6 +63,31 @@ from gpquad.engine.numba_config import njit
 #: Tangent rows: body velocity (linear targets), the target rate, the Euler angles, the lag.
 TV, TR, TA, TL = 0, 3, 4, 7
 TANGENT_ROWS = 8
+#: Windows flown side by side (lanes): the tree is walked once per stage for all of them.
+#: More stop fitting in cache for the growing horizon's short windows (up to 1800 of them).
+LANES = 64
+
+
+@njit
+def tangent_row(leaf, linear, axis):
+    """The tangent row a moving leaf (tangent_leaves) reads."""
+    if linear:
+        return TV + leaf - 3
+    return TR if leaf == 6 + axis else TA + leaf
+
+
+@njit
+def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first):
+    """The tangents' stage state of lanes 0..n-1, rows t_first..t_end-1 (stage_state's
+    arithmetic, element by element)."""
+    step = node * h
+    for lane in range(n):
+        for i in range(t_first, t_end):
+            for c in range(n_c):
+                if node == 0.0:
+                    tan_s[lane, i, c] = tan[lane, i, c]
+                else:
+                    tan_s[lane, i, c] = tan[lane, i, c] + step * tan_slope[lane, i, c]
 
 
 @njit
@@ -78,10 +107,12 @@ def rk4_window_residuals(
     jac,
     substeps,
 ):
-    """gpquad.engine.kernels.sensitivity.window_residuals flown by RK4 (module notes)."""
+    """gpquad.engine.kernels.sensitivity.window_residuals flown by RK4 (module notes), the
+    windows LANES at a time, each window's arithmetic its own."""
     quat_d, states, acc, inputs, rot, dt = flight
     n_in = inputs.shape[1]
     n_c = jac.shape[1]
+    n_windows = starts.shape[0]
     linear = target < 3
     axis = target - 3
     n_rows = residual_rows(target, att_weight)
@@ -90,16 +121,23 @@ def rk4_window_residuals(
     rate = lag_rate_kernel(alpha, dt)
     h = dt / substeps
     slot_of = constant_slots(codes, size)
-    n_y = BODY_ROWS + 1
-    features = np.zeros((9 + n_in, 1))
-    leaf = np.zeros(9 + n_in)
-    tangents = np.zeros((9 + n_in, n_c))
-    work = gradient_work(codes, size, 9 + n_in)
+    right = right_children(codes, size)
     moving = tangent_leaves(linear, axis, angle_tangents)
-    grad = np.empty(n_c)
-    y, ys, slope, total, tan, tan_s, tan_slope, tan_total = rk4_tangent_buffers(
-        n_y, TANGENT_ROWS, n_c
-    )
+    rows_of = np.array([tangent_row(k, linear, axis) for k in moving])
+    n_y = BODY_ROWS + 1
+    width = max(1, min(LANES, n_windows))
+    leaf = np.zeros((9 + n_in, width))
+    work = lanes_gradient_work(size, 9 + n_in, width)
+    leaf_adjoint = work[2]
+    grad = np.empty((n_c, width))
+    pred = np.empty(width)
+    y, ys, total = np.empty((n_y, width)), np.empty((n_y, width)), np.empty((n_y, width))
+    slope = np.zeros((n_y, width))
+    tan = np.zeros((width, TANGENT_ROWS, n_c))
+    tan_s = np.zeros((width, TANGENT_ROWS, n_c))
+    tan_slope = np.zeros((width, TANGENT_ROWS, n_c))
+    tan_total = np.zeros((width, TANGENT_ROWS, n_c))
+    alive = np.ones(width, dtype=np.bool_)
     # the leaves computed at each stage: those the tree reads, and the angles the Euler
     # kinematics of the angles' tangents read
     used = read_leaves(codes, size, 9 + n_in)
@@ -114,93 +152,106 @@ def rk4_window_residuals(
     kin = np.zeros(3)
     jang = np.zeros((3, 2))
     n_diverged = 0
-    for w in range(starts.shape[0]):
-        s = starts[w]
-        y[LAG, 0] = acc[s - 1, target] if s > 0 else 0.0
-        body_from_data(y, 0, quat_d, states, s)
-        tan[:, :] = 0.0
-        tan_slope[:, :] = 0.0
-        alive = True
+    for first in range(0, n_windows, width):
+        n = min(width, n_windows - first)
+        for lane in range(n):
+            s = starts[first + lane]
+            y[LAG, lane] = acc[s - 1, target] if s > 0 else 0.0
+            body_from_data(y, lane, quat_d, states, s)
+        tan[:, :, :] = 0.0
+        tan_slope[:, :, :] = 0.0
+        alive[:] = True
         for k in range(n_steps):
-            row = (w * n_steps + k) * n_rows
-            if not alive:
-                for extra in range(n_rows):
-                    res[row + extra] = DIVERGED_RESIDUAL
-                    jac[row + extra, :] = 0.0
-                continue
-            idx = s + k
-            if linear and k > 0:
-                attitude_and_rates_from_data(y, 0, quat_d, states, idx)
-            for jj in range(n_in):  # the input leaves the tree reads, held over the sample
-                if used[9 + jj]:
-                    leaf[9 + jj] = inputs[idx - delays[jj], jj]
+            for lane in range(n):
+                if not alive[lane]:
+                    row = ((first + lane) * n_steps + k) * n_rows
+                    for extra in range(n_rows):
+                        res[row + extra] = DIVERGED_RESIDUAL
+                        jac[row + extra, :] = 0.0
+                    continue
+                idx = starts[first + lane] + k
+                if linear and k > 0:
+                    attitude_and_rates_from_data(y, lane, quat_d, states, idx)
+                for jj in range(n_in):  # the input leaves the tree reads, held over the sample
+                    if used[9 + jj]:
+                        leaf[9 + jj, lane] = inputs[idx - delays[jj], jj]
             for _ in range(substeps):
                 for stage in range(N_STAGES):
                     node = NODES[stage]
-                    body_stage_state(y, slope, node, h, ys, 0, n_y)
-                    for c in range(n_c):
-                        stage_state(tan, tan_slope, node, h, tan_s, c, t_end, t_first)
+                    # a diverged lane is stepped too, to no purpose
+                    lanes_stage_state(y, slope, node, h, ys, n, n_y)
+                    lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first)
                     if uses_state:
-                        stage_features(ys, 0, used, features)
-                        for i in range(9):
-                            leaf[i] = features[i, 0]
-                    for c in range(n_c):  # the other rows stay zero
-                        if linear:
-                            for i in range(3):
-                                tangents[3 + i, c] = tan_s[TV + i, c]
-                        else:
-                            tangents[6 + axis, c] = tan_s[TR, c]
-                            if angle_tangents:
-                                for i in range(3):
-                                    tangents[i, c] = tan_s[TA + i, c]
-                    pred = eval_with_gradient(
-                        codes, values, size, slot_of, leaf, tangents, work, grad, moving
+                        for lane in range(n):
+                            stage_features(ys, lane, used, leaf)
+                    lanes_eval_with_gradient(
+                        codes, values, size, slot_of, right, leaf, work, grad, pred, n
                     )
-                    f = ys[LAG, 0] if lagged else pred
-                    for i in range(6):
-                        a[i] = acc[idx, i]
-                    a[target] = f
-                    body_derivative(ys, 0, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
-                    slope[LAG, 0] = rate * (pred - ys[LAG, 0]) if lagged else 0.0
-                    accumulate(total, slope, WEIGHTS[stage], stage, 0, n_y)
-                    p_s, q_s, r_s = ys[W, 0], ys[W + 1, 0], ys[W + 2, 0]
-                    if track_angles:
-                        euler_kinematics(axis, leaf[0], leaf[1], q_s, r_s, kin, jang)
+                    for lane in range(n):
+                        ts, tsl = tan_s[lane], tan_slope[lane]
+                        for m in range(moving.shape[0]):  # the leaves' tangents, in order
+                            g = leaf_adjoint[moving[m], lane]
+                            if g != 0.0:
+                                for c in range(n_c):
+                                    grad[c, lane] += g * ts[rows_of[m], c]
+                        idx = starts[first + lane] + k
+                        for i in range(6):
+                            a[i] = acc[idx, i]
+                        a[target] = ys[LAG, lane] if lagged else pred[lane]
+                        body_derivative(ys, lane, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
+                        slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
+                        p_s, q_s, r_s = ys[W, lane], ys[W + 1, lane], ys[W + 2, lane]
+                        if track_angles:
+                            euler_kinematics(
+                                axis, leaf[0, lane], leaf[1, lane], q_s, r_s, kin, jang
+                            )
+                        for c in range(n_c):
+                            df = ts[TL, c] if lagged else grad[c, lane]
+                            tsl[TL, c] = rate * (grad[c, lane] - ts[TL, c]) if lagged else 0.0
+                            if linear:
+                                s0, s1, s2 = ts[TV, c], ts[TV + 1, c], ts[TV + 2, c]
+                                tsl[TV, c] = -(q_s * s2 - r_s * s1)
+                                tsl[TV + 1, c] = -(r_s * s0 - p_s * s2)
+                                tsl[TV + 2, c] = -(p_s * s1 - q_s * s0)
+                                tsl[TV + target, c] += df
+                            else:
+                                tsl[TR, c] = df
+                                if track_angles:
+                                    a0, a1 = ts[TA, c], ts[TA + 1, c]
+                                    for i in range(3):
+                                        tsl[TA + i, c] = (
+                                            jang[i, 0] * a0 + jang[i, 1] * a1 + kin[i] * ts[TR, c]
+                                        )
+                            accumulate(
+                                tan_total[lane], tsl, WEIGHTS[stage], stage, c, t_end, t_first
+                            )
+                    lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_y)
+                lanes_finish_step(y, total, h, n, n_y)
+                for lane in range(n):
+                    for i in range(t_first, t_end):
+                        for c in range(n_c):
+                            tan[lane, i, c] += h * tan_total[lane, i, c]
+            for lane in range(n):
+                if not alive[lane]:
+                    continue
+                idx = starts[first + lane] + k
+                row = ((first + lane) * n_steps + k) * n_rows
+                x = y[V + target, lane] if linear else y[W + axis, lane]
+                if not abs(x) < STATE_LIMIT:
+                    alive[lane] = False
+                    n_diverged += 1
+                    for extra in range(n_rows):
+                        res[row + extra] = DIVERGED_RESIDUAL
+                        jac[row + extra, :] = 0.0
+                    continue
+                res[row] = x - states[idx + 1, 3 + target]
+                for c in range(n_c):
+                    jac[row, c] = tan[lane, TV + target, c] if linear else tan[lane, TR, c]
+                if n_rows == 2:
+                    angle = euler_angle(
+                        axis, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
+                    )
+                    res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, axis])
                     for c in range(n_c):
-                        df = tan_s[TL, c] if lagged else grad[c]
-                        tan_slope[TL, c] = rate * (grad[c] - tan_s[TL, c]) if lagged else 0.0
-                        if linear:
-                            s0, s1, s2 = tan_s[TV, c], tan_s[TV + 1, c], tan_s[TV + 2, c]
-                            tan_slope[TV, c] = -(q_s * s2 - r_s * s1)
-                            tan_slope[TV + 1, c] = -(r_s * s0 - p_s * s2)
-                            tan_slope[TV + 2, c] = -(p_s * s1 - q_s * s0)
-                            tan_slope[TV + target, c] += df
-                        else:
-                            tan_slope[TR, c] = df
-                            if track_angles:
-                                a0, a1 = tan_s[TA, c], tan_s[TA + 1, c]
-                                for i in range(3):
-                                    tan_slope[TA + i, c] = (
-                                        jang[i, 0] * a0 + jang[i, 1] * a1 + kin[i] * tan_s[TR, c]
-                                    )
-                        accumulate(tan_total, tan_slope, WEIGHTS[stage], stage, c, t_end, t_first)
-                finish_step(y, total, h, 0, n_y)
-                for c in range(n_c):
-                    advance(tan, tan_total, h, c, t_end, t_first)
-            x = y[V + target, 0] if linear else y[W + axis, 0]
-            if not abs(x) < STATE_LIMIT:
-                alive = False
-                n_diverged += 1
-                for extra in range(n_rows):
-                    res[row + extra] = DIVERGED_RESIDUAL
-                    jac[row + extra, :] = 0.0
-                continue
-            res[row] = x - states[idx + 1, 3 + target]
-            for c in range(n_c):
-                jac[row, c] = tan[TV + target, c] if linear else tan[TR, c]
-            if n_rows == 2:
-                angle = euler_angle(axis, y[Q, 0], y[Q + 1, 0], y[Q + 2, 0], y[Q + 3, 0])
-                res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, axis])
-                for c in range(n_c):
-                    jac[row + 1, c] = att_weight * tan[TA + axis, c]
+                        jac[row + 1, c] = att_weight * tan[lane, TA + axis, c]
     return n_diverged

@@ -134,3 +134,85 @@ def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, g
             for j in range(n_c):
                 grad[j] += g * tangents[k, j]
     return node_value[0]
+
+
+@njit
+def lanes_gradient_work(size, n_terminals, n_lanes):
+    """lanes_eval_with_gradient's work for up to n_lanes lanes: node values, node adjoints
+    (size, n_lanes) and leaf adjoints (n_terminals, n_lanes)."""
+    return (
+        np.empty((size, n_lanes)),
+        np.empty((size, n_lanes)),
+        np.empty((n_terminals, n_lanes)),
+    )
+
+
+@njit
+def lanes_eval_with_gradient(codes, values, size, slot_of, right, features, work, grad, pred, n):
+    """eval_with_gradient for lanes 0..n-1 at once, the tree walked once for all of them
+    (features (n_terminals, L), one column per lane), before the leaves' tangents: pred (L,)
+    gets the values, grad (n_c, L) the gradients through the constants' own nodes, and
+    work[2] (lanes_gradient_work's leaf adjoints) each leaf's adjoint, whose product with
+    the leaf's tangents the caller adds in eval_with_gradient's order (`moving` first to
+    last). Each lane's arithmetic is eval_with_gradient's, in its order: the same bits.
+    right: right_children(codes, size)."""
+    node_value, node_adjoint, leaf_adjoint = work
+    for i in range(size - 1, -1, -1):
+        c = codes[i]
+        if c >= VAR_BASE:
+            for lane in range(n):
+                node_value[i, lane] = features[c - VAR_BASE, lane]
+        elif c == CONST:
+            for lane in range(n):
+                node_value[i, lane] = values[i]
+        elif c == ADD:
+            for lane in range(n):
+                node_value[i, lane] = node_value[i + 1, lane] + node_value[right[i], lane]
+        elif c == SUB:
+            for lane in range(n):
+                node_value[i, lane] = node_value[i + 1, lane] - node_value[right[i], lane]
+        elif c == MUL:
+            for lane in range(n):
+                node_value[i, lane] = node_value[i + 1, lane] * node_value[right[i], lane]
+        else:
+            for lane in range(n):
+                b = node_value[right[i], lane]
+                node_value[i, lane] = 1.0 if abs(b) < DIV_EPS else node_value[i + 1, lane] / b
+    grad[:, :n] = 0.0
+    leaf_adjoint[:, :n] = 0.0
+    node_adjoint[0, :n] = 1.0
+    for i in range(size):
+        c = codes[i]
+        if c >= VAR_BASE:
+            for lane in range(n):
+                leaf_adjoint[c - VAR_BASE, lane] += node_adjoint[i, lane]
+        elif c == CONST:
+            if slot_of[i] >= 0:
+                for lane in range(n):
+                    grad[slot_of[i], lane] += node_adjoint[i, lane]
+        else:
+            left, r = i + 1, right[i]
+            if c == ADD:
+                for lane in range(n):
+                    node_adjoint[left, lane] = node_adjoint[i, lane]
+                    node_adjoint[r, lane] = node_adjoint[i, lane]
+            elif c == SUB:
+                for lane in range(n):
+                    node_adjoint[left, lane] = node_adjoint[i, lane]
+                    node_adjoint[r, lane] = -node_adjoint[i, lane]
+            elif c == MUL:
+                for lane in range(n):
+                    g = node_adjoint[i, lane]
+                    node_adjoint[left, lane] = g * node_value[r, lane]
+                    node_adjoint[r, lane] = g * node_value[left, lane]
+            else:
+                for lane in range(n):
+                    g, b = node_adjoint[i, lane], node_value[r, lane]
+                    if abs(b) < DIV_EPS:
+                        node_adjoint[left, lane] = 0.0
+                        node_adjoint[r, lane] = 0.0
+                    else:
+                        node_adjoint[left, lane] = g / b
+                        node_adjoint[r, lane] = -g * node_value[i, lane] / b
+    for lane in range(n):
+        pred[lane] = node_value[0, lane]
