@@ -20,7 +20,7 @@ the derivative of the continuous-time ODE (forward mode, one tangent row per sta
 The windows are flown LANES at a time, as lanes: their states step together, and the tree
 and its gradient are evaluated once per stage for all of them
 (gpquad.engine.kernels.tree_tangent.lanes_eval_with_gradient), each window's arithmetic
-its own (docs/decisions/2026-11-28-lm-tails-and-delay-screens.md).
+its own (docs/decisions/2026-11-28-sensitivity-lanes.md).
 """
 
 import numpy as np
