@@ -38,24 +38,29 @@ def _with_constants(tree, x):
     return Tree(tree.codes, values, tree.delays)
 
 
+def _one_lane(tree, leaves, tangents, moving):
+    """(value, gradient) of eval_with_gradient at one sample."""
+    grad = np.empty(_n_const(tree))
+    value = eval_with_gradient(
+        tree.codes,
+        tree.values,
+        tree.size,
+        constant_slots(tree.codes, tree.size),
+        leaves,
+        tangents,
+        gradient_work(tree.codes, tree.size, 13),
+        grad,
+        moving,
+    )
+    return value, grad
+
+
 @settings(max_examples=40, deadline=None)
 @given(prefix_trees, st.lists(st.floats(-2, 2), min_size=13, max_size=13))
 def test_tangent_matches_finite_differences_of_the_recursive_reference(nodes, leaves):
     tree = as_tree(nodes)
     n_c = _n_const(tree)
-    slot_of = np.where(tree.codes == CONST, np.cumsum(tree.codes == CONST) - 1, -1)
-    grad = np.empty(n_c)
-    value = eval_with_gradient(
-        tree.codes,
-        tree.values,
-        tree.size,
-        slot_of,
-        np.array(leaves),
-        np.zeros((13, n_c)),
-        gradient_work(tree.codes, tree.size, 13),
-        grad,
-        np.arange(13),
-    )
+    value, grad = _one_lane(tree, np.array(leaves), np.zeros((13, n_c)), np.arange(13))
     assert value == pytest.approx(
         naive.eval_tree(tree.codes, tree.values, leaves), rel=1e-12, abs=1e-12
     )
@@ -112,18 +117,7 @@ def test_lanes_gradient_is_the_one_lane_gradient_of_each_lane(nodes, n_lanes, se
         n_lanes,
     )
     for lane in range(n_lanes):
-        one = np.empty(n_c)
-        value = eval_with_gradient(
-            tree.codes,
-            tree.values,
-            tree.size,
-            slot_of,
-            features[:, lane].copy(),
-            tangents[lane],
-            gradient_work(tree.codes, tree.size, 13),
-            one,
-            moving,
-        )
+        value, one = _one_lane(tree, features[:, lane].copy(), tangents[lane], moving)
         lanes = grad[:, lane].copy()
         for k in moving:
             if work[2][k, lane] != 0.0:

@@ -30,3 +30,18 @@ def read_leaves(codes, size, n_terminals):
         if codes[i] >= VAR_BASE:
             used[codes[i] - VAR_BASE] = True
     return used
+
+
+@njit(inline="always")
+def diverged_rows(res, row, n_rows):
+    """A diverged window's residual rows at `row` (the sensitivity kernels' rule)."""
+    for extra in range(n_rows):
+        res[row + extra] = DIVERGED_RESIDUAL
+
+
+@njit(inline="always")
+def diverged_jacobian_rows(res, jac, row, n_rows):
+    """diverged_rows, and their Jacobian rows zero."""
+    diverged_rows(res, row, n_rows)
+    for extra in range(n_rows):
+        jac[row + extra, :] = 0.0

@@ -23,8 +23,8 @@ import numpy as np
 
 from gpquad.engine.kernels.divergence import (
     DIVERGED,
-    DIVERGED_RESIDUAL,
     STATE_LIMIT,
+    diverged_rows,
     read_leaves,
     uses_leaves,
 )
@@ -97,13 +97,6 @@ def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
         y[Q + i, lane] = quat_d[idx, i]
     for i in range(3):
         y[W + i, lane] = states[idx, 6 + i]
-
-
-@njit(inline="always")
-def diverged_rows(res, row, n_rows):
-    """A diverged window's residual rows at `row` (the sensitivity kernels' rule)."""
-    for extra in range(n_rows):
-        res[row + extra] = DIVERGED_RESIDUAL
 
 
 @njit

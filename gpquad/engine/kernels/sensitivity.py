@@ -49,6 +49,7 @@ import numpy as np
 from gpquad.engine.kernels.divergence import (
     DIVERGED_RESIDUAL,
     STATE_LIMIT,
+    diverged_jacobian_rows,
     read_leaves,
     uses_leaves,
 )
@@ -209,9 +210,7 @@ def euler_window_residuals(
         for k in range(n_steps):
             row = (w * n_steps + k) * n_rows
             if not alive:
-                for extra in range(n_rows):
-                    res[row + extra] = DIVERGED_RESIDUAL
-                    jac[row + extra, :] = 0.0
+                diverged_jacobian_rows(res, jac, row, n_rows)
                 continue
             idx = s + k
             if linear:  # the leaves' tangents below are set every step, the others stay zero
@@ -314,9 +313,7 @@ def euler_window_residuals(
             if not abs(x) < STATE_LIMIT:
                 alive = False
                 n_diverged += 1
-                for extra in range(n_rows):
-                    res[row + extra] = DIVERGED_RESIDUAL
-                    jac[row + extra, :] = 0.0
+                diverged_jacobian_rows(res, jac, row, n_rows)
                 continue
             res[row] = x - states[idx + 1, 3 + target]
             if n_rows == 2:

@@ -25,7 +25,7 @@ its own (docs/decisions/2026-11-28-sensitivity-lanes.md).
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import DIVERGED_RESIDUAL, STATE_LIMIT, read_leaves
+from gpquad.engine.kernels.divergence import STATE_LIMIT, diverged_jacobian_rows, read_leaves
 from gpquad.engine.kernels.fitness_rk4 import (
     LAG,
     attitude_and_rates_from_data,
@@ -165,9 +165,7 @@ def rk4_window_residuals(
             for lane in range(n):
                 if not alive[lane]:
                     row = ((first + lane) * n_steps + k) * n_rows
-                    for extra in range(n_rows):
-                        res[row + extra] = DIVERGED_RESIDUAL
-                        jac[row + extra, :] = 0.0
+                    diverged_jacobian_rows(res, jac, row, n_rows)
                     continue
                 idx = starts[first + lane] + k
                 if linear and k > 0:
@@ -240,9 +238,7 @@ def rk4_window_residuals(
                 if not abs(x) < STATE_LIMIT:
                     alive[lane] = False
                     n_diverged += 1
-                    for extra in range(n_rows):
-                        res[row + extra] = DIVERGED_RESIDUAL
-                        jac[row + extra, :] = 0.0
+                    diverged_jacobian_rows(res, jac, row, n_rows)
                     continue
                 res[row] = x - states[idx + 1, 3 + target]
                 for c in range(n_c):
