@@ -64,7 +64,8 @@ from gpquad.engine.numba_config import njit
 TV, TR, TA, TL = 0, 3, 4, 7
 TANGENT_ROWS = 8
 #: Windows flown side by side (lanes): the tree is walked once per stage for all of them.
-#: More stop fitting in cache for the growing horizon's short windows (up to 1800 of them).
+#: A block of lanes stays in cache; the growing horizon's short windows come by the hundreds
+#: (docs/decisions/2026-11-28-sensitivity-lanes.md).
 LANES = 64
 
 
