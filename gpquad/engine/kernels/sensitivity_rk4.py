@@ -25,7 +25,12 @@ its own (docs/decisions/2026-11-28-sensitivity-lanes.md).
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import STATE_LIMIT, diverged_jacobian_rows, read_leaves
+from gpquad.engine.kernels.divergence import (
+    STATE_LIMIT,
+    diverged_jacobian_rows,
+    read_leaves,
+    uses_leaves,
+)
 from gpquad.engine.kernels.fitness_rk4 import (
     LAG,
     attitude_and_rates_from_data,
@@ -145,6 +150,15 @@ def rk4_window_residuals(
     used[0] = used[0] or track_angles
     used[1] = used[1] or track_angles
     uses_state = used[:9].any()
+    # rows flown: the attitude only where an angle is read (by the tree, the angles'
+    # tangents or the angle row), the velocity only for linear targets or a tree that reads
+    # it (the rates always), as the fitness kernel flies them
+    if used[0] or used[1] or uses_leaves(codes, size, 2, 2) or n_rows == 2:
+        flown = Q
+    elif linear or uses_leaves(codes, size, 3, 5):
+        flown = V
+    else:
+        flown = W
     # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
     # are tracked, the lag's when there is one
     t_first = TV if linear else TR
@@ -159,6 +173,8 @@ def rk4_window_residuals(
             s = starts[first + lane]
             y[LAG, lane] = acc[s - 1, target] if s > 0 else 0.0
             body_from_data(y, lane, quat_d, states, s)
+            for i in range(n_y):  # rows not flown keep the start in the stage state
+                ys[i, lane] = y[i, lane]
         tan[:, :, :] = 0.0
         tan_slope[:, :, :] = 0.0
         alive[:] = True
@@ -178,7 +194,7 @@ def rk4_window_residuals(
                 for stage in range(N_STAGES):
                     node = NODES[stage]
                     # a diverged lane is stepped too, to no purpose
-                    lanes_stage_state(y, slope, node, h, ys, n, n_y)
+                    lanes_stage_state(y, slope, node, h, ys, n, n_y, flown)
                     lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first)
                     if uses_state:
                         for lane in range(n):
@@ -224,8 +240,8 @@ def rk4_window_residuals(
                             accumulate(
                                 tan_total[lane], tsl, WEIGHTS[stage], stage, c, t_end, t_first
                             )
-                    lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_y)
-                lanes_finish_step(y, total, h, n, n_y)
+                    lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_y, flown)
+                lanes_finish_step(y, total, h, n, n_y, flown)
                 for lane in range(n):
                     for i in range(t_first, t_end):
                         for c in range(n_c):
