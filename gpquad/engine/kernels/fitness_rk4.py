@@ -77,6 +77,19 @@ def stage_features(ys, lane, used, features):
             features[6 + i, lane] = ys[W + i, lane]
 
 
+@njit
+def first_flown_row(codes, size, linear, angle_read):
+    """The first body row a flight steps (the rows above it keep the window's start): the
+    attitude where an angle is read (by the tree, or angle_read: the angle is scored or its
+    tangents followed), else the velocity for a linear target or a tree that reads it, else
+    the rates, which are always flown."""
+    if uses_leaves(codes, size, 0, 2) or angle_read:
+        return Q
+    if linear or uses_leaves(codes, size, 3, 5):
+        return V
+    return W
+
+
 @njit(inline="always")
 def body_from_data(y, lane, quat_d, states, idx):
     """y's attitude, velocity and rate rows of `lane` set to the data's at sample idx: a
@@ -154,14 +167,7 @@ def rk4_tree_window_errors(
         body_from_data(y, lane, quat_d, states, s)
     used = read_leaves(codes, size, 9 + n_in)
     uses_state = uses_leaves(codes, size, 0, 8)
-    # rows flown: the attitude only where the tree reads an angle or the angle is scored,
-    # the velocity only for linear targets or a tree that reads it (the rates always)
-    if uses_leaves(codes, size, 0, 2) or att_err:
-        first = Q
-    elif linear or uses_leaves(codes, size, 3, 5):
-        first = V
-    else:
-        first = W
+    first = first_flown_row(codes, size, linear, att_err)
     for i in range(n_rows):  # element by element: a broadcast copy compiles shape checks
         for lane in range(n):
             ys[i, lane] = y[i, lane]

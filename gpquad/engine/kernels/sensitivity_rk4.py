@@ -25,16 +25,12 @@ its own (docs/decisions/2026-11-28-sensitivity-lanes.md).
 
 import numpy as np
 
-from gpquad.engine.kernels.divergence import (
-    STATE_LIMIT,
-    diverged_jacobian_rows,
-    read_leaves,
-    uses_leaves,
-)
+from gpquad.engine.kernels.divergence import STATE_LIMIT, diverged_jacobian_rows, read_leaves
 from gpquad.engine.kernels.fitness_rk4 import (
     LAG,
     attitude_and_rates_from_data,
     body_from_data,
+    first_flown_row,
     stage_features,
 )
 from gpquad.engine.kernels.quaternion import euler_angle
@@ -86,14 +82,17 @@ def tangent_row(leaf, linear, axis):
 def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first):
     """The tangents' stage state of lanes 0..n-1, rows t_first..t_end-1 (stage_state's
     arithmetic, element by element)."""
+    if node == 0.0:
+        for lane in range(n):
+            for i in range(t_first, t_end):
+                for c in range(n_c):
+                    tan_s[lane, i, c] = tan[lane, i, c]
+        return
     step = node * h
     for lane in range(n):
         for i in range(t_first, t_end):
             for c in range(n_c):
-                if node == 0.0:
-                    tan_s[lane, i, c] = tan[lane, i, c]
-                else:
-                    tan_s[lane, i, c] = tan[lane, i, c] + step * tan_slope[lane, i, c]
+                tan_s[lane, i, c] = tan[lane, i, c] + step * tan_slope[lane, i, c]
 
 
 @njit
@@ -150,15 +149,9 @@ def rk4_window_residuals(
     used[0] = used[0] or track_angles
     used[1] = used[1] or track_angles
     uses_state = used[:9].any()
-    # rows flown: the attitude only where an angle is read (by the tree, the angles'
-    # tangents or the angle row), the velocity only for linear targets or a tree that reads
-    # it (the rates always), as the fitness kernel flies them
-    if used[0] or used[1] or uses_leaves(codes, size, 2, 2) or n_rows == 2:
-        flown = Q
-    elif linear or uses_leaves(codes, size, 3, 5):
-        flown = V
-    else:
-        flown = W
+    # the body rows stepped, as the fitness kernel steps them (an angle row or the angles'
+    # tangents read the angles)
+    flown = first_flown_row(codes, size, linear, track_angles)
     # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
     # are tracked, the lag's when there is one
     t_first = TV if linear else TR
