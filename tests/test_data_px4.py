@@ -406,3 +406,28 @@ def test_px4_folder_copy_with_missing_velocity_topic(tmp_path):
     next(copy.glob("*vehicle_local_position_0.csv")).unlink()
     with pytest.raises(GpquadError, match="vehicle_local_position"):
         read_px4_csv(copy, DATA)
+
+
+def test_log_readers_load_on_first_use():
+    """A run imports only the reader of its own format: after `import gpquad.data.io` no
+    built-in log reader module (nor pandas, which they need) is loaded, and each registered
+    reader, called, is the module's own function (same flights)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gpquad.data.io as io\n"
+        "mods = [m for m in ('gpquad.data.px4', 'gpquad.data.ulog', 'gpquad.data.betaflight',"
+        " 'gpquad.data.table', 'gpquad.data.ardupilot', 'pandas', 'scipy.ndimage')"
+        " if m in sys.modules]\n"
+        "print(','.join(mods))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+    if not S250.is_dir():
+        pytest.skip("../shared/data (real PX4 logs) is not present")
+    lazy = READERS["px4-csv"](S250, DATA)
+    direct = read_px4_csv(S250, DATA)
+    assert len(lazy) == len(direct)
+    for a, b in zip(lazy, direct, strict=True):
+        assert np.array_equal(a.quat, b.quat) and np.array_equal(a.inputs, b.inputs)

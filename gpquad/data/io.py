@@ -34,22 +34,31 @@ def register_reader(name: str, reader: Callable[[Path, DataConfig], list[Flight]
     FORMATS.add(name)
 
 
+def _lazy_reader(module: str, name: str) -> Callable[[Path, DataConfig], list[Flight]]:
+    """The reader `name` of gpquad.data.`module`, imported when a log is first read: a run
+    imports only its own format's reader (and the libraries it needs)."""
+
+    def read(path: Path, data: DataConfig) -> list[Flight]:
+        import importlib
+
+        reader = getattr(importlib.import_module(f"gpquad.data.{module}"), name)
+        return reader(path, data)
+
+    read.__name__ = read.__qualname__ = name
+    read.__doc__ = f"gpquad.data.{module}.{name}, imported on first use."
+    return read
+
+
 def _register_log_readers() -> None:
     """PX4 (ulog2csv folders, .ulg), Betaflight blackbox and resampled tables (gpquad.data)."""
-    from gpquad.data.ardupilot import read_ardupilot
-    from gpquad.data.betaflight import read_betaflight
-    from gpquad.data.px4 import read_px4_csv
-    from gpquad.data.table import read_table_log
-    from gpquad.data.ulog import read_ulog
-
-    for name, reader in (
-        ("px4-csv", read_px4_csv),
-        ("ulog", read_ulog),
-        ("betaflight", read_betaflight),
-        ("table", read_table_log),
-        ("ardupilot", read_ardupilot),
+    for name, module, function in (
+        ("px4-csv", "px4", "read_px4_csv"),
+        ("ulog", "ulog", "read_ulog"),
+        ("betaflight", "betaflight", "read_betaflight"),
+        ("table", "table", "read_table_log"),
+        ("ardupilot", "ardupilot", "read_ardupilot"),
     ):
-        READERS.setdefault(name, reader)
+        READERS.setdefault(name, _lazy_reader(module, function))
 
 
 _register_log_readers()
