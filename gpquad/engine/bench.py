@@ -16,7 +16,8 @@
   its residual-and-Jacobian rollouts (window-steps with sensitivities) per second;
 - paper_iteration_s: wall time of one paper-scale iteration (600 + 80 generations and
   a simplification) on the reference simulator's flight, target p_dot;
-- paper_run_s: 30 such iterations (measured with --full, else projected from one).
+- paper_run_s: 30 such iterations (measured with --full, else projected from one);
+- machine: the CPU, the CPU numba compiled for and the cores (gpquad.engine.numba_config).
 """
 
 import time
@@ -27,6 +28,7 @@ from gpquad.data.io import load_dataset
 from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
+from gpquad.engine.numba_config import machine
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, OPERATORS, VAR_BASE
 from gpquad.engine.tree.variation import random_tree
@@ -189,12 +191,20 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
         "paper_run_s": paper_run,
         "paper_run_measured": bool(full),
         "iterations": ev.iterations,
+        # rates differ 2-3x between kinds of 2-core machine (docs/decisions)
+        "machine": machine(),
     }
 
 
 def format_report(result: dict) -> str:
     kind = "measured" if result["paper_run_measured"] else "projected from one iteration"
-    lines = [
+    m = result.get("machine")
+    lines = (
+        [f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for {m['compiled_for']}"]
+        if m
+        else []
+    )
+    lines += [
         "fitness kernel, 15-node trees x 84 windows x 750 steps (one random tree per target):",
         f"    {result['window_steps_per_s'] / 1e6:8.1f} M window-steps/s per core",
     ]

@@ -54,10 +54,15 @@ def git_revision() -> str:
 
 
 def provenance() -> dict:
+    """What a result needs to be reproduced: package versions, git revision, platform and
+    machine (gpquad.engine.numba_config.machine: another kind of CPU may round otherwise)."""
+    from gpquad.engine.numba_config import machine
+
     return {
         "versions": package_versions(),
         "git_revision": git_revision(),
         "platform": platform.platform(),
+        "machine": machine(),
     }
 
 

@@ -1,0 +1,50 @@
+"""Every result records the machine it was computed on (gpquad.engine.numba_config.machine):
+the same seed gives the same bits on one machine, and may round otherwise on another kind of
+CPU, so a reader needs to know which."""
+
+from __future__ import annotations
+
+import llvmlite.binding as ll
+from numba.core import config
+
+from gpquad.engine import numba_config
+from gpquad.engine.bench import format_report
+from gpquad.study.store import provenance
+
+
+def test_machine_names_the_cpu_and_the_compile_target(monkeypatch):
+    found = numba_config.machine()
+    assert set(found) == {"cpu", "compiled_for", "cores"}
+    assert found["cpu"] and found["cores"] >= 1
+    monkeypatch.setattr(config, "CPU_NAME", None)
+    assert numba_config.machine()["compiled_for"] == ll.get_host_cpu_name()
+    # NUMBA_CPU_NAME makes numba compile for another CPU: that one is recorded
+    monkeypatch.setattr(config, "CPU_NAME", "haswell")
+    assert numba_config.machine()["compiled_for"] == "haswell"
+
+
+def test_cpu_model_without_proc_cpuinfo(monkeypatch):
+    def no_file(*args, **kwargs):
+        raise OSError("no /proc here")
+
+    monkeypatch.setattr("builtins.open", no_file)
+    assert numba_config.cpu_model()  # the platform's word, never empty
+
+
+def test_provenance_and_bench_report_carry_the_machine():
+    assert provenance()["machine"] == numba_config.machine()
+    result = {
+        "window_steps_per_s": 3.3e7,
+        "paths": {"rates_and_inputs": 9.8e7},
+        "paths_rk4": {},
+        "generation_window_steps_per_s": 1.8e7,
+        "constant_fit_ms": 3.1,
+        "constant_fit_window_steps_per_s": 1.0e7,
+        "paper_iteration_s": 1.1,
+        "paper_run_s": 33.0,
+        "paper_run_measured": False,
+        "iterations": 30,
+        "machine": {"cpu": "Some CPU", "compiled_for": "znver3", "cores": 2},
+    }
+    first = format_report(result).splitlines()[0]
+    assert first == "machine: Some CPU, 2 cores, kernels compiled for znver3"
