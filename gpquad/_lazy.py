@@ -7,6 +7,11 @@ import importlib
 import sys
 
 
+def imported(module: str, name: str):
+    """The attribute `name` of `module`, importing the module if it is not yet."""
+    return getattr(importlib.import_module(module), name)
+
+
 def lazy_attributes(package: str, homes: dict[str, str]):
     """A module-level __getattr__ for `package`: name -> the attribute of the same name of
     module homes[name], imported on first use and then kept in the package."""
@@ -14,7 +19,7 @@ def lazy_attributes(package: str, homes: dict[str, str]):
     def __getattr__(name: str):
         if name not in homes:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
-        value = getattr(importlib.import_module(homes[name]), name)
+        value = imported(homes[name], name)
         setattr(sys.modules[package], name, value)
         return value
 

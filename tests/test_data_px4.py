@@ -417,8 +417,9 @@ def test_log_readers_load_on_first_use():
 
     code = (
         "import sys, gpquad.data.io as io\n"
-        "mods = [m for m in ('gpquad.data.px4', 'gpquad.data.ulog', 'gpquad.data.betaflight',"
-        " 'gpquad.data.table', 'gpquad.data.ardupilot', 'pandas', 'scipy.ndimage')"
+        "mods = [m for m in ('gpquad.data.generic', 'gpquad.data.px4', 'gpquad.data.ulog',"
+        " 'gpquad.data.betaflight', 'gpquad.data.table', 'gpquad.data.ardupilot', 'pandas',"
+        " 'scipy.ndimage')"
         " if m in sys.modules]\n"
         "print(','.join(mods))\n"
     )

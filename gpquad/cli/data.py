@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpquad._lazy import imported
 from gpquad.errors import GpquadError
 
 #: Formats whose readers give a LogTable (signals, segments) before the pipeline.
@@ -36,7 +37,7 @@ def _log_tables(path: Path, fmt: str, data) -> list:
             warnings.warn(s, stacklevel=2)  # grouped by kind (gpquad.cli.commands.WarningLines)
         return tables
     module, name = _LOG_READERS[fmt]
-    return [getattr(__import__(module, fromlist=[name]), name)(path, data)]
+    return [imported(module, name)(path, data)]
 
 
 def describe_log(log) -> str:

@@ -11,21 +11,14 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
+from gpquad._lazy import imported
 from gpquad.data.dataset import Dataset, build_dataset
 from gpquad.data.flight import Flight
 from gpquad.data.formats import FORMATS
 from gpquad.errors import GpquadError
 from gpquad.study.config import Config, DataConfig
 
-
-def _read_generic(path: Path, data: DataConfig) -> list[Flight]:
-    """One flight per file; an export of `gpquad data export` gives one per segment."""
-    from gpquad.data.generic import read_generic
-
-    return read_generic(path, data)
-
-
-READERS: dict[str, Callable[[Path, DataConfig], list[Flight]]] = {"generic": _read_generic}
+READERS: dict[str, Callable[[Path, DataConfig], list[Flight]]] = {}
 
 
 def register_reader(name: str, reader: Callable[[Path, DataConfig], list[Flight]]) -> None:
@@ -39,10 +32,7 @@ def _lazy_reader(module: str, name: str) -> Callable[[Path, DataConfig], list[Fl
     imports only its own format's reader (and the libraries it needs)."""
 
     def read(path: Path, data: DataConfig) -> list[Flight]:
-        import importlib
-
-        reader = getattr(importlib.import_module(f"gpquad.data.{module}"), name)
-        return reader(path, data)
+        return imported(f"gpquad.data.{module}", name)(path, data)
 
     read.__name__ = read.__qualname__ = name
     read.__doc__ = f"gpquad.data.{module}.{name}, imported on first use."
@@ -50,8 +40,11 @@ def _lazy_reader(module: str, name: str) -> Callable[[Path, DataConfig], list[Fl
 
 
 def _register_log_readers() -> None:
-    """PX4 (ulog2csv folders, .ulg), Betaflight blackbox and resampled tables (gpquad.data)."""
+    """gpquad's generic flight files (one flight per file; an export of `gpquad data export`
+    gives one per segment), PX4 (ulog2csv folders, .ulg), Betaflight blackbox and resampled
+    tables (gpquad.data)."""
     for name, module, function in (
+        ("generic", "generic", "read_generic"),
         ("px4-csv", "px4", "read_px4_csv"),
         ("ulog", "ulog", "read_ulog"),
         ("betaflight", "betaflight", "read_betaflight"),

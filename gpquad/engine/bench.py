@@ -191,7 +191,6 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
         "paper_run_s": paper_run,
         "paper_run_measured": bool(full),
         "iterations": ev.iterations,
-        # rates differ 2-3x between kinds of 2-core machine (docs/decisions)
         "machine": machine(),
     }
 
