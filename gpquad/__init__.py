@@ -16,9 +16,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gpquad._lazy import lazy_attributes
-from gpquad._version import __version__
-from gpquad.errors import GpquadError
+from gpquad._blas import pin
+
+pin()  # before numpy loads: the same BLAS kernels on every x86-64 machine (gpquad._blas)
+
+from gpquad._lazy import lazy_attributes  # noqa: E402
+from gpquad._version import __version__  # noqa: E402
+from gpquad.errors import GpquadError  # noqa: E402
 
 if TYPE_CHECKING:
     from gpquad.api import fit, load, read_log, reference_flight

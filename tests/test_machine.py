@@ -14,7 +14,7 @@ from gpquad.study.store import provenance
 
 def test_machine_names_the_cpu_and_the_compile_target(monkeypatch):
     found = numba_config.machine()
-    assert set(found) == {"cpu", "compiled_for", "cores"}
+    assert set(found) == {"cpu", "compiled_for", "cores", "blas"}
     assert found["cpu"] and found["cores"] >= 1
     monkeypatch.setattr(config, "CPU_NAME", None)
     assert numba_config.machine()["compiled_for"] == ll.get_host_cpu_name()
@@ -44,7 +44,15 @@ def test_provenance_and_bench_report_carry_the_machine():
         "paper_run_s": 33.0,
         "paper_run_measured": False,
         "iterations": 30,
-        "machine": {"cpu": "Some CPU", "compiled_for": "znver3", "cores": 2},
+        "machine": {
+            "cpu": "Some CPU",
+            "compiled_for": "znver3",
+            "cores": 2,
+            "blas": {"library": "openblas 0.3.31", "kernels": "Haswell", "same_everywhere": True},
+        },
     }
     first = format_report(result).splitlines()[0]
-    assert first == "machine: Some CPU, 2 cores, kernels compiled for znver3"
+    assert first == (
+        "machine: Some CPU, 2 cores, kernels compiled for znver3, "
+        "BLAS openblas 0.3.31 (Haswell kernels)"
+    )

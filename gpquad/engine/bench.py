@@ -17,7 +17,8 @@
 - paper_iteration_s: wall time of one paper-scale iteration (600 + 80 generations and
   a simplification) on the reference simulator's flight, target p_dot;
 - paper_run_s: 30 such iterations (measured with --full, else projected from one);
-- machine: the CPU, the CPU numba compiled for and the cores (gpquad.engine.numba_config).
+- machine: the CPU, the CPU numba compiled for, the cores and the BLAS kernels
+  (gpquad.engine.numba_config).
 """
 
 import time
@@ -199,7 +200,10 @@ def format_report(result: dict) -> str:
     kind = "measured" if result["paper_run_measured"] else "projected from one iteration"
     m = result.get("machine")
     lines = (
-        [f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for {m['compiled_for']}"]
+        [
+            f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for "
+            f"{m['compiled_for']}, BLAS {m['blas']['library']} ({m['blas']['kernels']} kernels)"
+        ]
         if m
         else []
     )

@@ -33,15 +33,23 @@ def cpu_model() -> str:
 
 def machine() -> dict:
     """The machine a result was computed on: the CPU's model, the CPU numba compiles the
-    kernels for (LLVM's name of the host, or NUMBA_CPU_NAME) and the cores. numba compiles
-    for the host CPU, and numpy and OpenBLAS choose their code by CPU: the same seed gives
-    the same bits on one machine for any --jobs, and may differ in the last bits on another
-    kind of CPU (docs/decisions/2026-11-28-machine-kinds.md)."""
+    kernels for (LLVM's name of the host, or NUMBA_CPU_NAME), the cores, and the BLAS
+    kernels numpy runs (gpquad._blas.state: the same on every x86-64 machine with AVX2 and
+    FMA when gpquad loaded before numpy). The same seed gives the same bits on one machine
+    for any --jobs; on another kind of CPU, the same wherever "blas" says
+    "same_everywhere" on both (docs/decisions/2026-11-28-blas-kernels.md)."""
     from numba.core import config
+
+    from gpquad._blas import state
 
     target = config.CPU_NAME
     if not target:
         import llvmlite.binding as ll
 
         target = ll.get_host_cpu_name()
-    return {"cpu": cpu_model(), "compiled_for": str(target), "cores": os.cpu_count()}
+    return {
+        "cpu": cpu_model(),
+        "compiled_for": str(target),
+        "cores": os.cpu_count(),
+        "blas": state(),
+    }
