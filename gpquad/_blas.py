@@ -1,10 +1,9 @@
 """One BLAS code path on every x86-64 machine, so that a seed gives the same equations there.
 
 numpy's and scipy's OpenBLAS choose their kernels by CPU when they load: the SkylakeX kernels
-on a CPU with AVX-512, the Haswell ones (AVX2 and FMA) on one without, such as an AMD EPYC
-of the Zen 2 or 3 kind. The two sum a product in another order. A search amplifies such
-last bits into other equations, and the same config and seed gave a mean RSE at 7 s of
-0.0107 on the one kind and 0.0199 on the other
+on a CPU with AVX-512, the Haswell ones (AVX2 and FMA) on one without, such as an AMD EPYC.
+The two sum a product in another order, and a search amplifies such last bits into other
+equations: the same config and seed found other equations on the two kinds of machine
 (docs/decisions/2026-11-28-blas-kernels.md).
 
 `pin` asks OpenBLAS for its Haswell kernels wherever the CPU has AVX2 and FMA, before numpy
