@@ -1,17 +1,21 @@
-"""One BLAS code path on every x86-64 machine, so that a seed gives the same equations there.
+"""One BLAS code path on every Linux x86-64 machine, so that a seed gives the same
+equations there.
 
-numpy's and scipy's OpenBLAS choose their kernels by CPU when they load: the SkylakeX kernels
-on a CPU with AVX-512, the Haswell ones (AVX2 and FMA) on one without, such as an AMD EPYC.
-The two sum a product in another order, and a search amplifies such last bits into other
-equations: the same config and seed found other equations on the two kinds of machine
-(docs/decisions/2026-11-28-blas-kernels.md).
+numpy's and scipy's OpenBLAS (the pip wheels) choose their kernels by CPU when they load:
+the SkylakeX kernels on a CPU with AVX-512, the Haswell ones (AVX2 and FMA) on one without,
+such as an AMD EPYC. The two sum a product in another order, and a search amplifies such
+last bits into other equations: the same config and seed found other equations on the two
+kinds of machine (docs/decisions/2026-11-28-blas-kernels.md).
 
 `pin` asks OpenBLAS for its Haswell kernels wherever the CPU has AVX2 and FMA, before numpy
-loads (gpquad's package import calls it first). The processes a run starts inherit the
-variable. It leaves the choice alone where a user set OPENBLAS_CORETYPE, where numpy or scipy
-is loaded already (their BLAS has chosen), off x86-64, and where the CPU's flags cannot be
-read (/proc/cpuinfo: Linux) or lack AVX2 or FMA (Haswell kernels would not run there).
-`state` says which kernels this process runs, for a result's provenance.
+loads (gpquad's package import calls it first). It sets OPENBLAS_CORETYPE for the whole
+process, and the processes it starts inherit it. It leaves the choice alone where a user
+set OPENBLAS_CORETYPE (to their CPU's own kernels, say), off x86-64, where the CPU's flags
+cannot be read (/proc/cpuinfo: Linux) or lack AVX2 or FMA (the kernels would not run), and
+where numpy or scipy is loaded already: their BLAS has chosen. There the variable is set to
+the kernels numpy chose, marked as followed (FOLLOWS), so that the processes a fit starts
+compute as this one does; `late` then words a warning, here and in those processes.
+`state` says which BLAS libraries this process runs, and with which kernels.
 """
 
 from __future__ import annotations
@@ -20,27 +24,19 @@ import os
 import platform
 import sys
 
+from gpquad._machine import cpu_flags
+
 #: The environment variable OpenBLAS reads when it loads, and the kernels gpquad asks for.
 VARIABLE = "OPENBLAS_CORETYPE"
 CORE = "Haswell"
+#: Set beside VARIABLE where gpquad followed a BLAS loaded before it (not a user's choice).
+FOLLOWS = "GPQUAD_BLAS_FOLLOWS"
 #: The CPU flags (as /proc/cpuinfo names them) that the Haswell kernels need.
 NEEDS = ("avx2", "fma")
 #: Modules that load an OpenBLAS: once one is loaded, setting the variable changes nothing.
 LOADERS = ("numpy", "scipy")
-#: Why this process could not pin (numpy loaded first on a CPU that runs CORE), for `late`.
+#: The kernels this process follows instead of CORE (a BLAS loaded first), for `late`.
 _missed: dict[str, str] = {}
-
-
-def cpu_flags(path: str = "/proc/cpuinfo") -> frozenset[str]:
-    """The first processor's flags (empty where they cannot be read)."""
-    try:
-        with open(path) as fh:
-            for line in fh:
-                if line.startswith("flags"):
-                    return frozenset(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return frozenset()
 
 
 def pinnable(flags: frozenset[str], arch: str) -> bool:
@@ -48,25 +44,30 @@ def pinnable(flags: frozenset[str], arch: str) -> bool:
     return arch.lower() in ("x86_64", "amd64") and all(f in flags for f in NEEDS)
 
 
+def _is_core(kernels: str) -> bool:
+    return kernels.strip().lower() == CORE.lower()
+
+
 def pin(environ=None, modules=None, flags=None, arch=None, loaded_kernels=None) -> bool:
     """Set VARIABLE to CORE in `environ` (os.environ) if no BLAS is loaded yet and the user
-    chose none, on a CPU that runs those kernels; returns whether it did. Where a BLAS is
-    loaded already, VARIABLE is set to the kernels it chose, so that the worker processes a
-    run starts compute as this one does (the same equations for any number of them). The
-    arguments stand in for the process's environment, modules, CPU flags, architecture and
-    loaded kernels (tests)."""
+    chose none, on a CPU that runs those kernels; returns whether it did (module notes).
+    The arguments stand in for the process's environment, modules, CPU flags, architecture
+    and the loaded BLAS's kernels (tests)."""
     environ = os.environ if environ is None else environ
     modules = sys.modules if modules is None else modules
-    if VARIABLE in environ:
-        return False
     flags = cpu_flags() if flags is None else flags
     can = pinnable(flags, platform.machine() if arch is None else arch)
+    chosen = environ.get(VARIABLE, "").strip()
+    if chosen:  # the user's, or followed by a parent process (then said again here)
+        if can and environ.get(FOLLOWS) == chosen and not _is_core(chosen):
+            _missed["kernels"] = chosen
+        return False
     if any(name in modules for name in LOADERS):
-        kernels = state()["kernels"] if loaded_kernels is None else loaded_kernels
-        if kernels != "unknown":
-            environ[VARIABLE] = kernels
-        if can and kernels.lower() != CORE.lower():
-            _missed["kernels"] = kernels
+        kernels = _loaded_kernels() if loaded_kernels is None else loaded_kernels
+        if kernels:  # "" from a test: another BLAS
+            environ[VARIABLE] = environ[FOLLOWS] = kernels
+            if can and not _is_core(kernels):
+                _missed["kernels"] = kernels
         return False
     if not can:
         return False
@@ -75,33 +76,57 @@ def pin(environ=None, modules=None, flags=None, arch=None, loaded_kernels=None) 
 
 
 def late() -> str | None:
-    """A warning where numpy was loaded before gpquad on a CPU where gpquad would have
-    pinned other BLAS kernels than numpy chose (None otherwise): a notebook's order of
-    imports, which the command line does not have."""
+    """A warning where this process runs other OpenBLAS kernels than CORE because numpy was
+    loaded before gpquad (here or in the process that started this one), on a CPU where
+    gpquad would have pinned CORE; None otherwise."""
     kernels = _missed.get("kernels")
     if kernels is None:
         return None
     return (
         f"numpy was imported before gpquad, so its BLAS runs this CPU's {kernels} kernels, "
-        f"not the {CORE} ones gpquad uses everywhere else: the equations may differ from "
-        "those of `gpquad run` or of another machine for the same seed; import gpquad "
-        f"before numpy (or set {VARIABLE}={CORE})"
+        f"not the {CORE} ones gpquad pins on other Linux x86-64 machines: the equations may "
+        "differ from theirs for the same seed; import gpquad before numpy, or start Python "
+        f"with {VARIABLE}={CORE}"
     )
 
 
-def state() -> dict:
-    """The BLAS this process runs: {"library", "kernels", "same_everywhere"}; the last says
-    whether they are the kernels gpquad pins (the same bits as other x86-64 machines)."""
-    import numpy  # noqa: F401  (its BLAS, loaded)
-    from threadpoolctl import threadpool_info
+def _openblas(user_blas: list[dict]) -> list[dict]:
+    return [
+        {
+            "library": f"{i.get('internal_api', 'unknown')} {i.get('version') or ''}".strip(),
+            "file": os.path.basename(str(i.get("filepath", ""))),
+            "kernels": str(i.get("architecture") or "unknown"),
+        }
+        for i in user_blas
+    ]
 
-    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-    if not blas:
-        return {"library": "unknown", "kernels": "unknown", "same_everywhere": False}
-    info = blas[0]
-    kernels = str(info.get("architecture", "unknown"))
-    return {
-        "library": f"{info.get('internal_api', 'unknown')} {info.get('version', '')}".strip(),
-        "kernels": kernels,
-        "same_everywhere": kernels.lower() == CORE.lower(),
-    }
+
+def _blas_info() -> list[dict]:
+    """threadpoolctl's BLAS entries of this process ([] if it cannot tell)."""
+    try:
+        from threadpoolctl import threadpool_info
+
+        return _openblas([i for i in threadpool_info() if i.get("user_api") == "blas"])
+    except Exception:  # noqa: BLE001  (a provenance or an import must not fail on it)
+        return []
+
+
+def _loaded_kernels() -> str | None:
+    """The OpenBLAS kernels numpy loaded (None for another BLAS, or if unknown)."""
+    for entry in _blas_info():
+        if entry["library"].startswith("openblas") and entry["kernels"] != "unknown":
+            return entry["kernels"]
+    return None
+
+
+def state() -> dict:
+    """{"libraries": [{"library", "file", "kernels"}], "pinned"}: every BLAS this process
+    runs (numpy's and scipy's are loaded first), and whether all run CORE's kernels."""
+    try:
+        import numpy  # noqa: F401
+        import scipy.linalg  # noqa: F401  (its own OpenBLAS, which the LM's QR runs)
+    except ImportError:
+        pass
+    libraries = _blas_info()
+    pinned = bool(libraries) and all(_is_core(lib["kernels"]) for lib in libraries)
+    return {"libraries": libraries, "pinned": pinned}

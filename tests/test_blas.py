@@ -1,17 +1,22 @@
-"""One BLAS code path on every x86-64 machine (gpquad._blas): OpenBLAS's Haswell kernels are
-asked for before numpy loads, so that another kind of CPU finds the same equations; where
-numpy loaded first, the worker processes compute as the parent does and gpquad.fit says so."""
+"""One BLAS code path on every Linux x86-64 machine (gpquad._blas): OpenBLAS's Haswell kernels
+are asked for before numpy loads, so that another kind of CPU finds the same equations;
+where numpy loaded first, the processes a fit starts compute as the parent does, and both
+gpquad.fit and the command line say so."""
 
 from __future__ import annotations
 
 import os
+import platform
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
 
 from gpquad import _blas
-from gpquad._blas import CORE, VARIABLE, cpu_flags, late, pin
+from gpquad._blas import CORE, FOLLOWS, VARIABLE, late, pin, pinnable, state
+from gpquad._machine import cpu_flags, cpuinfo
+from gpquad.errors import GpquadError
 
 X86 = frozenset({"sse2", "avx", "avx2", "fma", "avx512f"})
 
@@ -43,64 +48,109 @@ def test_leaves_cpus_that_cannot_run_them(flags, arch):
     assert environ == {}
 
 
-def test_a_users_choice_wins():
+def test_a_users_choice_wins_and_an_empty_one_is_none():
     environ = {VARIABLE: "SkylakeX"}
     assert not pin(environ, modules={}, flags=X86, arch="x86_64")
-    assert environ == {VARIABLE: "SkylakeX"}
+    assert environ == {VARIABLE: "SkylakeX"} and late() is None
+    environ = {VARIABLE: " "}  # OpenBLAS ignores it: gpquad pins
+    assert pin(environ, modules={}, flags=X86, arch="x86_64")
+    assert environ == {VARIABLE: CORE}
 
 
 def test_numpy_loaded_first_keeps_the_workers_with_the_parent_and_warns():
     environ: dict = {}
     modules = {"numpy": object()}
     assert not pin(environ, modules, flags=X86, arch="x86_64", loaded_kernels="SkylakeX")
-    assert environ == {VARIABLE: "SkylakeX"}  # the processes a run starts compute as this one
+    # the processes a run starts compute as this one, and know why
+    assert environ == {VARIABLE: "SkylakeX", FOLLOWS: "SkylakeX"}
     why = late()
     assert why is not None and "SkylakeX" in why and "import gpquad before numpy" in why
 
 
-def test_numpy_loaded_first_with_the_same_kernels_needs_no_warning():
-    environ: dict = {}
-    pin(environ, {"numpy": object()}, flags=X86, arch="x86_64", loaded_kernels="Haswell")
-    assert environ == {VARIABLE: "Haswell"} and late() is None
+def test_a_process_started_by_such_a_parent_follows_it_and_warns_too():
+    environ = {VARIABLE: "SkylakeX", FOLLOWS: "SkylakeX"}
+    assert not pin(environ, modules={}, flags=X86, arch="x86_64")
+    assert environ == {VARIABLE: "SkylakeX", FOLLOWS: "SkylakeX"}
+    assert late() is not None and "SkylakeX" in late()
+
+
+def test_no_warning_where_nothing_differs_or_nothing_is_known():
+    pin({}, {"numpy": object()}, flags=X86, arch="x86_64", loaded_kernels="Haswell")
     pin({}, {"numpy": object()}, flags=X86 - {"avx2"}, arch="x86_64", loaded_kernels="Sandybridge")
-    assert late() is None  # gpquad could not have pinned there either
+    environ: dict = {}  # another BLAS (MKL, Accelerate): no OpenBLAS kernels to follow
+    pin(environ, {"numpy": object()}, flags=X86, arch="x86_64", loaded_kernels="")
+    assert late() is None and environ == {}
 
 
-def test_cpu_flags_read_from_cpuinfo(tmp_path):
+def test_cpuinfo_fields_are_read(tmp_path):
     info = tmp_path / "cpuinfo"
     info.write_text("processor\t: 0\nmodel name\t: Some CPU\nflags\t\t: fpu sse2 avx2 fma\n")
     assert cpu_flags(str(info)) == {"fpu", "sse2", "avx2", "fma"}
+    assert cpuinfo("model name", str(info)) == "Some CPU"
     assert cpu_flags(str(tmp_path / "missing")) == frozenset()
 
 
-def _in_a_new_process(code: str) -> str:
-    env = {k: v for k, v in os.environ.items() if k != VARIABLE}
-    out = subprocess.run(
-        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+def test_state_names_every_blas_and_whether_all_are_pinned():
+    found = state()
+    assert found["libraries"], "numpy's BLAS is listed"
+    for lib in found["libraries"]:
+        assert set(lib) == {"library", "file", "kernels"}
+    assert found["pinned"] == all(
+        lib["kernels"].lower() == CORE.lower() for lib in found["libraries"]
     )
-    return out.stdout.strip()
 
 
-@pytest.mark.skipif(
-    not _blas.pinnable(cpu_flags(), __import__("platform").machine()),
-    reason="a CPU without AVX2 and FMA keeps its own kernels",
+def _in_a_new_process(code: str, **env) -> subprocess.CompletedProcess:
+    clean = {k: v for k, v in os.environ.items() if k not in (VARIABLE, FOLLOWS)}
+    return subprocess.run(
+        [sys.executable, "-c", code], env={**clean, **env}, capture_output=True, text=True
+    )
+
+
+LOADED = "import sys; print(sorted(m for m in ('numpy', 'scipy') if m in sys.modules))"
+#: This process's variable, whether every BLAS runs CORE, and the kernels numpy loaded.
+SHOW = (
+    "import os; from gpquad._blas import _loaded_kernels, state; "
+    f"print(os.environ.get('{VARIABLE}'), state()['pinned'], _loaded_kernels())"
 )
+
+
+def test_importing_gpquad_loads_no_blas_before_it_pins():
+    out = _in_a_new_process("import gpquad; " + LOADED)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stderr
+
+
+PINNABLE = pinnable(cpu_flags(), platform.machine())
+
+
+@pytest.mark.skipif(not PINNABLE, reason="a CPU without AVX2 and FMA keeps its own kernels")
 def test_importing_gpquad_first_runs_the_haswell_kernels():
-    show = "import os; from gpquad._blas import state; print(os.environ['{v}'], state()['kernels'])"
-    assert _in_a_new_process("import gpquad, numpy; " + show.format(v=VARIABLE)) == (
-        f"{CORE} {CORE}"
-    )
-    # numpy first: whatever it chose, the variable names it, for the worker processes
-    first = _in_a_new_process("import numpy, gpquad; " + show.format(v=VARIABLE))
-    variable, kernels = first.split()
+    variable, _, kernels = _in_a_new_process("import numpy; " + SHOW).stdout.split()
+    if kernels == "None":
+        pytest.skip("numpy's BLAS is not an OpenBLAS that names its kernels")
+    out = _in_a_new_process("import gpquad, numpy; " + SHOW)
+    assert out.stdout.split() == [CORE, "True", CORE], out.stderr
+    # numpy first: whatever it chose, the variable names it, for the processes a fit starts
+    variable, _, kernels = _in_a_new_process("import numpy, gpquad; " + SHOW).stdout.split()
     assert variable == kernels
+
+
+@pytest.mark.skipif(not PINNABLE, reason="a CPU without AVX2 and FMA keeps its own kernels")
+def test_the_command_line_says_it_follows_a_parent_that_loaded_numpy_first():
+    out = subprocess.run(
+        [sys.executable, "-m", "gpquad", "export", "no-such-run-folder", "--format", "c"],
+        env={**os.environ, VARIABLE: "SkylakeX", FOLLOWS: "SkylakeX"},
+        capture_output=True,
+        text=True,
+    )
+    assert "gpquad: warning: numpy was imported before gpquad" in out.stderr
+    assert out.returncode == 2  # and the command's own error after it
 
 
 def test_fit_warns_where_numpy_chose_other_kernels(monkeypatch, capsys):
     import gpquad
 
     monkeypatch.setattr(_blas, "_missed", {"kernels": "SkylakeX"})
-    flight = gpquad.reference_flight(seed=0, duration_s=20.0)
-    gpquad.fit(flight, seed=1, iterations=1, targets=["p_dot"], jobs=1)
-    err = capsys.readouterr().err
-    assert "gpquad: warning: numpy was imported before gpquad" in err
+    with pytest.raises(GpquadError):  # the warning comes before the data is read
+        gpquad.fit(pd.DataFrame({"t": [0.0, 0.04]}))
+    assert "gpquad: warning: numpy was imported before gpquad" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""Every result records the machine it was computed on (gpquad.engine.numba_config.machine):
+"""Every result records the machine it was computed on (gpquad._machine.machine):
 the same seed gives the same bits on one machine, and may round otherwise on another kind of
 CPU, so a reader needs to know which."""
 
@@ -7,20 +7,20 @@ from __future__ import annotations
 import llvmlite.binding as ll
 from numba.core import config
 
-from gpquad.engine import numba_config
+from gpquad import _machine
 from gpquad.engine.bench import format_report
 from gpquad.study.store import provenance
 
 
 def test_machine_names_the_cpu_and_the_compile_target(monkeypatch):
-    found = numba_config.machine()
+    found = _machine.machine()
     assert set(found) == {"cpu", "compiled_for", "cores", "blas"}
     assert found["cpu"] and found["cores"] >= 1
     monkeypatch.setattr(config, "CPU_NAME", None)
-    assert numba_config.machine()["compiled_for"] == ll.get_host_cpu_name()
+    assert _machine.machine()["compiled_for"] == ll.get_host_cpu_name()
     # NUMBA_CPU_NAME makes numba compile for another CPU: that one is recorded
     monkeypatch.setattr(config, "CPU_NAME", "haswell")
-    assert numba_config.machine()["compiled_for"] == "haswell"
+    assert _machine.machine()["compiled_for"] == "haswell"
 
 
 def test_cpu_model_without_proc_cpuinfo(monkeypatch):
@@ -28,11 +28,11 @@ def test_cpu_model_without_proc_cpuinfo(monkeypatch):
         raise OSError("no /proc here")
 
     monkeypatch.setattr("builtins.open", no_file)
-    assert numba_config.cpu_model()  # the platform's word, never empty
+    assert _machine.cpu_model()  # the platform's word, never empty
 
 
 def test_provenance_and_bench_report_carry_the_machine():
-    assert provenance()["machine"] == numba_config.machine()
+    assert provenance()["machine"] == _machine.machine()
     result = {
         "window_steps_per_s": 3.3e7,
         "paths": {"rates_and_inputs": 9.8e7},
@@ -48,11 +48,17 @@ def test_provenance_and_bench_report_carry_the_machine():
             "cpu": "Some CPU",
             "compiled_for": "znver3",
             "cores": 2,
-            "blas": {"library": "openblas 0.3.31", "kernels": "Haswell", "same_everywhere": True},
+            "blas": {
+                "libraries": [
+                    {"library": "openblas 0.3.31", "file": "a.so", "kernels": "Haswell"},
+                    {"library": "openblas 0.3.30", "file": "b.so", "kernels": "Haswell"},
+                ],
+                "pinned": True,
+            },
         },
     }
     first = format_report(result).splitlines()[0]
     assert first == (
-        "machine: Some CPU, 2 cores, kernels compiled for znver3, "
-        "BLAS openblas 0.3.31 (Haswell kernels)"
+        "machine: Some CPU, 2 cores, kernels compiled for znver3; "
+        "BLAS openblas 0.3.31 (Haswell), openblas 0.3.30 (Haswell)"
     )

@@ -249,6 +249,10 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    from gpquad._blas import late
+
+    if (why := late()) is not None:  # started by a process that loaded numpy first
+        print(f"gpquad: warning: {why}", file=sys.stderr)
     lines = WarningLines()
     with warnings.catch_warnings():
         warnings.simplefilter("always")

@@ -18,18 +18,18 @@
   a simplification) on the reference simulator's flight, target p_dot;
 - paper_run_s: 30 such iterations (measured with --full, else projected from one);
 - machine: the CPU, the CPU numba compiled for, the cores and the BLAS kernels
-  (gpquad.engine.numba_config).
+  (gpquad._machine).
 """
 
 import time
 
 import numpy as np
 
+from gpquad._machine import machine
 from gpquad.data.io import load_dataset
 from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import gauss_newton_constants
-from gpquad.engine.numba_config import machine
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, OPERATORS, VAR_BASE
 from gpquad.engine.tree.variation import random_tree
@@ -202,7 +202,8 @@ def format_report(result: dict) -> str:
     lines = (
         [
             f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for "
-            f"{m['compiled_for']}, BLAS {m['blas']['library']} ({m['blas']['kernels']} kernels)"
+            f"{m['compiled_for']}; BLAS "
+            + ", ".join(f"{b['library']} ({b['kernels']})" for b in m["blas"]["libraries"])
         ]
         if m
         else []

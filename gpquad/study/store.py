@@ -55,8 +55,8 @@ def git_revision() -> str:
 
 def provenance() -> dict:
     """What a result needs to be reproduced: package versions, git revision, platform and
-    machine (gpquad.engine.numba_config.machine: another kind of CPU may round otherwise)."""
-    from gpquad.engine.numba_config import machine
+    machine (gpquad._machine.machine: the CPU and the BLAS kernels it ran)."""
+    from gpquad._machine import machine
 
     return {
         "versions": package_versions(),
