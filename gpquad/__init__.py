@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 from gpquad._blas import pin
 
-pin()  # before numpy loads: the same BLAS kernels on every x86-64 machine (gpquad._blas)
+pin()  # before numpy loads: the same BLAS kernels on Linux x86-64 machines (gpquad._blas)
 
 from gpquad._lazy import lazy_attributes  # noqa: E402
 from gpquad._version import __version__  # noqa: E402
