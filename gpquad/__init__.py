@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gpquad._blas import pin
+from gpquad._machine import pin
 
-pin()  # before numpy loads: the same BLAS kernels on Linux x86-64 machines (gpquad._blas)
+pin()  # before numpy loads: the same BLAS kernels on Linux x86-64 machines (gpquad._machine)
 
 from gpquad._lazy import lazy_attributes  # noqa: E402
 from gpquad._version import __version__  # noqa: E402

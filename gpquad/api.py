@@ -177,7 +177,7 @@ def fit(
     GpquadError
         Bad data or settings, in one line naming the field, before any long work.
     """
-    from gpquad._blas import late
+    from gpquad._machine import late
     from gpquad.data.io import dataset_of, load_dataset
     from gpquad.study.fit import fit_dataset, warn_unmeasured
     from gpquad.study.runner import run_experiment

@@ -249,7 +249,7 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
-    from gpquad._blas import late
+    from gpquad._machine import late
 
     if (why := late()) is not None:  # started by a process that loaded numpy first
         print(f"gpquad: warning: {why}", file=sys.stderr)

@@ -1,4 +1,4 @@
-"""One BLAS code path on every Linux x86-64 machine (gpquad._blas): OpenBLAS's Haswell kernels
+"""One BLAS code path on every Linux x86-64 machine (gpquad._machine): OpenBLAS's Haswell kernels
 are asked for before numpy loads, so that another kind of CPU finds the same equations;
 where numpy loaded first, the processes a fit starts compute as the parent does, and both
 gpquad.fit and the command line say so."""
@@ -13,9 +13,18 @@ import sys
 import pandas as pd
 import pytest
 
-from gpquad import _blas
-from gpquad._blas import CORE, FOLLOWS, VARIABLE, late, pin, pinnable, state
-from gpquad._machine import cpu_flags, cpuinfo
+from gpquad import _machine
+from gpquad._machine import (
+    CORE,
+    FOLLOWS,
+    VARIABLE,
+    blas_state,
+    cpu_flags,
+    cpuinfo,
+    late,
+    pin,
+    pinnable,
+)
 from gpquad.errors import GpquadError
 
 X86 = frozenset({"sse2", "avx", "avx2", "fma", "avx512f"})
@@ -23,7 +32,7 @@ X86 = frozenset({"sse2", "avx", "avx2", "fma", "avx512f"})
 
 @pytest.fixture(autouse=True)
 def no_missed_pin(monkeypatch):
-    monkeypatch.setattr(_blas, "_missed", {})
+    monkeypatch.setattr(_machine, "_missed", {})
 
 
 def test_pins_the_haswell_kernels_before_numpy_loads():
@@ -91,7 +100,7 @@ def test_cpuinfo_fields_are_read(tmp_path):
 
 
 def test_state_names_every_blas_and_whether_all_are_pinned():
-    found = state()
+    found = blas_state()
     assert found["libraries"], "numpy's BLAS is listed"
     for lib in found["libraries"]:
         assert set(lib) == {"library", "file", "kernels"}
@@ -110,8 +119,8 @@ def _in_a_new_process(code: str, **env) -> subprocess.CompletedProcess:
 LOADED = "import sys; print(sorted(m for m in ('numpy', 'scipy') if m in sys.modules))"
 #: This process's variable, whether every BLAS runs CORE, and the kernels numpy loaded.
 SHOW = (
-    "import os; from gpquad._blas import _loaded_kernels, state; "
-    f"print(os.environ.get('{VARIABLE}'), state()['pinned'], _loaded_kernels())"
+    "import os; from gpquad._machine import _loaded_kernels, blas_state; "
+    f"print(os.environ.get('{VARIABLE}'), blas_state()['pinned'], _loaded_kernels())"
 )
 
 
@@ -150,7 +159,7 @@ def test_the_command_line_says_it_follows_a_parent_that_loaded_numpy_first():
 def test_fit_warns_where_numpy_chose_other_kernels(monkeypatch, capsys):
     import gpquad
 
-    monkeypatch.setattr(_blas, "_missed", {"kernels": "SkylakeX"})
+    monkeypatch.setattr(_machine, "_missed", {"kernels": "SkylakeX"})
     with pytest.raises(GpquadError):  # the warning comes before the data is read
         gpquad.fit(pd.DataFrame({"t": [0.0, 0.04]}))
     assert "gpquad: warning: numpy was imported before gpquad" in capsys.readouterr().err
