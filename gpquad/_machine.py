@@ -119,25 +119,30 @@ def late() -> str | None:
     )
 
 
-def _openblas(user_blas: list[dict]) -> list[dict]:
+def warn_if_late() -> None:
+    """Print `late`'s warning, if any, as one line on standard error (the command line and
+    gpquad.fit, before any work)."""
+    if (why := late()) is not None:
+        print(f"gpquad: warning: {why}", file=sys.stderr)
+
+
+def _blas_info() -> list[dict]:
+    """[{"library", "file", "kernels"}]: threadpoolctl's BLAS entries of this process ([] if
+    it cannot tell)."""
+    try:
+        from threadpoolctl import threadpool_info
+
+        found = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    except Exception:  # noqa: BLE001  (a provenance or an import must not fail on it)
+        return []
     return [
         {
             "library": f"{i.get('internal_api', 'unknown')} {i.get('version') or ''}".strip(),
             "file": os.path.basename(str(i.get("filepath", ""))),
             "kernels": str(i.get("architecture") or "unknown"),
         }
-        for i in user_blas
+        for i in found
     ]
-
-
-def _blas_info() -> list[dict]:
-    """threadpoolctl's BLAS entries of this process ([] if it cannot tell)."""
-    try:
-        from threadpoolctl import threadpool_info
-
-        return _openblas([i for i in threadpool_info() if i.get("user_api") == "blas"])
-    except Exception:  # noqa: BLE001  (a provenance or an import must not fail on it)
-        return []
 
 
 def _loaded_kernels() -> str | None:

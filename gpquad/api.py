@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -177,7 +176,7 @@ def fit(
     GpquadError
         Bad data or settings, in one line naming the field, before any long work.
     """
-    from gpquad._machine import late
+    from gpquad._machine import warn_if_late
     from gpquad.data.io import dataset_of, load_dataset
     from gpquad.study.fit import fit_dataset, warn_unmeasured
     from gpquad.study.runner import run_experiment
@@ -185,8 +184,7 @@ def fit(
     from gpquad.study.workers import default_jobs
 
     cfg = _with_overrides(_config(config), seed, overrides)
-    if (why := late()) is not None:
-        print(f"gpquad: warning: {why}", file=sys.stderr)
+    warn_if_late()
     flights, cfg, source = _flights_and_config(data, cfg)
     dataset = load_dataset(cfg) if flights is None else dataset_of(flights, cfg, source)
     profile: dict = {}  # where the fit's time went (Model.profile)

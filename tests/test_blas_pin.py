@@ -99,14 +99,23 @@ def test_cpuinfo_fields_are_read(tmp_path):
     assert cpu_flags(str(tmp_path / "missing")) == frozenset()
 
 
-def test_state_names_every_blas_and_whether_all_are_pinned():
+def test_state_names_every_blas_and_whether_all_are_pinned(monkeypatch):
     found = blas_state()
     assert found["libraries"], "numpy's BLAS is listed"
     for lib in found["libraries"]:
         assert set(lib) == {"library", "file", "kernels"}
-    assert found["pinned"] == all(
-        lib["kernels"].lower() == CORE.lower() for lib in found["libraries"]
-    )
+
+    def entries(*kernels):
+        return lambda: [{"library": "openblas", "file": "x.so", "kernels": k} for k in kernels]
+
+    for kernels, pinned in [
+        (("Haswell", "haswell"), True),
+        (("Haswell", "SkylakeX"), False),  # scipy's BLAS not pinned: not the same everywhere
+        (("unknown",), False),
+        ((), False),  # no BLAS that threadpoolctl sees
+    ]:
+        monkeypatch.setattr(_machine, "_blas_info", entries(*kernels))
+        assert blas_state()["pinned"] is pinned, kernels
 
 
 def _in_a_new_process(code: str, **env) -> subprocess.CompletedProcess:

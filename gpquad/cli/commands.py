@@ -249,10 +249,9 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
-    from gpquad._machine import late
+    from gpquad._machine import warn_if_late
 
-    if (why := late()) is not None:  # started by a process that loaded numpy first
-        print(f"gpquad: warning: {why}", file=sys.stderr)
+    warn_if_late()  # started by a process that loaded numpy first
     lines = WarningLines()
     with warnings.catch_warnings():
         warnings.simplefilter("always")

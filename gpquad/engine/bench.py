@@ -198,17 +198,11 @@ def run_benchmark(full: bool = False, seed: int = 0) -> dict:
 
 def format_report(result: dict) -> str:
     kind = "measured" if result["paper_run_measured"] else "projected from one iteration"
-    m = result.get("machine")
-    lines = (
-        [
-            f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for "
-            f"{m['compiled_for']}; BLAS "
-            + ", ".join(f"{b['library']} ({b['kernels']})" for b in m["blas"]["libraries"])
-        ]
-        if m
-        else []
-    )
-    lines += [
+    m = result["machine"]
+    blas = ", ".join(f"{b['library']} ({b['kernels']})" for b in m["blas"]["libraries"])
+    lines = [
+        f"machine: {m['cpu']}, {m['cores']} cores, kernels compiled for {m['compiled_for']}; "
+        f"BLAS {blas}",
         "fitness kernel, 15-node trees x 84 windows x 750 steps (one random tree per target):",
         f"    {result['window_steps_per_s'] / 1e6:8.1f} M window-steps/s per core",
     ]
