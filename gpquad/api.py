@@ -159,9 +159,11 @@ def fit(
     progress : bool
         Print a progress line per iteration and step.
     jobs : int, optional
-        Processes for the equations' searches (default: one per core, at most one per
-        target); the equations are the same for any value. A fit into a `run_dir` searches
-        in this process unless `jobs` is given (then only whole equations are checkpointed).
+        Cores to use (default: every core): the equations are searched in up to this many
+        processes, one per equation, and a search or finishing step with cores to spare
+        takes them as threads; the equations are the same for any value. A fit into a
+        `run_dir` searches in this process unless `jobs` is given (then only whole
+        equations are checkpointed).
     **overrides
         Config fields by name, in [evolution], [data] or [vehicle]: ``targets=["p_dot"]``,
         ``iterations=2``, ``input_taps=1``, ``trim="mean"``, ``inputs=[...]``.
@@ -204,7 +206,7 @@ def fit(
             dataset,
             cfg,
             Progress(progress, ev.iterations * len(ev.targets)),
-            jobs=default_jobs(len(ev.targets)) if jobs is None else jobs,
+            jobs=default_jobs() if jobs is None else jobs,
             seconds=profile,
         )
     return Model(found, cfg, profile)

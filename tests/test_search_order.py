@@ -4,6 +4,7 @@ each is reported as it arrives, and recorded (history, checkpoint) in target ord
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from export_models import HAND_TRIM, equation
@@ -26,17 +27,20 @@ class Said:
         pass
 
 
-def fake_workers(monkeypatch, arrival):
+def fake_workers(monkeypatch, arrival, threads: list | None = None):
     """Workers that record the order the searches were handed out, and return them in the
-    order `arrival` (a function of that order)."""
+    order `arrival` (a function of that order); `threads` receives, as each search
+    arrives, the threads its pool's share file gives a search still running."""
     handed: list[str] = []
 
-    def submit_all(jobs, func, arguments):
+    def submit_all(processes, func, arguments):
         handed.extend(args[1] for args in arguments)
         return arguments
 
     def completed(arguments):
-        for _, target, _, _ in arrival(list(arguments)):
+        for _, target, _, _, share, jobs in arrival(list(arguments)):
+            if threads is not None:
+                threads.append(fit.workers.threads_of(share, jobs)())
             eq = equation(target, ("*", 2.0, "p"), [0, 0, 0, 0], HAND_TRIM)
             yield target, eq, [{"target": target, "iteration": 0, "generation": 0}], 1.0
 
@@ -74,7 +78,7 @@ def test_searches_go_longest_first_and_are_recorded_in_target_order(tmp_path, mo
     ]
     assert ends == sorted(ends) and len(set(ends)) == 6
     # each equation reported as it arrived, named, with its seconds
-    arrived = [args[1] for args in arrival([(None, t, None, None) for t in fit.SEARCH_ORDER])]
+    arrived = [args[1] for args in arrival([(None, t) for t in fit.SEARCH_ORDER])]
     lines = [line for line in said.lines if "-> " in line]
     assert [line.split("-> ")[1].split(" =")[0] for line in lines] == arrived
     assert all(line.endswith("; 1.0 s)") for line in lines)
@@ -95,3 +99,24 @@ def test_an_interrupted_search_keeps_what_arrived_in_target_order(monkeypatch):
         fit.search_equations(None, Config(), Progress(False, 6), jobs=2)
     found = info.value.equations  # type: ignore[attr-defined]
     assert list(found) == [t for t in TARGET_NAMES if t in ("a_x", "a_y")]
+
+
+@pytest.mark.parametrize("jobs, expected", [(2, [1, 1, 1, 1, 1, 2]), (4, [1, 1, 1, 1, 2, 4])])
+def test_the_searches_left_share_the_idle_cores(tmp_path, monkeypatch, jobs, expected):
+    """As searches finish, the ones still running may take the cores they left idle:
+    jobs // (searches left) threads; the share file is gone once the pool is done."""
+    threads: list[int] = []
+    fake_workers(monkeypatch, lambda a: a, threads)
+    shares = []
+    real = fit.workers.CoreShare
+
+    class Recorded(real):  # type: ignore[misc, valid-type]
+        def __init__(self, *args):
+            super().__init__(*args)
+            shares.append(self.path)
+
+    monkeypatch.setattr(fit.workers, "CoreShare", Recorded)
+    report = Progress(False, 6)
+    fit._search_in_workers(None, Config(), report, None, None, list(TARGET_NAMES), jobs, {}, {})
+    assert threads == expected
+    assert len(shares) == 1 and not Path(shares[0]).exists()

@@ -33,7 +33,7 @@ def load_engine(path=None) -> tuple[Config, str]:
 
 def fit_gpquad(dataset, cfg: Config, jobs: int = 1, seconds: dict | None = None):
     """Identify the six equations on the training ranges of `dataset`: a DiscoveredModel
-    (the searches in `jobs` processes; the same equations for any value); `seconds`
+    (on `jobs` cores, gpquad.study.workers; the same equations for any value); `seconds`
     receives the fit's profile (gpquad.study.fit.fit_dataset)."""
     from gpquad.study.fit import fit_dataset
 

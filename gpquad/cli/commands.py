@@ -32,9 +32,10 @@ def _cmd_run(args) -> int:
     )
     if args.jobs is not None and args.jobs < 1:
         raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
-    jobs = workers.default_jobs(len(cfg.evolution.targets)) if args.jobs is None else args.jobs
-    if jobs > 1 and len(cfg.evolution.targets) > 1:  # they warm up while the rest loads
-        workers.start(jobs)
+    jobs = workers.default_jobs() if args.jobs is None else args.jobs
+    n_targets = len(cfg.evolution.targets)
+    if jobs > 1 and n_targets > 1:  # they warm up while the rest loads
+        workers.start(workers.processes(jobs, n_targets))
     from gpquad.study.runner import default_run_dir, run_experiment
 
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
@@ -137,8 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--jobs",
         type=int,
-        help="search the equations in this many processes (the same results for any value; "
-        "default one per core; 1 also checkpoints within an equation, every iteration)",
+        help="cores to use: the equations are searched in up to this many processes, one "
+        "per equation, and a search or finish with cores to spare takes them as threads "
+        "(the same results for any value; default every core; 1 also checkpoints within "
+        "an equation, every iteration)",
     )
     run.add_argument(
         "--no-figures",

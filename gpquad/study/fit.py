@@ -92,11 +92,14 @@ class RowCollector:
         self.rows.clear()
 
 
-def _identify_in_worker(dataset: Dataset, target: str, cfg: Config, keep_rows: bool):
-    """(target, equation, history rows or [], seconds) of one search in a worker process."""
+def _identify_in_worker(
+    dataset: Dataset, target: str, cfg: Config, keep_rows: bool, share: str, jobs: int
+):
+    """(target, equation, history rows or [], seconds) of one search in a worker process,
+    with the threads its pool's CoreShare file `share` allows (workers.threads_of)."""
     t0 = time.perf_counter()
     rows = RowCollector() if keep_rows else None
-    equation, _ = identify(dataset, target, cfg, rows)
+    equation, _ = identify(dataset, target, cfg, rows, threads=workers.threads_of(share, jobs))
     return target, equation, rows.rows if rows else [], time.perf_counter() - t0
 
 
@@ -117,8 +120,10 @@ def search_equations(
     history and checkpoints are written there and finished targets are resumed from it. On
     KeyboardInterrupt the exception carries `equations` = the equations found so far.
 
-    With jobs > 1 the targets left to search run in worker processes (the same equations
-    for any jobs: each search is seeded by its target and runs BLAS on one thread). In a
+    With jobs > 1 the targets left to search run in worker processes, at most one per
+    target (the same equations for any jobs: each search is seeded by its target and runs
+    BLAS on one thread), and a search with cores left idle takes them as threads
+    (workers.CoreShare); a single search here takes `jobs` threads. In a
     run folder each finished target is recorded (its history rows appended in target order,
     its record written) once every target before it is, so history.csv is the same bytes as
     with jobs = 1; a target interrupted in a worker restarts on resume (no per-iteration
@@ -127,7 +132,10 @@ def search_equations(
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
-    parallel = jobs > 1 and len(ev.targets) > 1 and not workers.inside_worker()
+    inside = workers.inside_worker()
+    parallel = jobs > 1 and len(ev.targets) > 1 and not inside
+    # a search in this process may use the fit's cores, unless it shares them with others
+    threads = 1 if inside else jobs
     try:
         history_end = _history_start(run_dir) if run_dir is not None else 0
         pending: list[str] = []
@@ -155,6 +163,7 @@ def search_equations(
                     report,
                     checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
                     history_start=history_end,
+                    threads=lambda: threads,
                 )
                 timings[target] = time.perf_counter() - t0
                 history_end = _record(equations[target], done, history, [])
@@ -203,26 +212,33 @@ def _say_found(report: Progress, equation: Equation, seconds: float | None = Non
 def _search_in_workers(
     dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
 ) -> None:
-    """The `pending` targets searched in `jobs` worker processes, each recorded in target
-    order as soon as every target before it is (search_equations' notes)."""
-    report.say(f"gpquad: searching {len(pending)} equations in {jobs} processes ...")
+    """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
+    target order as soon as every target before it is (search_equations' notes)."""
+    pool = workers.processes(jobs, len(cfg.evolution.targets))
+    report.say(f"gpquad: searching {len(pending)} equations in {pool} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)
-    futures = workers.submit_all(
-        jobs,
-        _identify_in_worker,
-        [(dataset, t, cfg, run_dir is not None) for t in longest_first(pending)],
-    )
-    for target, equation, rows, seconds in workers.completed(futures):
-        ready[target] = (equation, rows)
-        equations[target], timings[target] = equation, seconds
-        _say_found(report, equation, seconds)
-        report.done += cfg.evolution.iterations
-        while order and order[0] in ready:
-            name = order.pop(0)
-            equation, rows = ready.pop(name)
-            done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
-            _record(equation, done, history, rows)
+    share = workers.CoreShare(jobs, len(pending))  # the searches left, read by the workers
+    arguments = [
+        (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
+    ]
+    try:
+        futures = workers.submit_all(pool, _identify_in_worker, arguments)
+        for left, (target, equation, rows, seconds) in enumerate(
+            workers.completed(futures), start=1
+        ):
+            share.set(len(pending) - left)
+            ready[target] = (equation, rows)
+            equations[target], timings[target] = equation, seconds
+            _say_found(report, equation, seconds)
+            report.done += cfg.evolution.iterations
+            while order and order[0] in ready:
+                name = order.pop(0)
+                equation, rows = ready.pop(name)
+                done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
+                _record(equation, done, history, rows)
+    finally:
+        share.close()
 
 
 def longest_first(targets) -> list[str]:

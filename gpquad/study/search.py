@@ -82,8 +82,11 @@ def identify(
     state: RunState | None = None,
     checkpoint_path: Path | None = None,
     history_start: int | None = None,
+    threads=None,
 ) -> tuple[Equation, RunState]:
     """Run the coevolution for one target; returns its best equation and final state.
+    `threads`: a callable giving the threads its final choice may use now (default 1; the
+    equation is the same for any number).
 
     With checkpoint_path, the state is saved atomically after every iteration together
     with the history file's size, and a run is continued from an existing checkpoint
@@ -94,6 +97,8 @@ def identify(
     """
     ev = cfg.evolution
     co = Coevolution(dataset, target, ev)
+    if threads is not None:
+        co.threads = threads
     if state is None and checkpoint_path is not None and checkpoint_path.exists():
         state = _resumed_state(co, checkpoint_path, history, history_start)
     if state is None:

@@ -6,12 +6,17 @@ kernels' compilation (gpquad.study.warmup: one group per worker) overlap the loa
 `submit_all` waits for the warm-up before it hands out the searches. `release` lets them
 exit once the searches are done. A fit inside a worker process (a benchmark's cells run in
 parallel, say) searches in its own process: `inside_worker`.
+
+A fit's `jobs` are the cores it may use: at most one worker process per equation, and a
+search whose pool has cores left idle (the last one running, say) takes them as threads
+for its final choice, told by `CoreShare`. The equations are the same for any number.
 """
 
 from __future__ import annotations
 
 import atexit
 import os
+import tempfile
 from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
 
 from gpquad.study.warmup import GROUPS, warm
@@ -20,9 +25,56 @@ from gpquad.study.warmup import GROUPS, warm
 _pool: dict = {}
 
 
-def default_jobs(n_targets: int) -> int:
-    """Processes for the searches: one per core, at most one per target."""
-    return max(1, min(os.cpu_count() or 1, n_targets))
+def default_jobs() -> int:
+    """The cores a fit uses by default: all of them."""
+    return max(1, os.cpu_count() or 1)
+
+
+def processes(jobs: int, n_targets: int) -> int:
+    """Worker processes for `n_targets` searches on `jobs` cores: one per core, at most one
+    per target."""
+    return max(1, min(jobs, n_targets))
+
+
+class CoreShare:
+    """The number of a pool's searches not yet finished, in a small file that the searches
+    read (`threads_of`): while fewer are left than the fit's `jobs`, each may use
+    jobs // left threads."""
+
+    def __init__(self, jobs: int, left: int):
+        fd, self.path = tempfile.mkstemp(prefix="gpquad-searches-")
+        os.close(fd)
+        self.jobs = jobs
+        self.set(left)
+
+    def set(self, left: int) -> None:
+        """Record `left` searches not yet finished (replaced atomically)."""
+        tmp = f"{self.path}.tmp"
+        with open(tmp, "w") as fh:
+            fh.write(str(left))
+        os.replace(tmp, self.path)
+
+    def close(self) -> None:
+        for path in (self.path, f"{self.path}.tmp"):
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+
+
+def threads_of(path: str, jobs: int):
+    """A search's threads() for a pool's CoreShare file: jobs // (searches left), at least 1
+    (1 when the file cannot be read)."""
+
+    def threads() -> int:
+        try:
+            with open(path) as fh:
+                left = int(fh.read())
+        except (OSError, ValueError):
+            return 1
+        return max(1, jobs // max(1, left))
+
+    return threads
 
 
 def inside_worker() -> bool:

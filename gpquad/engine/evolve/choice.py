@@ -86,7 +86,8 @@ class FinalChoice:
         (gpquad.engine.evolve.selection). The pruning flies the search's scheme; with another
         configured `integrator` the pruned equation is pruned again in it, the front's
         constants are fitted through it, and the choice is made in it. Every fit here stops
-        when it stops gaining (lm.STALL)."""
+        when it stops gaining (lm.STALL); the pruning's and the front's fits run in up to
+        `self.threads()` threads (the same equation for any number)."""
         cfg = self.cfg
         starts, steps = tile(self.dataset.train, self.window_steps, cfg.max_delay)
         samples = (starts[:, None] + np.arange(steps)[None, :]).ravel()
@@ -95,7 +96,11 @@ class FinalChoice:
             ev, fit = self._mse_fitter(scheme, substeps)
             constant_of = lambda t, a, b: self.subtree_mean(t, a, b, samples)  # noqa: E731
             regain = self.regain_fitter(cfg.gradient_steps, ev, stall=STALL)
-            return ev, fit, prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain)
+            return (
+                ev,
+                fit,
+                prune_by_bic(ev, tree, starts, steps, constant_of, fit, regain, self.threads),
+            )
 
         # BIC over every window, training and validation: a criterion made for the data the
         # constants were fitted on, and the validation windows alone are often one or two
@@ -117,7 +122,9 @@ class FinalChoice:
         if cfg.integrator != SEARCH_SCHEME:
             # pruned again: terms the surrogate needed only for its own discretisation go
             ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
-            front = fitted_rivals(ev_mse, fit, pruned, front, starts, chosen_from, steps)
+            front = fitted_rivals(
+                ev_mse, fit, pruned, front, starts, chosen_from, steps, self.threads()
+            )
         return select_by_bic(ev_mse, [pruned] + front, chosen_from, steps)[0]
 
     def _mse_fitter(self, integrator: str, substeps: int):

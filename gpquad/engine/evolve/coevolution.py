@@ -8,6 +8,8 @@ suite, and one bloat simplification of every model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from gpquad.data.dataset import Dataset
@@ -80,6 +82,9 @@ class Coevolution(FinalChoice):
         self.space = WindowSpace(dataset.train, self.window_steps, cfg.max_delay)
         # the growing horizon of the linear seed and of the gain refits
         self.regain_windows = self.windows_for(SEED_HORIZONS)
+        #: Threads the final choice may use now (gpquad.engine.evolve.choice; asked again
+        #: before each batch of fits): a search alone on the machine may take its cores.
+        self.threads: Callable[[], int] = lambda: 1
 
     # ----------------------------------------------------------------- state
     def init_state(self, seed) -> RunState:

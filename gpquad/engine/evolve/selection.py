@@ -16,12 +16,14 @@ size/error front) with the lowest BIC on the validation windows.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.term_search import with_term_coefficients, without_small_terms
+from gpquad.engine.threads import thread_map
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.polynomial import polynomial_form
 from gpquad.engine.tree.variation import fold_constants, subtrees_as_constants
@@ -66,10 +68,19 @@ def mse_of(ev_mse: Evaluator, tree: Tree, starts, n_steps: int) -> float:
 
 
 def prune_by_bic(
-    ev_mse: Evaluator, model: Tree, starts, n_steps: int, constant_of, fit, regain_fit=None
+    ev_mse: Evaluator,
+    model: Tree,
+    starts,
+    n_steps: int,
+    constant_of,
+    fit,
+    regain_fit=None,
+    threads=lambda: 1,
 ) -> Tree:
     """Replace subtrees by constants (largest first, constants re-fitted by
-    fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow."""
+    fit(tree, mse, starts, n_steps) -> (tree, mse)) while the training BIC does not grow.
+    The candidates are fitted threads() at a time side by side (asked before each batch;
+    the same result for any number)."""
     n = len(starts) * n_steps
     floor = mse_floor(ev_mse, starts, n_steps)
     model = fold_constants(model)
@@ -98,36 +109,51 @@ def prune_by_bic(
             break
     # a leaf folded into its term's gain repeats the term as a constant: one fit per structure
     fitted: dict[tuple, tuple[Tree, float]] = {}
+
+    def fitted_one(candidate: Tree) -> tuple[Tree, float]:
+        return fit(candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps)
+
     changed = True
     while changed and model.size > 1:
         changed = False
-        for candidate in subtrees_as_constants(model, constant_of):
-            key = tuple(candidate.codes.tolist())
-            if key not in fitted:
-                mse = mse_of(ev_mse, candidate, starts, n_steps)
-                fitted[key] = fit(candidate, mse, starts, n_steps)
-            candidate, cand_err = fitted[key]
-            cand_score = bic(cand_err, n, candidate.size, floor)
-            if cand_score <= score:
-                model, score, changed = candidate, cand_score, True
-                break
+        candidates = subtrees_as_constants(model, constant_of)
+        # a batch is judged in order: the first that passes is taken, as one by one, and the
+        # fits after it are not kept (the cache holds only what one by one would hold)
+        while not changed and (batch := list(itertools.islice(candidates, threads()))):
+            keys = [tuple(c.codes.tolist()) for c in batch]
+            new: dict[tuple, Tree] = {}  # the first candidate of each structure
+            for key, candidate in zip(keys, batch, strict=True):
+                if key not in fitted:
+                    new.setdefault(key, candidate)
+            made = dict(zip(new, thread_map(fitted_one, list(new.values()), len(batch))))
+            for key in keys:
+                if key not in fitted:
+                    fitted[key] = made[key]
+                candidate, cand_err = fitted[key]
+                cand_score = bic(cand_err, n, candidate.size, floor)
+                if cand_score <= score:
+                    model, score, changed = candidate, cand_score, True
+                    break
     return model
 
 
-def fitted_rivals(ev_mse: Evaluator, fit, chosen: Tree, rivals, starts, chosen_from, n_steps):
+def fitted_rivals(
+    ev_mse: Evaluator, fit, chosen: Tree, rivals, starts, chosen_from, n_steps, workers: int = 1
+) -> list[Tree]:
     """The `rivals` that could beat `chosen` on the windows `chosen_from`, each with its
     constants fitted by fit(tree, mse, starts, n_steps) on the windows `starts`; the others
     are left out unfitted. A tree of k nodes scores at least n log(floor) + k log(n)
     whatever its constants; one whose bound is not below `chosen`'s BIC cannot be chosen
-    before it (select_by_bic keeps the first on ties)."""
+    before it (select_by_bic keeps the first on ties). The fits run in up to `workers`
+    threads."""
     n = len(chosen_from) * n_steps
     floor = mse_floor(ev_mse, chosen_from, n_steps)
     to_beat = bic(mse_of(ev_mse, chosen, chosen_from, n_steps), n, chosen.size, floor)
-    return [
-        fit(t, mse_of(ev_mse, t, starts, n_steps), starts, n_steps)[0]
-        for t in rivals
-        if bic(floor, n, t.size, floor) < to_beat
-    ]
+    return thread_map(
+        lambda t: fit(t, mse_of(ev_mse, t, starts, n_steps), starts, n_steps)[0],
+        [t for t in rivals if bic(floor, n, t.size, floor) < to_beat],
+        workers,
+    )
 
 
 def fewest_nodes(tree: Tree) -> Tree:

@@ -1,0 +1,192 @@
+"""A search takes the cores its pool leaves idle as threads for its final choice
+(gpquad.study.workers.CoreShare); the equations are the same for any number of threads."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+import types
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_engine import tiny_config
+
+from gpquad.data.io import load_dataset
+from gpquad.engine.evolve.selection import bic, mse_floor, mse_of, prune_by_bic
+from gpquad.engine.evolve.term_search import with_term_coefficients
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.variation import (
+    VariationParams,
+    fold_constants,
+    random_tree,
+    subtrees_as_constants,
+)
+from gpquad.study import workers
+from gpquad.study.config import preset_evolution
+from gpquad.study.search import identify
+
+STARTS = np.array([0, 10], dtype=np.int64)
+STEPS = 5
+
+
+def _draw(tree: Tree, salt: bytes) -> float:
+    """A number in [0, 1) that is a function of the tree's codes and values."""
+    digest = hashlib.sha256(salt + tree.codes.tobytes() + tree.values.round(9).tobytes())
+    return int.from_bytes(digest.digest()[:8], "little") / 2.0**64
+
+
+class StubEvaluator:
+    """An evaluator whose error is a function of the tree, codes and values alike."""
+
+    def __init__(self):
+        self.arrays = types.SimpleNamespace(states=np.tile(np.linspace(0.0, 1.0, 400)[:, None], 12))
+        self.target = 3
+        self.capacity = 63
+
+    def window_errors(self, trees, starts, n_steps=None):
+        return np.array([[1.0 + 3.0 * _draw(t, b"mse")] * len(starts) for t in trees])
+
+
+def stub_fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+    """A 'fit' whose result depends on where it starts: the same structure from other
+    constants ends elsewhere (as an LM fit does)."""
+    values = tree.values + np.where(tree.codes == 0, 0.5 * _draw(tree, b"step"), 0.0)
+    fitted = Tree(tree.codes, values, tree.delays)
+    return fitted, min(error, 0.5 + 3.0 * _draw(fitted, b"fitted"))
+
+
+def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
+    """prune_by_bic as it was before its batches (the reference): every candidate fitted
+    in turn, the first that passes taken."""
+    n = len(starts) * n_steps
+    floor = mse_floor(ev_mse, starts, n_steps)
+    model = fold_constants(model)
+    model, err = fit(model, mse_of(ev_mse, model, starts, n_steps), starts, n_steps)
+    score = bic(err, n, model.size, floor)
+    per_term = with_term_coefficients(model)
+    if model.size < per_term.size <= ev_mse.capacity:
+        per_term, per_err = fit(
+            per_term, mse_of(ev_mse, per_term, starts, n_steps), starts, n_steps
+        )
+        if bic(per_err, n, per_term.size, floor) < score:
+            model, score = per_term, bic(per_err, n, per_term.size, floor)
+    fitted: dict = {}
+    changed = True
+    while changed and model.size > 1:
+        changed = False
+        for candidate in subtrees_as_constants(model, constant_of):
+            key = tuple(candidate.codes.tolist())
+            if key not in fitted:
+                fitted[key] = fit(
+                    candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps
+                )
+            candidate, cand_err = fitted[key]
+            cand_score = bic(cand_err, n, candidate.size, floor)
+            if cand_score <= score:
+                model, score, changed = candidate, cand_score, True
+                break
+    return model
+
+
+PARAMS = VariationParams(n_variables=13, n_inputs=4, max_depth=5, p_leaf=0.4)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    threads=st.lists(st.integers(1, 5), min_size=1, max_size=6),
+)
+def test_pruning_in_batches_is_the_pruning_one_by_one(seed, threads):
+    """Any number of threads, changing between batches, prunes to the same tree as one by
+    one: the first candidate that passes is taken, and the fits made beside it and after it
+    are not kept (a later pass's candidate of the same structure is fitted from its own
+    constants)."""
+    model = random_tree(np.random.default_rng(seed), PARAMS)
+    ev = StubEvaluator()
+
+    def constant_of(tree, start, end):
+        return round(0.1 * start - 0.05 * end, 6)
+
+    reference = one_by_one(ev, model, STARTS, STEPS, constant_of, stub_fit)
+    cycle = iter(threads * 1000)
+    batched = prune_by_bic(
+        ev, model, STARTS, STEPS, constant_of, stub_fit, threads=lambda: next(cycle)
+    )
+    assert batched.codes.tolist() == reference.codes.tolist()
+    assert batched.values.tolist() == reference.values.tolist()
+    assert batched.delays.tolist() == reference.delays.tolist()
+
+
+def test_the_stub_pruning_takes_several_passes():
+    """The property above is not vacuous: its trees are pruned, over several passes, with
+    candidates refused and taken."""
+    passes = []
+    taken = 0
+    for seed in range(20):
+        model = random_tree(np.random.default_rng(seed), PARAMS)
+        pruned = one_by_one(StubEvaluator(), model, STARTS, STEPS, lambda t, a, b: 0.0, stub_fit)
+        taken += pruned.size < fold_constants(model).size
+        passes.append(fold_constants(model).size - pruned.size)
+    assert taken >= 5 and max(passes) >= 4
+
+
+def test_the_share_tells_each_search_its_threads(tmp_path):
+    share = workers.CoreShare(jobs=4, left=6)
+    threads = workers.threads_of(share.path, 4)
+    seen = []
+    for left in (6, 4, 3, 2, 1, 0):
+        share.set(left)
+        seen.append(threads())
+    assert seen == [1, 1, 1, 2, 4, 4]
+    share.close()
+    assert not os.path.exists(share.path)
+    assert threads() == 1  # no file: one thread
+    bad = tmp_path / "bad"
+    bad.write_text("many")
+    assert workers.threads_of(str(bad), 4)() == 1
+
+
+def test_the_pool_has_at_most_one_process_per_equation():
+    assert workers.processes(8, 6) == 6
+    assert workers.processes(2, 6) == 2
+    assert workers.processes(4, 1) == 1
+    assert workers.default_jobs() == max(1, os.cpu_count() or 1)
+
+
+def recommended(target: str):
+    """The default engine (BIC choice, RK4) on a small budget."""
+    small = preset_evolution(
+        "recommended",
+        targets=(target,),
+        iterations=1,
+        model_generations=15,
+        test_generations=5,
+        window_s=2.4,
+        simplify_generations=5,
+    )
+    return dataclasses.replace(tiny_config(), evolution=small)
+
+
+@pytest.fixture(scope="module")
+def quick_dataset():
+    return load_dataset(tiny_config())
+
+
+@pytest.mark.parametrize("target", ["a_y", "p_dot"])
+def test_a_search_finds_the_same_equation_with_more_threads(quick_dataset, target):
+    cfg = recommended(target)
+    calls = []
+
+    def two():
+        calls.append(2)
+        return 2
+
+    one, _ = identify(quick_dataset, target, cfg)
+    more, _ = identify(quick_dataset, target, cfg, threads=two)
+    assert calls, "the search never asked for its threads"
+    assert more.to_dict() == one.to_dict()
+    assert math.isfinite(more.error)
