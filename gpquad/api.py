@@ -159,11 +159,12 @@ def fit(
     progress : bool
         Print a progress line per iteration and step.
     jobs : int, optional
-        Cores to use (default: every core): the equations are searched in up to this many
-        processes, one per equation, and a search or finishing step with cores to spare
-        takes them as threads; the equations are the same for any value. A fit into a
-        `run_dir` searches in this process unless `jobs` is given (then only whole
-        equations are checkpointed).
+        Cores to use (default: every core this process may use). The equations are
+        searched in up to this many processes, one per equation; a search with cores to
+        spare (the last one running, or the only one) fits its final choice's candidates
+        in threads on them, and the finishing steps use `jobs` threads. The equations are
+        the same for any value. A fit into a `run_dir` searches in this process, on one
+        core, unless `jobs` is given (then only whole equations are checkpointed).
     **overrides
         Config fields by name, in [evolution], [data] or [vehicle]: ``targets=["p_dot"]``,
         ``iterations=2``, ``input_taps=1``, ``trim="mean"``, ``inputs=[...]``.

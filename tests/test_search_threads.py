@@ -7,6 +7,8 @@ import dataclasses
 import hashlib
 import math
 import os
+import subprocess
+import sys
 import types
 
 import numpy as np
@@ -16,6 +18,7 @@ from hypothesis import strategies as st
 from test_engine import tiny_config
 
 from gpquad.data.io import load_dataset
+from gpquad.engine.evolve import selection
 from gpquad.engine.evolve.selection import bic, mse_floor, mse_of, prune_by_bic
 from gpquad.engine.evolve.term_search import with_term_coefficients
 from gpquad.engine.tree.encoding import Tree
@@ -25,9 +28,9 @@ from gpquad.engine.tree.variation import (
     random_tree,
     subtrees_as_constants,
 )
-from gpquad.study import workers
+from gpquad.study import fit, workers
 from gpquad.study.config import preset_evolution
-from gpquad.study.search import identify
+from gpquad.study.search import Progress, identify
 
 STARTS = np.array([0, 10], dtype=np.int64)
 STEPS = 5
@@ -57,6 +60,13 @@ def stub_fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, floa
     values = tree.values + np.where(tree.codes == 0, 0.5 * _draw(tree, b"step"), 0.0)
     fitted = Tree(tree.codes, values, tree.delays)
     return fitted, min(error, 0.5 + 3.0 * _draw(fitted, b"fitted"))
+
+
+def tied_fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+    """stub_fit with its errors on a coarse grid: a leaf made a constant keeps the tree's
+    size, and with its error it often ties the BIC (taken: `<=`)."""
+    fitted, fitted_error = stub_fit(tree, error, starts, n_steps)
+    return fitted, min(error, 0.5 + 0.5 * round(fitted_error / 0.5 - 1.0))
 
 
 def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
@@ -95,16 +105,16 @@ def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
 PARAMS = VariationParams(n_variables=13, n_inputs=4, max_depth=5, p_leaf=0.4)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
     threads=st.lists(st.integers(1, 5), min_size=1, max_size=6),
 )
-def test_pruning_in_batches_is_the_pruning_one_by_one(seed, threads):
+@pytest.mark.parametrize("stub_fit", [stub_fit, tied_fit])
+def test_pruning_in_batches_is_the_pruning_one_by_one(stub_fit, seed, threads):
     """Any number of threads, changing between batches, prunes to the same tree as one by
-    one: the first candidate that passes is taken, and the fits made beside it and after it
-    are not kept (a later pass's candidate of the same structure is fitted from its own
-    constants)."""
+    one: the first candidate that passes is taken (ties too), and the fits made beside it
+    and after it are not kept."""
     model = random_tree(np.random.default_rng(seed), PARAMS)
     ev = StubEvaluator()
 
@@ -135,7 +145,7 @@ def test_the_stub_pruning_takes_several_passes():
 
 
 def test_the_share_tells_each_search_its_threads(tmp_path):
-    share = workers.CoreShare(jobs=4, left=6)
+    share = workers.CoreShare(left=6)
     threads = workers.threads_of(share.path, 4)
     seen = []
     for left in (6, 4, 3, 2, 1, 0):
@@ -150,11 +160,78 @@ def test_the_share_tells_each_search_its_threads(tmp_path):
     assert workers.threads_of(str(bad), 4)() == 1
 
 
+def test_without_a_temporary_directory_each_search_keeps_one_thread(monkeypatch):
+    def no_directory(*args, **kwargs):
+        raise PermissionError("read-only file system")
+
+    monkeypatch.setattr(workers.tempfile, "mkstemp", no_directory)
+    with workers.CoreShare(left=1) as share:
+        share.set(1)
+        assert workers.threads_of(share.path, 4)() == 1
+
+
+def test_a_worker_search_is_given_its_pool_share(monkeypatch):
+    """_identify_in_worker hands the search the threads its pool's share allows."""
+    seen = []
+
+    def spy(dataset, target, cfg, rows, threads=None):
+        seen.append(threads())
+        return types.SimpleNamespace(target=target), None
+
+    monkeypatch.setattr(fit, "identify", spy)
+    with workers.CoreShare(left=1) as share:
+        fit._identify_in_worker(None, "p_dot", None, False, share.path, 3)
+        share.set(3)
+        fit._identify_in_worker(None, "q_dot", None, False, share.path, 3)
+    assert seen == [3, 1]
+
+
+@pytest.mark.parametrize("inside, expected", [(False, 3), (True, 1)])
+def test_a_search_in_this_process_takes_the_fits_cores(monkeypatch, inside, expected):
+    """One equation searched in this process gets `jobs` threads, unless this process is
+    itself a worker of another (a benchmark's parallel cells)."""
+    seen = []
+
+    def spy(dataset, target, cfg, history, report, threads=None, **kwargs):
+        seen.append(threads())
+        raise KeyboardInterrupt  # enough: the search was started with its threads
+
+    monkeypatch.setattr(fit, "identify", spy)
+    monkeypatch.setattr(fit.workers, "inside_worker", lambda: inside)
+    cfg = recommended("p_dot")
+    with pytest.raises(KeyboardInterrupt):
+        fit.search_equations(None, cfg, Progress(False, 1), jobs=3)
+    assert seen == [expected]
+
+
 def test_the_pool_has_at_most_one_process_per_equation():
     assert workers.processes(8, 6) == 6
     assert workers.processes(2, 6) == 2
     assert workers.processes(4, 1) == 1
-    assert workers.default_jobs() == max(1, os.cpu_count() or 1)
+
+
+def test_the_default_counts_the_cores_this_process_may_use():
+    """CPU affinity (taskset, a batch scheduler) limits the default, as a container's quota
+    does: os.cpu_count() would count every core of the host."""
+    if not hasattr(os, "sched_setaffinity"):
+        pytest.skip("no CPU affinity on this platform")
+    code = (
+        "import os; os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]}); "
+        "from gpquad.study.workers import default_jobs; print(default_jobs())"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "1"
+    assert workers.default_jobs() >= 1
+
+
+def test_no_threads_asked_is_one_thread():
+    """threads() <= 0 prunes as one thread does (it must never skip the pruning)."""
+    model = random_tree(np.random.default_rng(7), PARAMS)
+    args = (StubEvaluator(), model, STARTS, STEPS, lambda t, a, b: 0.0, stub_fit)
+    one = prune_by_bic(*args, threads=lambda: 1)
+    none = prune_by_bic(*args, threads=lambda: 0)
+    assert none.codes.tolist() == one.codes.tolist() and none.values.tolist() == one.values.tolist()
+    assert one.size < fold_constants(model).size
 
 
 def recommended(target: str):
@@ -185,8 +262,18 @@ def test_a_search_finds_the_same_equation_with_more_threads(quick_dataset, targe
         calls.append(2)
         return 2
 
+    batches = []
+    real_map = selection.thread_map
+
+    def recorded(func, items, workers):
+        batches.append(len(items))
+        return real_map(func, items, workers)
+
     one, _ = identify(quick_dataset, target, cfg)
-    more, _ = identify(quick_dataset, target, cfg, threads=two)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(selection, "thread_map", recorded)
+        more, _ = identify(quick_dataset, target, cfg, threads=two)
     assert calls, "the search never asked for its threads"
+    assert max(batches) > 1, "no fits were made side by side"
     assert more.to_dict() == one.to_dict()
     assert math.isfinite(more.error)

@@ -139,9 +139,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--jobs",
         type=int,
         help="cores to use: the equations are searched in up to this many processes, one "
-        "per equation, and a search or finish with cores to spare takes them as threads "
-        "(the same results for any value; default every core; 1 also checkpoints within "
-        "an equation, every iteration)",
+        "per equation; a search with cores to spare fits its final choice's candidates in "
+        "threads on them, and the finishing steps use this many threads (the same results "
+        "for any value; default every core this process may use; 1, or a run of one "
+        "equation, also checkpoints within an equation, every iteration)",
     )
     run.add_argument(
         "--no-figures",

@@ -215,14 +215,14 @@ def _search_in_workers(
     """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
     target order as soon as every target before it is (search_equations' notes)."""
     pool = workers.processes(jobs, len(cfg.evolution.targets))
-    report.say(f"gpquad: searching {len(pending)} equations in {pool} processes ...")
+    searches = f"{len(pending)} equation{'s' if len(pending) > 1 else ''}"
+    report.say(f"gpquad: searching {searches} in {pool} processes ...")
     ready: dict[str, tuple] = {}
     order = list(pending)
-    share = workers.CoreShare(jobs, len(pending))  # the searches left, read by the workers
-    arguments = [
-        (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
-    ]
-    try:
+    with workers.CoreShare(len(pending)) as share:  # the searches left, read by the workers
+        arguments = [
+            (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
+        ]
         futures = workers.submit_all(pool, _identify_in_worker, arguments)
         for left, (target, equation, rows, seconds) in enumerate(
             workers.completed(futures), start=1
@@ -237,8 +237,6 @@ def _search_in_workers(
                 equation, rows = ready.pop(name)
                 done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
                 _record(equation, done, history, rows)
-    finally:
-        share.close()
 
 
 def longest_first(targets) -> list[str]:

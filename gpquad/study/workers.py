@@ -26,8 +26,11 @@ _pool: dict = {}
 
 
 def default_jobs() -> int:
-    """The cores a fit uses by default: all of them."""
-    return max(1, os.cpu_count() or 1)
+    """The cores a fit uses by default: every core this process may run on (joblib's count,
+    which honours CPU affinity and a container's CPU quota)."""
+    from joblib import cpu_count
+
+    return max(1, cpu_count())
 
 
 def processes(jobs: int, n_targets: int) -> int:
@@ -39,27 +42,45 @@ def processes(jobs: int, n_targets: int) -> int:
 class CoreShare:
     """The number of a pool's searches not yet finished, in a small file that the searches
     read (`threads_of`): while fewer are left than the fit's `jobs`, each may use
-    jobs // left threads."""
+    jobs // left threads. Where the file cannot be made or replaced, the searches keep the
+    count they last read (one thread when none), which gives the same equations."""
 
-    def __init__(self, jobs: int, left: int):
-        fd, self.path = tempfile.mkstemp(prefix="gpquad-searches-")
-        os.close(fd)
-        self.jobs = jobs
+    def __init__(self, left: int):
+        try:
+            fd, self.path = tempfile.mkstemp(prefix="gpquad-searches-")
+            os.close(fd)
+        except OSError:  # no writable temporary directory: one thread per search
+            self.path = os.devnull
+            return
         self.set(left)
 
     def set(self, left: int) -> None:
-        """Record `left` searches not yet finished (replaced atomically)."""
+        """Record `left` searches not yet finished (replaced atomically; skipped where the
+        file is held open by a reader and cannot be replaced, as on Windows)."""
+        if self.path == os.devnull:
+            return
         tmp = f"{self.path}.tmp"
-        with open(tmp, "w") as fh:
-            fh.write(str(left))
-        os.replace(tmp, self.path)
+        try:
+            with open(tmp, "w") as fh:
+                fh.write(str(left))
+            os.replace(tmp, self.path)
+        except OSError:
+            pass
 
     def close(self) -> None:
+        if self.path == os.devnull:
+            return
         for path in (self.path, f"{self.path}.tmp"):
             try:
                 os.unlink(path)
             except FileNotFoundError:
                 pass
+
+    def __enter__(self) -> CoreShare:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def threads_of(path: str, jobs: int):

@@ -119,7 +119,7 @@ def prune_by_bic(
         candidates = subtrees_as_constants(model, constant_of)
         # a batch is judged in order: the first that passes is taken, as one by one, and the
         # fits after it are not kept (the cache holds only what one by one would hold)
-        while not changed and (batch := list(itertools.islice(candidates, threads()))):
+        while not changed and (batch := list(itertools.islice(candidates, max(1, threads())))):
             keys = [tuple(c.codes.tolist()) for c in batch]
             new: dict[tuple, Tree] = {}  # the first candidate of each structure
             for key, candidate in zip(keys, batch, strict=True):
