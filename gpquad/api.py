@@ -163,8 +163,9 @@ def fit(
         searched in up to this many processes, one per equation; a search with cores to
         spare (the last one running, or the only one) fits its final choice's candidates
         in threads on them, and the finishing steps use `jobs` threads. The equations are
-        the same for any value. A fit into a `run_dir` searches in this process, on one
-        core, unless `jobs` is given (then only whole equations are checkpointed).
+        the same for any value. A fit into a `run_dir` searches in this process (its
+        threads on every core) and checkpoints every iteration, unless `jobs` is given
+        (then in worker processes, and only whole equations are checkpointed).
     **overrides
         Config fields by name, in [evolution], [data] or [vehicle]: ``targets=["p_dot"]``,
         ``iterations=2``, ``input_taps=1``, ``trim="mean"``, ``inputs=[...]``.
@@ -192,11 +193,16 @@ def fit(
     dataset = load_dataset(cfg) if flights is None else dataset_of(flights, cfg, source)
     profile: dict = {}  # where the fit's time went (Model.profile)
     if run_dir is not None:
-        n_jobs = 1 if jobs is None else jobs
-        if n_jobs < 1:
+        if jobs is not None and jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")
         found = run_experiment(
-            cfg, run_dir, progress=progress, dataset=dataset, jobs=n_jobs, seconds=profile
+            cfg,
+            run_dir,
+            progress=progress,
+            dataset=dataset,
+            jobs=default_jobs() if jobs is None else jobs,
+            seconds=profile,
+            in_process=jobs is None,  # every iteration checkpointed
         )
     else:
         warn_unmeasured(dataset, cfg.evolution.targets)

@@ -277,3 +277,47 @@ def test_a_search_finds_the_same_equation_with_more_threads(quick_dataset, targe
     assert max(batches) > 1, "no fits were made side by side"
     assert more.to_dict() == one.to_dict()
     assert math.isfinite(more.error)
+
+
+def test_in_process_searches_take_the_fits_cores(monkeypatch):
+    """in_process (gpquad.fit into a run_dir): every target searched here, one after the
+    other, each with `jobs` threads."""
+    from export_models import HAND_TRIM, equation
+
+    seen = {}
+
+    def spy(dataset, target, cfg, history, report, threads=None, **kwargs):
+        seen[target] = threads()
+        return equation(target, ("*", 2.0, "p"), [0, 0, 0, 0], HAND_TRIM), None
+
+    monkeypatch.setattr(fit, "identify", spy)
+    monkeypatch.setattr(fit.workers, "inside_worker", lambda: False)
+    cfg = dataclasses.replace(
+        recommended("p_dot"),
+        evolution=dataclasses.replace(recommended("p_dot").evolution, targets=("p_dot", "q_dot")),
+    )
+    found, _ = fit.search_equations(None, cfg, Progress(False, 2), jobs=3, in_process=True)
+    assert seen == {"p_dot": 3, "q_dot": 3} and set(found) == {"p_dot", "q_dot"}
+
+
+def test_a_fit_into_a_run_folder_searches_here_on_every_core(monkeypatch, tmp_path):
+    import gpquad
+    from gpquad.study import runner
+
+    asked = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(cfg, run_dir, **kwargs):
+        asked.update(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(runner, "run_experiment", spy)
+    flight = gpquad.reference_flight(seed=0, duration_s=20.0)
+    with pytest.raises(Stop):
+        gpquad.fit(flight, run_dir=tmp_path / "r", targets=["p_dot"], iterations=1)
+    assert asked["in_process"] is True and asked["jobs"] == workers.default_jobs()
+    with pytest.raises(Stop):
+        gpquad.fit(flight, run_dir=tmp_path / "r", targets=["p_dot"], iterations=1, jobs=2)
+    assert asked["in_process"] is False and asked["jobs"] == 2

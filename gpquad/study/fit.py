@@ -115,6 +115,7 @@ def search_equations(
     run_dir: Path | None = None,
     resuming: bool = False,
     jobs: int = 1,
+    in_process: bool = False,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
@@ -123,7 +124,8 @@ def search_equations(
     With jobs > 1 the targets left to search run in worker processes, at most one per
     target (the same equations for any jobs: each search is seeded by its target and runs
     BLAS on one thread), and a search with cores left idle takes them as threads
-    (workers.CoreShare); a single search here takes `jobs` threads. In a
+    (workers.CoreShare); a search in this process (one target, `in_process`, or jobs = 1)
+    takes `jobs` threads. In a
     run folder each finished target is recorded (its history rows appended in target order,
     its record written) once every target before it is, so history.csv is the same bytes as
     with jobs = 1; a target interrupted in a worker restarts on resume (no per-iteration
@@ -133,7 +135,7 @@ def search_equations(
     timings: dict[str, float] = {}
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
     inside = workers.inside_worker()
-    parallel = jobs > 1 and len(ev.targets) > 1 and not inside
+    parallel = jobs > 1 and len(ev.targets) > 1 and not inside and not in_process
     # a search in this process may use the fit's cores, unless it shares them with others
     threads = 1 if inside else jobs
     try:

@@ -151,6 +151,7 @@ def run_experiment(
     after=None,
     searched=None,
     seconds: dict | None = None,
+    in_process: bool = False,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -159,7 +160,9 @@ def run_experiment(
     already loaded (gpquad.fit), else the config's. `after(model, dataset)` runs once the
     model is written (the command line draws its figures there, on the loaded data).
     `seconds`, if given, receives the fit's profile as gpquad.study.fit.fit_dataset's (the
-    same numbers run.json keeps).
+    same numbers run.json keeps). `jobs`: the cores to use; `in_process`: search every
+    target in this process, on `jobs` threads, checkpointing every iteration
+    (gpquad.study.fit.search_equations).
     """
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg)
     show = cfg.output.progress if progress is None else progress
@@ -189,7 +192,9 @@ def run_experiment(
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
     try:
-        equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
+        equations, timings = search_equations(
+            dataset, cfg, report, run_dir, resuming, jobs, in_process
+        )
     except KeyboardInterrupt as exc:
         model = new_model(getattr(exc, "equations", {}), dataset, cfg)
         write_model(run_dir, dataclasses.replace(model, interrupted=True))
