@@ -125,11 +125,10 @@ def search_equations(
     target (the same equations for any jobs: each search is seeded by its target and runs
     BLAS on one thread), and a search with cores left idle takes them as threads
     (workers.CoreShare); a search in this process (one target, `in_process`, or jobs = 1)
-    takes `jobs` threads. In a
-    run folder each finished target is recorded (its history rows appended in target order,
-    its record written) once every target before it is, so history.csv is the same bytes as
-    with jobs = 1; a target interrupted in a worker restarts on resume (no per-iteration
-    checkpoint there)."""
+    takes `jobs` threads. In a run folder each finished target is recorded (its history
+    rows appended in target order, its record written) once every target before it is, so
+    history.csv is the same bytes as with jobs = 1; a target interrupted in a worker
+    restarts on resume (no per-iteration checkpoint there)."""
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
