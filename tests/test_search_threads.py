@@ -19,8 +19,7 @@ from test_engine import tiny_config
 
 from gpquad.data.io import load_dataset
 from gpquad.engine.evolve import selection
-from gpquad.engine.evolve.selection import bic, mse_floor, mse_of, prune_by_bic
-from gpquad.engine.evolve.term_search import with_term_coefficients
+from gpquad.engine.evolve.selection import bic, pruned_subtrees
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.variation import (
     VariationParams,
@@ -32,8 +31,8 @@ from gpquad.study import fit, workers
 from gpquad.study.config import preset_evolution
 from gpquad.study.search import Progress, identify
 
-STARTS = np.array([0, 10], dtype=np.int64)
-STEPS = 5
+#: The stub criterion: BIC over 10 window-steps, far above its floor.
+N, FLOOR = 10, 1e-7
 
 
 def _draw(tree: Tree, salt: bytes) -> float:
@@ -42,48 +41,33 @@ def _draw(tree: Tree, salt: bytes) -> float:
     return int.from_bytes(digest.digest()[:8], "little") / 2.0**64
 
 
-class StubEvaluator:
-    """An evaluator whose error is a function of the tree, codes and values alike."""
-
-    def __init__(self):
-        self.arrays = types.SimpleNamespace(states=np.tile(np.linspace(0.0, 1.0, 400)[:, None], 12))
-        self.target = 3
-        self.capacity = 63
-
-    def window_errors(self, trees, starts, n_steps=None):
-        return np.array([[1.0 + 3.0 * _draw(t, b"mse")] * len(starts) for t in trees])
-
-
-def stub_fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+def stub_fit(tree: Tree) -> tuple[Tree, float]:
     """A 'fit' whose result depends on where it starts: the same structure from other
     constants ends elsewhere (as an LM fit does)."""
     values = tree.values + np.where(tree.codes == 0, 0.5 * _draw(tree, b"step"), 0.0)
     fitted = Tree(tree.codes, values, tree.delays)
-    return fitted, min(error, 0.5 + 3.0 * _draw(fitted, b"fitted"))
+    start = 1.0 + 3.0 * _draw(tree, b"mse")
+    return fitted, min(start, 0.5 + 3.0 * _draw(fitted, b"fitted"))
 
 
-def tied_fit(tree: Tree, error: float, starts, n_steps: int) -> tuple[Tree, float]:
+def tied_fit(tree: Tree) -> tuple[Tree, float]:
     """stub_fit with its errors on a coarse grid: a leaf made a constant keeps the tree's
     size, and with its error it often ties the BIC (taken: `<=`)."""
-    fitted, fitted_error = stub_fit(tree, error, starts, n_steps)
-    return fitted, min(error, 0.5 + 0.5 * round(fitted_error / 0.5 - 1.0))
+    fitted, error = stub_fit(tree)
+    return fitted, 0.5 + 0.5 * round(error / 0.5 - 1.0)
 
 
-def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
-    """prune_by_bic as it was before its batches (the reference): every candidate fitted
-    in turn, the first that passes taken."""
-    n = len(starts) * n_steps
-    floor = mse_floor(ev_mse, starts, n_steps)
-    model = fold_constants(model)
-    model, err = fit(model, mse_of(ev_mse, model, starts, n_steps), starts, n_steps)
-    score = bic(err, n, model.size, floor)
-    per_term = with_term_coefficients(model)
-    if model.size < per_term.size <= ev_mse.capacity:
-        per_term, per_err = fit(
-            per_term, mse_of(ev_mse, per_term, starts, n_steps), starts, n_steps
-        )
-        if bic(per_err, n, per_term.size, floor) < score:
-            model, score = per_term, bic(per_err, n, per_term.size, floor)
+def score_of(tree: Tree, error: float) -> float:
+    return bic(error, N, tree.size, FLOOR)
+
+
+def constant_of(tree, start, end):
+    return round(0.1 * start - 0.05 * end, 6)
+
+
+def one_by_one(model: Tree, score: float, fit) -> Tree:
+    """The pruning passes as they were before their batches (the reference): every
+    candidate fitted in turn, the first that scores no higher taken."""
     fitted: dict = {}
     changed = True
     while changed and model.size > 1:
@@ -91,11 +75,9 @@ def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
         for candidate in subtrees_as_constants(model, constant_of):
             key = tuple(candidate.codes.tolist())
             if key not in fitted:
-                fitted[key] = fit(
-                    candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps
-                )
+                fitted[key] = fit(candidate)
             candidate, cand_err = fitted[key]
-            cand_score = bic(cand_err, n, candidate.size, floor)
+            cand_score = score_of(candidate, cand_err)
             if cand_score <= score:
                 model, score, changed = candidate, cand_score, True
                 break
@@ -103,6 +85,12 @@ def one_by_one(ev_mse, model, starts, n_steps, constant_of, fit) -> Tree:
 
 
 PARAMS = VariationParams(n_variables=13, n_inputs=4, max_depth=5, p_leaf=0.4)
+
+
+def _start(seed: int, fit) -> tuple[Tree, float]:
+    """A random tree, fitted, and its score: where the pruning passes start."""
+    model, error = fit(fold_constants(random_tree(np.random.default_rng(seed), PARAMS)))
+    return model, score_of(model, error)
 
 
 @settings(max_examples=200, deadline=None)
@@ -115,16 +103,11 @@ def test_pruning_in_batches_is_the_pruning_one_by_one(stub_fit, seed, threads):
     """Any number of threads, changing between batches, prunes to the same tree as one by
     one: the first candidate that passes is taken (ties too), and the fits made beside it
     and after it are not kept."""
-    model = random_tree(np.random.default_rng(seed), PARAMS)
-    ev = StubEvaluator()
-
-    def constant_of(tree, start, end):
-        return round(0.1 * start - 0.05 * end, 6)
-
-    reference = one_by_one(ev, model, STARTS, STEPS, constant_of, stub_fit)
+    model, score = _start(seed, stub_fit)
+    reference = one_by_one(model, score, stub_fit)
     cycle = iter(threads * 1000)
-    batched = prune_by_bic(
-        ev, model, STARTS, STEPS, constant_of, stub_fit, threads=lambda: next(cycle)
+    batched = pruned_subtrees(
+        model, score, score_of, constant_of, stub_fit, threads=lambda: next(cycle)
     )
     assert batched.codes.tolist() == reference.codes.tolist()
     assert batched.values.tolist() == reference.values.tolist()
@@ -134,14 +117,11 @@ def test_pruning_in_batches_is_the_pruning_one_by_one(stub_fit, seed, threads):
 def test_the_stub_pruning_takes_several_passes():
     """The property above is not vacuous: its trees are pruned, over several passes, with
     candidates refused and taken."""
-    passes = []
-    taken = 0
+    cut = []
     for seed in range(20):
-        model = random_tree(np.random.default_rng(seed), PARAMS)
-        pruned = one_by_one(StubEvaluator(), model, STARTS, STEPS, lambda t, a, b: 0.0, stub_fit)
-        taken += pruned.size < fold_constants(model).size
-        passes.append(fold_constants(model).size - pruned.size)
-    assert taken >= 5 and max(passes) >= 4
+        model, score = _start(seed, stub_fit)
+        cut.append(model.size - one_by_one(model, score, stub_fit).size)
+    assert sum(c > 0 for c in cut) >= 5 and max(cut) >= 4
 
 
 def test_the_share_tells_each_search_its_threads(tmp_path):
@@ -226,12 +206,11 @@ def test_the_default_counts_the_cores_this_process_may_use():
 
 def test_no_threads_asked_is_one_thread():
     """threads() <= 0 prunes as one thread does (it must never skip the pruning)."""
-    model = random_tree(np.random.default_rng(7), PARAMS)
-    args = (StubEvaluator(), model, STARTS, STEPS, lambda t, a, b: 0.0, stub_fit)
-    one = prune_by_bic(*args, threads=lambda: 1)
-    none = prune_by_bic(*args, threads=lambda: 0)
+    model, score = _start(7, stub_fit)
+    one = pruned_subtrees(model, score, score_of, constant_of, stub_fit, lambda: 1)
+    none = pruned_subtrees(model, score, score_of, constant_of, stub_fit, lambda: 0)
     assert none.codes.tolist() == one.codes.tolist() and none.values.tolist() == one.values.tolist()
-    assert one.size < fold_constants(model).size
+    assert one.size < model.size
 
 
 def recommended(target: str):

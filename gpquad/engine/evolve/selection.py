@@ -107,30 +107,39 @@ def prune_by_bic(
         if bic(small_err, n, smaller.size, floor) <= score:
             model, score = smaller, bic(small_err, n, smaller.size, floor)
             break
-    # a leaf folded into its term's gain repeats the term as a constant: one fit per structure
-    fitted: dict[tuple, tuple[Tree, float]] = {}
 
     def fitted_one(candidate: Tree) -> tuple[Tree, float]:
         return fit(candidate, mse_of(ev_mse, candidate, starts, n_steps), starts, n_steps)
 
+    return pruned_subtrees(
+        model, score, lambda t, e: bic(e, n, t.size, floor), constant_of, fitted_one, threads
+    )
+
+
+def pruned_subtrees(model: Tree, score: float, score_of, constant_of, fit, threads) -> Tree:
+    """`model` (its score `score`) with subtrees replaced by constants while
+    score_of(tree, error) does not grow: in passes over subtrees_as_constants, the first
+    candidate whose fit(candidate) -> (tree, error) scores no higher is taken. One fit per
+    structure (a leaf folded into its term's gain repeats the term as a constant). The
+    candidates are fitted threads() at a time side by side and judged in order, so the
+    result and the fits kept are those of one by one."""
+    fitted: dict[tuple, tuple[Tree, float]] = {}
     changed = True
     while changed and model.size > 1:
         changed = False
         candidates = subtrees_as_constants(model, constant_of)
-        # a batch is judged in order: the first that passes is taken, as one by one, and the
-        # fits after it are not kept (the cache holds only what one by one would hold)
         while not changed and (batch := list(itertools.islice(candidates, max(1, threads())))):
             keys = [tuple(c.codes.tolist()) for c in batch]
             new: dict[tuple, Tree] = {}  # the first candidate of each structure
             for key, candidate in zip(keys, batch, strict=True):
                 if key not in fitted:
                     new.setdefault(key, candidate)
-            made = dict(zip(new, thread_map(fitted_one, list(new.values()), len(batch))))
-            for key in keys:
+            made = dict(zip(new, thread_map(fit, list(new.values()), len(batch))))
+            for key in keys:  # the fits after the one taken are not kept
                 if key not in fitted:
                     fitted[key] = made[key]
                 candidate, cand_err = fitted[key]
-                cand_score = bic(cand_err, n, candidate.size, floor)
+                cand_score = score_of(candidate, cand_err)
                 if cand_score <= score:
                     model, score, changed = candidate, cand_score, True
                     break
