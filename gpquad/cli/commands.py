@@ -34,9 +34,10 @@ def _cmd_run(args) -> int:
         raise GpquadError(f"must be >= 1, got {args.jobs}", field="--jobs")
     jobs = workers.default_jobs() if args.jobs is None else args.jobs
     n_targets = len(cfg.evolution.targets)
+    from gpquad.study.runner import default_run_dir, run_experiment
+
     if jobs > 1 and n_targets > 1:  # they warm up while the rest loads
         workers.start(workers.processes(jobs, n_targets))
-    from gpquad.study.runner import default_run_dir, run_experiment
 
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
     if not args.no_figures:  # matplotlib loads while this process mostly waits on the search

@@ -65,6 +65,18 @@ def synthetic_dataset(seed: int = 0):
     return build_dataset([flight], validation_fraction=0.25)
 
 
+def load() -> None:
+    """What every group needs, without compiling one: the search's modules imported and
+    numba's compiler loaded (its first call of a kernel, about a second). Done in a
+    process before it forks its workers, which then start with both."""
+    import gpquad.models.joint_jacobian  # noqa: F401
+    import gpquad.models.reference_models  # noqa: F401
+    from gpquad.engine.evolve import gradient_fit  # noqa: F401
+    from gpquad.engine.kernels import least_squares
+
+    least_squares.sum_squares(np.zeros(1))
+
+
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
     seconds it took. "euler": the eq. 2 fitness and sensitivity kernels, the LM's and the

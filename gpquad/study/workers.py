@@ -7,6 +7,13 @@ kernels' compilation (gpquad.study.warmup: one group per worker) overlap the loa
 exit once the searches are done. A fit inside a worker process (a benchmark's cells run in
 parallel, say) searches in its own process: `inside_worker`.
 
+On Linux, from a process that runs no other Python thread (the `gpquad run` command, a
+script), the workers are forked from this process once it has imported the search and
+loaded numba's compiler (`fork_context`, `gpquad.study.warmup.load`): they start with
+both, where a fresh interpreter takes about two seconds of CPU for them. Elsewhere (a
+notebook, whose kernel runs threads; macOS; Windows) they are fresh interpreters (loky).
+The workers ignore Ctrl-C: this process stops them.
+
 A fit's `jobs` are the cores it may use: at most one worker process per equation, and a
 search whose pool has cores left idle (the last one running, say) takes them as threads
 for its final choice, told by `CoreShare`. The equations are the same for any number.
@@ -16,10 +23,12 @@ from __future__ import annotations
 
 import atexit
 import os
+import signal
+import sys
 import tempfile
 from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
 
-from gpquad.study.warmup import GROUPS, warm
+from gpquad.study.warmup import GROUPS, load, warm
 
 #: The executor of the last start() and its warm-up futures.
 _pool: dict = {}
@@ -105,15 +114,44 @@ def inside_worker() -> bool:
     return multiprocessing.parent_process() is not None
 
 
+def fork_context():
+    """multiprocessing's fork context where a fork is safe and available: Linux, and no
+    Python thread in this process but the main one (a thread holding a lock at the fork
+    would leave it held in the child); None elsewhere."""
+    import multiprocessing
+    import threading
+
+    if not sys.platform.startswith("linux") or threading.active_count() > 1:
+        return None
+    if "fork" not in multiprocessing.get_all_start_methods():  # pragma: no cover
+        return None
+    return multiprocessing.get_context("fork")
+
+
+def _ignore_interrupts() -> None:
+    """A worker's initializer: Ctrl-C in a terminal reaches every process of its group;
+    this process stops the workers (`completed`), which would otherwise die mid-message."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def start(jobs: int) -> None:
     """Start `jobs` worker processes and their warm-up (returns at once); a pool of another
     size is shut down first."""
-    from joblib.externals.loky import ProcessPoolExecutor
-
     if _pool.get("jobs") == jobs:
         return
     release()
-    executor = ProcessPoolExecutor(max_workers=jobs)
+    context = fork_context()
+    if context is not None:
+        from concurrent.futures import ProcessPoolExecutor
+
+        load()  # the forked workers inherit it
+        executor = ProcessPoolExecutor(
+            max_workers=jobs, mp_context=context, initializer=_ignore_interrupts
+        )
+    else:
+        from joblib.externals.loky import ProcessPoolExecutor as LokyExecutor
+
+        executor = LokyExecutor(max_workers=jobs, initializer=_ignore_interrupts)
     _pool.update(jobs=jobs, executor=executor, warm=[executor.submit(warm, g) for g in GROUPS])
 
 
@@ -150,8 +188,21 @@ def release(wait: bool = False, kill: bool = False) -> None:
     steps need none, and the next search starts new ones."""
     executor = _pool.pop("executor", None)
     _pool.clear()
-    if executor is not None:
+    if executor is None:
+        return
+    from concurrent.futures import ProcessPoolExecutor
+
+    if not isinstance(executor, ProcessPoolExecutor):  # loky's
         executor.shutdown(wait=wait, kill_workers=kill)
+        return
+    processes = list((executor._processes or {}).values())  # Python < 3.14: no kill_workers
+    executor.shutdown(wait=False, cancel_futures=kill)
+    if kill:
+        for process in processes:
+            process.kill()
+    if wait:
+        for process in processes:
+            process.join()
 
 
 # a pool still open at exit (gpquad.fit's, kept for the next fit) is shut down while the

@@ -1,0 +1,181 @@
+"""The search's worker pool: forked from a process without other threads (Linux), fresh
+interpreters otherwise, the same equations either way, and Ctrl-C that stops every process
+of a run at once."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from gpquad.study import workers
+
+ROOT = str(Path(__file__).resolve().parents[1])
+ENV = {**os.environ, "PYTHONPATH": ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+CONFIG = """
+name = "pool"
+seed = 5
+[data]
+trim = "mean"
+[simulator]
+duration_s = 60.0
+[evolution]
+targets = ["a_z", "p_dot", "q_dot"]
+iterations = {iterations}
+model_generations = 20
+input_taps = 1
+"""
+
+#: A Python thread started before gpquad: the pool of a notebook's kernel (fresh workers).
+WITH_A_THREAD = """
+import sys, threading
+threading.Thread(target=threading.Event().wait, daemon=True).start()
+sys.argv = ["gpquad", *sys.argv[1:]]
+from gpquad.cli.commands import entry
+entry()
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers are forked on Linux")
+def test_fork_only_without_other_python_threads():
+    assert workers.fork_context() is not None or threading.active_count() > 1
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        assert workers.fork_context() is None
+    finally:
+        stop.set()
+        thread.join()
+
+
+def test_no_fork_off_linux(monkeypatch):
+    monkeypatch.setattr(sys, "platform", "darwin")
+    assert workers.fork_context() is None
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers are forked on Linux")
+def test_forked_and_fresh_workers_find_the_same_equations(tmp_path):
+    """One clean process runs the same fit with forked workers and with fresh ones."""
+    config = tmp_path / "pool.toml"
+    config.write_text(CONFIG.format(iterations=1))
+    script = textwrap.dedent(
+        f"""
+        import json, sys
+        from gpquad.study import workers
+        from gpquad.study.config import load_config
+        from gpquad.study.runner import run_experiment
+
+        cfg = load_config({str(config)!r})
+        found = {{}}
+        for arm in ("fork", "fresh"):
+            if arm == "fresh":
+                workers.fork_context = lambda: None
+            model = run_experiment(cfg, None, progress=False, jobs=2)
+            kind = type(workers._pool["executor"]).__module__
+            workers.release(wait=True)
+            found[arm] = {{"pool": kind, "equations": model.text()}}
+        print(json.dumps(found))
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], env=ENV, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr
+    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert found["fork"]["pool"] == "concurrent.futures.process"
+    assert "loky" in found["fresh"]["pool"]
+    assert found["fork"]["equations"] == found["fresh"]["equations"]
+    assert "p_dot =" in found["fork"]["equations"]
+
+
+#: Each worker of a fresh pool raises SIGINT in itself; prints the pool's kind and results.
+RAISE_SIGINT = """
+import json, signal, sys
+from gpquad.study import workers
+
+if sys.argv[1] == "fresh":
+    workers.fork_context = lambda: None
+futures = workers.submit_all(2, signal.raise_signal, [(signal.SIGINT,)] * 2)
+try:
+    results = [f.result(timeout=120) for f in futures]
+except BaseException as exc:  # the worker's KeyboardInterrupt, or a broken pool
+    results = repr(exc)
+kind = type(workers._pool["executor"]).__module__
+workers.release(wait=True, kill=True)
+print(json.dumps({"pool": kind, "results": results}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="SIGINT; forked on Linux")
+@pytest.mark.parametrize("pool", ["forked", "fresh"])
+def test_workers_ignore_ctrl_c(pool):
+    """A worker that receives SIGINT (Ctrl-C reaches the whole process group) keeps
+    running: the run stops it. A worker that died of it mid-message left the run's pool
+    hung or its manager thread failing. In a clean process, where a pool is forked."""
+    proc = subprocess.run(
+        [sys.executable, "-c", RAISE_SIGINT, pool],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert found["results"] == [None, None], found
+    assert ("loky" in found["pool"]) == (pool == "fresh")
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="process groups and SIGINT")
+@pytest.mark.parametrize("pool", ["forked", "fresh"])
+def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
+    """Ctrl-C in a terminal reaches every process of the run's group: the run says it was
+    interrupted and exits with 130 at once, without a traceback or a process left."""
+    config = tmp_path / "pool.toml"
+    config.write_text(CONFIG.format(iterations=4))
+    head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
+    cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(tmp_path / "run")],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if "searching" in line:
+                break
+        time.sleep(1.0)  # the searches are under way (each takes seconds)
+        assert proc.poll() is None, "the run ended before the interruption"
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "Traceback" not in out, err
+    assert "interrupted" in out + err
+    deadline = time.monotonic() + 10
+    while _group_alive(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _group_alive(proc.pid), "a worker outlived the run"
