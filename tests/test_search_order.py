@@ -120,3 +120,32 @@ def test_the_searches_left_share_the_idle_cores(tmp_path, monkeypatch, jobs, exp
     fit._search_in_workers(None, Config(), report, None, None, list(TARGET_NAMES), jobs, {}, {})
     assert threads == expected
     assert len(shares) == 1 and not Path(shares[0]).exists()
+
+
+@pytest.mark.parametrize("jobs, after", [(2, 5), (4, 3), (8, 1)])
+def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, jobs, after):
+    """`idle` (the command line loads its plotting there) runs once, when fewer searches
+    are left than the pool's processes (min(jobs, 6)): not before, while every core is
+    busy."""
+    arrived: list[str] = []
+
+    def arrival(arguments):
+        for args in arguments:
+            arrived.append(args[1])
+            yield args
+
+    fake_workers(monkeypatch, arrival)
+    calls: list[int] = []
+    fit._search_in_workers(
+        None,
+        Config(),
+        Progress(False, 6),
+        None,
+        None,
+        list(TARGET_NAMES),
+        jobs,
+        {},
+        {},
+        lambda: calls.append(len(arrived)),
+    )
+    assert calls == [after]

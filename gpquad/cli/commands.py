@@ -36,14 +36,18 @@ def _cmd_run(args) -> int:
     n_targets = len(cfg.evolution.targets)
     from gpquad.study.runner import default_run_dir, run_experiment
 
-    if jobs > 1 and n_targets > 1:  # they warm up while the rest loads
+    pooled = jobs > 1 and n_targets > 1
+    if pooled:  # they warm up while the rest loads
         workers.start(workers.processes(jobs, n_targets))
-
     run_dir = Path(args.out) if args.out else default_run_dir(cfg)
-    if not args.no_figures:  # matplotlib loads while this process mostly waits on the search
+
+    def load_plotting() -> None:  # in a thread, on a core the searches leave idle
         import threading
 
         threading.Thread(target=_import_plotting, daemon=True).start()
+
+    if not args.no_figures and not pooled:  # the searches run in this process, one at a time
+        load_plotting()
     figures: list[Path] = []
 
     def searched(folder) -> None:
@@ -62,6 +66,7 @@ def _cmd_run(args) -> int:
             jobs=jobs,
             after=None if args.no_figures else draw,
             searched=searched,
+            idle=load_plotting if pooled and not args.no_figures else None,
         )
     except KeyboardInterrupt:
         return 130

@@ -116,6 +116,7 @@ def search_equations(
     resuming: bool = False,
     jobs: int = 1,
     in_process: bool = False,
+    idle=None,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
@@ -128,7 +129,9 @@ def search_equations(
     takes `jobs` threads. In a run folder each finished target is recorded (its history
     rows appended in target order, its record written) once every target before it is, so
     history.csv is the same bytes as with jobs = 1; a target interrupted in a worker
-    restarts on resume (no per-iteration checkpoint there)."""
+    restarts on resume (no per-iteration checkpoint there). `idle()`, if given, is called
+    once when the worker processes leave a core idle (fewer searches left than processes):
+    the command line loads its plotting there."""
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
@@ -173,7 +176,7 @@ def search_equations(
             if history is not None:
                 history.truncate(history_end)
             _search_in_workers(
-                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
+                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle
             )
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
@@ -211,7 +214,7 @@ def _say_found(report: Progress, equation: Equation, seconds: float | None = Non
 
 
 def _search_in_workers(
-    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings
+    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle=None
 ) -> None:
     """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
     target order as soon as every target before it is (search_equations' notes)."""
@@ -229,6 +232,9 @@ def _search_in_workers(
             workers.completed(futures), start=1
         ):
             share.set(len(pending) - left)
+            if idle is not None and len(pending) - left < pool:
+                idle()
+                idle = None
             ready[target] = (equation, rows)
             equations[target], timings[target] = equation, seconds
             _say_found(report, equation, seconds)

@@ -152,6 +152,7 @@ def run_experiment(
     searched=None,
     seconds: dict | None = None,
     in_process: bool = False,
+    idle=None,
 ) -> DiscoveredModel:
     """Identify every configured target and write the run folder.
 
@@ -161,7 +162,8 @@ def run_experiment(
     model is written (the command line draws its figures there, on the loaded data).
     `seconds`, if given, receives the fit's profile as gpquad.study.fit.fit_dataset's (the
     same numbers run.json keeps). `jobs`: the cores to use; `in_process`: search every
-    target in this process, on `jobs` threads, checkpointing every iteration
+    target in this process, on `jobs` threads, checkpointing every iteration; `idle()`
+    runs once when the searches' worker processes leave a core idle
     (gpquad.study.fit.search_equations).
     """
     run_dir = Path(run_dir) if run_dir is not None else default_run_dir(cfg)
@@ -193,7 +195,7 @@ def run_experiment(
     )
     try:
         equations, timings = search_equations(
-            dataset, cfg, report, run_dir, resuming, jobs, in_process
+            dataset, cfg, report, run_dir, resuming, jobs, in_process, idle
         )
     except KeyboardInterrupt as exc:
         model = new_model(getattr(exc, "equations", {}), dataset, cfg)
