@@ -4,6 +4,7 @@ its exit code, its files, no temporary folder of the worker processes, no leak w
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -73,8 +74,9 @@ def test_exit_code_of_a_user_mistake_survives_the_fast_exit(tmp_path):
 
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_figures_drawn_by_a_worker_or_the_run_are_the_same_files(tmp_path, jobs):
-    """With two processes a worker draws the convergence figure while the model is
-    finished; with one the run draws it. Either way both figures are written and listed."""
+    """After a search in worker processes or in the run's own, both figures are written
+    and listed, and they are the bytes make_run_report draws from the run folder
+    afterwards (the run passes it the data it has loaded)."""
     config = tmp_path / "exit.toml"
     config.write_text(TINY)
     root = str(Path(__file__).resolve().parents[1])
@@ -86,6 +88,13 @@ def test_figures_drawn_by_a_worker_or_the_run_are_the_same_files(tmp_path, jobs)
     figures = [run / "report" / "convergence.png", run / "report" / "prediction.png"]
     assert all(f.stat().st_size > 1000 for f in figures)
     assert f"Figures: {figures[0]}, {figures[1]}" in proc.stdout
+    from gpquad.report.builder import make_run_report
+
+    again = tmp_path / "again"
+    shutil.copytree(run, again, ignore=shutil.ignore_patterns("report"))
+    redrawn = make_run_report(again, formats=("png",))
+    assert [f.name for f in redrawn] == [f.name for f in figures]
+    assert [f.read_bytes() for f in redrawn] == [f.read_bytes() for f in figures]
 
 
 def test_bad_data_after_the_workers_started_exits_with_its_line(tmp_path):
