@@ -135,6 +135,44 @@ def test_workers_ignore_ctrl_c(pool):
     assert ("loky" in found["pool"]) == (pool == "fresh")
 
 
+#: Starts a pool and reads, before the warm-up ends, whether its processes ignore SIGINT.
+BORN_IGNORING = """
+import json, signal, sys
+from gpquad.study import workers
+
+if sys.argv[1] == "fresh":
+    workers.fork_context = lambda: None
+workers.start(2)
+pids = [p.pid for p in workers._pool["executor"]._processes.values()]
+ignored = []
+for pid in pids:
+    with open(f"/proc/{pid}/status") as fh:
+        mask = next(line for line in fh if line.startswith("SigIgn:")).split()[1]
+    ignored.append(bool(int(mask, 16) & (1 << (signal.SIGINT - 1))))
+here = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+workers.release(wait=True, kill=True)
+print(json.dumps({"ignored": ignored, "here": here}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc; forked on Linux")
+@pytest.mark.parametrize("pool", ["forked", "fresh"])
+def test_workers_ignore_ctrl_c_from_birth(pool):
+    """A fresh interpreter imports for a second or two before its initializer runs: the
+    workers are started with SIGINT ignored, which they inherit, and this process gets
+    its own handler back."""
+    proc = subprocess.run(
+        [sys.executable, "-c", BORN_IGNORING, pool],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert found["ignored"] == [True, True] and found["here"], found
+
+
 def _group_alive(pgid: int) -> bool:
     try:
         os.killpg(pgid, 0)

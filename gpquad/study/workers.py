@@ -22,6 +22,7 @@ for its final choice, told by `CoreShare`. The equations are the same for any nu
 from __future__ import annotations
 
 import atexit
+import contextlib
 import os
 import signal
 import sys
@@ -152,7 +153,26 @@ def start(jobs: int) -> None:
         from joblib.externals.loky import ProcessPoolExecutor as LokyExecutor
 
         executor = LokyExecutor(max_workers=jobs, initializer=_ignore_interrupts)
-    _pool.update(jobs=jobs, executor=executor, warm=[executor.submit(warm, g) for g in GROUPS])
+    with _born_ignoring_interrupts():  # the processes start at the first submit
+        futures = [executor.submit(warm, g) for g in GROUPS]
+    _pool.update(jobs=jobs, executor=executor, warm=futures)
+
+
+@contextlib.contextmanager
+def _born_ignoring_interrupts():
+    """SIGINT ignored in this process (from its main thread only) while it starts worker
+    processes: they inherit that, through a fork and through exec, so a fresh interpreter
+    ignores Ctrl-C while it imports, before its initializer runs."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
