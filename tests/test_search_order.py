@@ -149,3 +149,29 @@ def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, jobs
         lambda: calls.append(len(arrived)),
     )
     assert calls == [after]
+
+
+def test_idle_is_called_at_once_when_fewer_searches_than_processes(monkeypatch):
+    """A resumed run with one search left on a two-process pool: a core is idle at once."""
+    arrived: list[str] = []
+
+    def arrival(arguments):
+        for args in arguments:
+            arrived.append(args[1])
+            yield args
+
+    fake_workers(monkeypatch, arrival)
+    calls: list[int] = []
+    fit._search_in_workers(
+        None,
+        Config(),
+        Progress(False, 6),
+        None,
+        None,
+        ["a_x"],
+        2,
+        {},
+        {},
+        lambda: calls.append(len(arrived)),
+    )
+    assert calls == [0]

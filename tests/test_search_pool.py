@@ -173,6 +173,54 @@ def test_workers_ignore_ctrl_c_from_birth(pool):
     assert found["ignored"] == [True, True] and found["here"], found
 
 
+#: completed()'s error path (every future cancelled, then release(kill=True)) while one
+#: search waits behind a full call queue (six searches on two workers, 1 MB each).
+STOPPED_WITH_ONE_PENDING = """
+import time
+import numpy as np
+from gpquad.study import workers
+
+def search(payload, seconds):
+    time.sleep(seconds)
+
+payload = np.zeros(1_000_000 // 8)
+futures = workers.submit_all(2, search, [(payload, 30.0)] * 2)
+time.sleep(0.5)
+executor = workers._pool["executor"]
+futures += [executor.submit(search, payload, 30.0) for _ in range(4)]
+del executor
+time.sleep(0.5)
+print("pending", [f._state for f in futures].count("PENDING"), flush=True)
+for future in futures:
+    future.cancel()
+workers.release(kill=True)
+print("released", flush=True)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the forked pool")
+def test_a_pool_stopped_with_a_search_pending_lets_the_process_exit():
+    """A failed search or Ctrl-C stops the pool while a search still waits to be sent; the
+    process then exits at once. Without the pool's manager thread joined, it hung at exit."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", STOPPED_WITH_ONE_PENDING],
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail("the process did not exit after its pool was stopped")
+    assert proc.returncode == 0, err
+    assert "pending 1" in out and "released" in out
+    assert "InvalidStateError" not in err, err
+
+
 def _group_alive(pgid: int) -> bool:
     try:
         os.killpg(pgid, 0)

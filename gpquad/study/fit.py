@@ -228,6 +228,9 @@ def _search_in_workers(
             (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
         ]
         futures = workers.submit_all(pool, _identify_in_worker, arguments)
+        if idle is not None and len(pending) < pool:  # a resumed run: a core is idle now
+            idle()
+            idle = None
         for left, (target, equation, rows, seconds) in enumerate(
             workers.completed(futures), start=1
         ):

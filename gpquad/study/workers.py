@@ -216,10 +216,17 @@ def release(wait: bool = False, kill: bool = False) -> None:
         executor.shutdown(wait=wait, kill_workers=kill)
         return
     processes = list((executor._processes or {}).values())  # Python < 3.14: no kill_workers
+    manager = getattr(executor, "_executor_manager_thread", None)
     executor.shutdown(wait=False, cancel_futures=kill)
     if kill:
         for process in processes:
             process.kill()
+        if manager is not None:
+            # Held here, the executor lets its manager thread close the call queue. Dropped,
+            # the thread set an error on a cancelled future (InvalidStateError in Python
+            # 3.11's terminate_broken), died, and left the queue's feeder thread blocked
+            # on a full pipe, which the interpreter then waited for at exit.
+            manager.join(timeout=60)
     if wait:
         for process in processes:
             process.join()
