@@ -122,11 +122,14 @@ def test_the_searches_left_share_the_idle_cores(tmp_path, monkeypatch, jobs, exp
     assert len(shares) == 1 and not Path(shares[0]).exists()
 
 
-@pytest.mark.parametrize("jobs, after", [(2, 5), (4, 3), (8, 1)])
-def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, jobs, after):
+@pytest.mark.parametrize(
+    "pending, jobs, after",
+    [(TARGET_NAMES, 2, 5), (TARGET_NAMES, 4, 3), (TARGET_NAMES, 8, 1), (["a_x"], 2, 0)],
+)
+def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, pending, jobs, after):
     """`idle` (the command line loads its plotting there) runs once, when fewer searches
     are left than the pool's processes (min(jobs, 6)): not before, while every core is
-    busy."""
+    busy; at once for a resumed run with fewer searches than processes."""
     arrived: list[str] = []
 
     def arrival(arguments):
@@ -142,36 +145,10 @@ def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, jobs
         Progress(False, 6),
         None,
         None,
-        list(TARGET_NAMES),
+        list(pending),
         jobs,
         {},
         {},
         lambda: calls.append(len(arrived)),
     )
     assert calls == [after]
-
-
-def test_idle_is_called_at_once_when_fewer_searches_than_processes(monkeypatch):
-    """A resumed run with one search left on a two-process pool: a core is idle at once."""
-    arrived: list[str] = []
-
-    def arrival(arguments):
-        for args in arguments:
-            arrived.append(args[1])
-            yield args
-
-    fake_workers(monkeypatch, arrival)
-    calls: list[int] = []
-    fit._search_in_workers(
-        None,
-        Config(),
-        Progress(False, 6),
-        None,
-        None,
-        ["a_x"],
-        2,
-        {},
-        {},
-        lambda: calls.append(len(arrived)),
-    )
-    assert calls == [0]

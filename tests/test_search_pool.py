@@ -98,6 +98,15 @@ def test_forked_and_fresh_workers_find_the_same_equations(tmp_path):
     assert "p_dot =" in found["fork"]["equations"]
 
 
+def _printed_json(script: str, *args: str) -> dict:
+    """The JSON that `script` prints last, run in a clean process with `args`."""
+    proc = subprocess.run(
+        [sys.executable, "-c", script, *args], env=ENV, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
 #: Each worker of a fresh pool raises SIGINT in itself; prints the pool's kind and results.
 RAISE_SIGINT = """
 import json, signal, sys
@@ -122,15 +131,7 @@ def test_workers_ignore_ctrl_c(pool):
     """A worker that receives SIGINT (Ctrl-C reaches the whole process group) keeps
     running: the run stops it. A worker that died of it mid-message left the run's pool
     hung or its manager thread failing. In a clean process, where a pool is forked."""
-    proc = subprocess.run(
-        [sys.executable, "-c", RAISE_SIGINT, pool],
-        env=ENV,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
-    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    found = _printed_json(RAISE_SIGINT, pool)
     assert found["results"] == [None, None], found
     assert ("loky" in found["pool"]) == (pool == "fresh")
 
@@ -161,16 +162,21 @@ def test_workers_ignore_ctrl_c_from_birth(pool):
     """A fresh interpreter imports for a second or two before its initializer runs: the
     workers are started with SIGINT ignored, which they inherit, and this process gets
     its own handler back."""
-    proc = subprocess.run(
-        [sys.executable, "-c", BORN_IGNORING, pool],
-        env=ENV,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
-    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    found = _printed_json(BORN_IGNORING, pool)
     assert found["ignored"] == [True, True] and found["here"], found
+
+
+def _in_own_group(cmd: list[str]) -> subprocess.Popen:
+    """`cmd` started in a process group of its own (killed or interrupted as one), its
+    output piped as text."""
+    return subprocess.Popen(
+        cmd,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
 
 
 #: completed()'s error path (every future cancelled, then release(kill=True)) while one
@@ -202,14 +208,7 @@ print("released", flush=True)
 def test_a_pool_stopped_with_a_search_pending_lets_the_process_exit():
     """A failed search or Ctrl-C stops the pool while a search still waits to be sent; the
     process then exits at once. Without the pool's manager thread joined, it hung at exit."""
-    proc = subprocess.Popen(
-        [sys.executable, "-c", STOPPED_WITH_ONE_PENDING],
-        env=ENV,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
+    proc = _in_own_group([sys.executable, "-c", STOPPED_WITH_ONE_PENDING])
     try:
         out, err = proc.communicate(timeout=60)
     except subprocess.TimeoutExpired:
@@ -238,14 +237,7 @@ def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
     config.write_text(CONFIG.format(iterations=4))
     head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
     cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
-    proc = subprocess.Popen(
-        [*cmd, "--out", str(tmp_path / "run")],
-        env=ENV,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
+    proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])
     try:
         assert proc.stdout is not None
         for line in proc.stdout:
