@@ -143,6 +143,7 @@ from gpquad.study import workers
 
 if sys.argv[1] == "fresh":
     workers.fork_context = lambda: None
+before = signal.getsignal(signal.SIGINT)
 workers.start(2)
 pids = [p.pid for p in workers._pool["executor"]._processes.values()]
 ignored = []
@@ -150,7 +151,7 @@ for pid in pids:
     with open(f"/proc/{pid}/status") as fh:
         mask = next(line for line in fh if line.startswith("SigIgn:")).split()[1]
     ignored.append(bool(int(mask, 16) & (1 << (signal.SIGINT - 1))))
-here = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+here = signal.getsignal(signal.SIGINT) is before
 workers.release(wait=True, kill=True)
 print(json.dumps({"ignored": ignored, "here": here}))
 """
@@ -168,7 +169,8 @@ def test_workers_ignore_ctrl_c_from_birth(pool):
 
 def _in_own_group(cmd: list[str]) -> subprocess.Popen:
     """`cmd` started in a process group of its own (killed or interrupted as one), its
-    output piped as text."""
+    output piped as text, with SIGINT's default action (a test run started in the
+    background of a shell inherits it ignored, as a terminal's Ctrl-C never is)."""
     return subprocess.Popen(
         cmd,
         env=ENV,
@@ -176,6 +178,7 @@ def _in_own_group(cmd: list[str]) -> subprocess.Popen:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
 
 
