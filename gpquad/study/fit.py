@@ -228,16 +228,16 @@ def _search_in_workers(
             (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
         ]
         futures = workers.submit_all(pool, _identify_in_worker, arguments)
-        if idle is not None and len(pending) < pool:  # a resumed run: a core is idle now
+        # idle() once a process has no search left: at once in a resumed run with fewer
+        idle_after = max(0, len(pending) - pool + 1)  # arrivals
+        if idle is not None and idle_after == 0:
             idle()
-            idle = None
         for left, (target, equation, rows, seconds) in enumerate(
             workers.completed(futures), start=1
         ):
             share.set(len(pending) - left)
-            if idle is not None and len(pending) - left < pool:
+            if idle is not None and left == idle_after:
                 idle()
-                idle = None
             ready[target] = (equation, rows)
             equations[target], timings[target] = equation, seconds
             _say_found(report, equation, seconds)
