@@ -260,3 +260,32 @@ def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
     while _group_alive(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not _group_alive(proc.pid), "a worker outlived the run"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="process groups and SIGKILL")
+@pytest.mark.parametrize("pool", ["forked", "fresh"])
+def test_workers_exit_when_the_run_is_killed(tmp_path, pool):
+    """A run killed outright (SIGKILL: the out-of-memory killer, a job's time limit) cannot
+    stop its workers; they see it gone and exit, mid-search, instead of living on."""
+    config = tmp_path / "pool.toml"
+    config.write_text(CONFIG.format(iterations=8))
+    head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
+    cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
+    proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            if "searching" in line:
+                break
+        time.sleep(1.0)  # the searches are under way (each takes seconds)
+        assert proc.poll() is None, "the run ended before it was killed"
+        os.kill(proc.pid, signal.SIGKILL)  # the run alone, not its group
+        proc.wait(timeout=60)  # (its pipes stay open while a worker lives)
+        deadline = time.monotonic() + 10
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group_alive(proc.pid), "a worker outlived the killed run"
+    finally:
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()

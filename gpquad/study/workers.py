@@ -12,7 +12,8 @@ script), the workers are forked from this process once it has imported the searc
 loaded numba's compiler (`fork_context`, `gpquad.study.warmup.load`): they start with
 both, where a fresh interpreter takes about two seconds of CPU for them. Elsewhere (a
 notebook, whose kernel runs threads; macOS; Windows) they are fresh interpreters (loky).
-The workers ignore Ctrl-C: this process stops them.
+The workers ignore Ctrl-C: this process stops them. They exit by themselves once it is
+gone (killed outright, it could not stop them).
 
 A fit's `jobs` are the cores it may use: at most one worker process per equation, and a
 search whose pool has cores left idle (the last one running, say) takes them as threads
@@ -129,10 +130,31 @@ def fork_context():
     return multiprocessing.get_context("fork")
 
 
-def _ignore_interrupts() -> None:
-    """A worker's initializer: Ctrl-C in a terminal reaches every process of its group;
-    this process stops the workers (`completed`), which would otherwise die mid-message."""
+#: Seconds between a worker's looks at its parent (`_exit_when_orphaned`).
+PARENT_POLL_S = 0.5
+
+
+def _initialize_worker(parent: int) -> None:
+    """A worker's initializer. Ctrl-C in a terminal reaches every process of its group;
+    this process stops the workers (`completed`), which would otherwise die mid-message:
+    they ignore it. And a worker exits once this process (`parent`) is gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if os.name == "posix":
+        import threading
+
+        threading.Thread(target=_exit_when_orphaned, args=(parent,), daemon=True).start()
+
+
+def _exit_when_orphaned(parent: int) -> None:
+    """Exit this process, whatever it is doing, once `parent` is no longer its parent. A
+    parent killed outright (SIGKILL, the out-of-memory killer, a job's time limit) cannot
+    stop its workers; a forked worker then finished its search and waited for the next one
+    forever, and a loky worker lived on for an hour."""
+    import time
+
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
 
 
 def start(jobs: int) -> None:
@@ -147,12 +169,17 @@ def start(jobs: int) -> None:
 
         load()  # the forked workers inherit it
         executor = ProcessPoolExecutor(
-            max_workers=jobs, mp_context=context, initializer=_ignore_interrupts
+            max_workers=jobs,
+            mp_context=context,
+            initializer=_initialize_worker,
+            initargs=(os.getpid(),),
         )
     else:
         from joblib.externals.loky import ProcessPoolExecutor as LokyExecutor
 
-        executor = LokyExecutor(max_workers=jobs, initializer=_ignore_interrupts)
+        executor = LokyExecutor(
+            max_workers=jobs, initializer=_initialize_worker, initargs=(os.getpid(),)
+        )
     with _born_ignoring_interrupts():  # the processes start at the first submit
         futures = [executor.submit(warm, g) for g in GROUPS]
     _pool.update(jobs=jobs, executor=executor, warm=futures)
