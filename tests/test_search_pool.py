@@ -231,23 +231,40 @@ def _group_alive(pgid: int) -> bool:
     return True
 
 
+def _searching_run(tmp_path, pool: str, iterations: int) -> subprocess.Popen:
+    """`gpquad run` of CONFIG on two workers (forked, or fresh: a thread runs first) in a
+    process group of its own, returned once its searches are under way."""
+    config = tmp_path / "pool.toml"
+    config.write_text(CONFIG.format(iterations=iterations))
+    head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
+    cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
+    proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if "searching" in line:
+            break
+    time.sleep(1.0)  # the searches are under way (each takes seconds)
+    if proc.poll() is not None:
+        proc.communicate()
+        pytest.fail("the run ended before the test could stop it")
+    return proc
+
+
+def _wait_for_group_end(pgid: int, seconds: float = 10.0) -> bool:
+    """Whether every process of the group is gone within `seconds`."""
+    deadline = time.monotonic() + seconds
+    while _group_alive(pgid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return not _group_alive(pgid)
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="process groups and SIGINT")
 @pytest.mark.parametrize("pool", ["forked", "fresh"])
 def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
     """Ctrl-C in a terminal reaches every process of the run's group: the run says it was
     interrupted and exits with 130 at once, without a traceback or a process left."""
-    config = tmp_path / "pool.toml"
-    config.write_text(CONFIG.format(iterations=4))
-    head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
-    cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
-    proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])
+    proc = _searching_run(tmp_path, pool, iterations=4)
     try:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            if "searching" in line:
-                break
-        time.sleep(1.0)  # the searches are under way (each takes seconds)
-        assert proc.poll() is None, "the run ended before the interruption"
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=60)
     finally:
@@ -256,10 +273,7 @@ def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "Traceback" not in out, err
     assert "interrupted" in out + err
-    deadline = time.monotonic() + 10
-    while _group_alive(proc.pid) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not _group_alive(proc.pid), "a worker outlived the run"
+    assert _wait_for_group_end(proc.pid), "a worker outlived the run"
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="process groups and SIGKILL")
@@ -267,24 +281,11 @@ def test_ctrl_c_during_the_searches_stops_every_process(tmp_path, pool):
 def test_workers_exit_when_the_run_is_killed(tmp_path, pool):
     """A run killed outright (SIGKILL: the out-of-memory killer, a job's time limit) cannot
     stop its workers; they see it gone and exit, mid-search, instead of living on."""
-    config = tmp_path / "pool.toml"
-    config.write_text(CONFIG.format(iterations=8))
-    head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
-    cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
-    proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])
+    proc = _searching_run(tmp_path, pool, iterations=8)
     try:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            if "searching" in line:
-                break
-        time.sleep(1.0)  # the searches are under way (each takes seconds)
-        assert proc.poll() is None, "the run ended before it was killed"
         os.kill(proc.pid, signal.SIGKILL)  # the run alone, not its group
         proc.wait(timeout=60)  # (its pipes stay open while a worker lives)
-        deadline = time.monotonic() + 10
-        while _group_alive(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not _group_alive(proc.pid), "a worker outlived the killed run"
+        assert _wait_for_group_end(proc.pid), "a worker outlived the killed run"
     finally:
         if _group_alive(proc.pid):
             os.killpg(proc.pid, signal.SIGKILL)
