@@ -148,8 +148,8 @@ def _initialize_worker(parent: int) -> None:
 def _exit_when_orphaned(parent: int) -> None:
     """Exit this process, whatever it is doing, once `parent` is no longer its parent. A
     parent killed outright (SIGKILL, the out-of-memory killer, a job's time limit) cannot
-    stop its workers; a forked worker then finished its search and waited for the next one
-    forever, and a loky worker lived on for an hour."""
+    stop its workers, which would otherwise finish their search and wait for the next one
+    forever."""
     import time
 
     while os.getppid() == parent:
