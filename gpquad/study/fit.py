@@ -228,8 +228,9 @@ def _search_in_workers(
             (dataset, t, cfg, run_dir is not None, share.path, jobs) for t in longest_first(pending)
         ]
         futures = workers.submit_all(pool, _identify_in_worker, arguments)
-        # idle() once a process has no search left: at once in a resumed run with fewer
-        idle_after = max(0, len(pending) - pool + 1)  # arrivals
+        # idle() once a process has no search left: after this many results, or at once
+        # (a resumed run with fewer searches than processes)
+        idle_after = max(0, len(pending) - pool + 1)
         if idle is not None and idle_after == 0:
             idle()
         for left, (target, equation, rows, seconds) in enumerate(

@@ -28,6 +28,8 @@ import os
 import signal
 import sys
 import tempfile
+import threading
+import time
 from concurrent.futures import FIRST_EXCEPTION, Future, as_completed, wait
 
 from gpquad.study.warmup import GROUPS, load, warm
@@ -121,7 +123,6 @@ def fork_context():
     Python thread in this process but the main one (a thread holding a lock at the fork
     would leave it held in the child); None elsewhere."""
     import multiprocessing
-    import threading
 
     if not sys.platform.startswith("linux") or threading.active_count() > 1:
         return None
@@ -140,8 +141,6 @@ def _initialize_worker(parent: int) -> None:
     they ignore it. And a worker exits once this process (`parent`) is gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if os.name == "posix":
-        import threading
-
         threading.Thread(target=_exit_when_orphaned, args=(parent,), daemon=True).start()
 
 
@@ -150,8 +149,6 @@ def _exit_when_orphaned(parent: int) -> None:
     parent killed outright (SIGKILL, the out-of-memory killer, a job's time limit) cannot
     stop its workers, which would otherwise finish their search and wait for the next one
     forever."""
-    import time
-
     while os.getppid() == parent:
         time.sleep(PARENT_POLL_S)
     os._exit(1)
@@ -190,8 +187,6 @@ def _born_ignoring_interrupts():
     """SIGINT ignored in this process (from its main thread only) while it starts worker
     processes: they inherit that, through a fork and through exec, so a fresh interpreter
     ignores Ctrl-C while it imports, before its initializer runs."""
-    import threading
-
     if threading.current_thread() is not threading.main_thread():
         yield
         return
