@@ -8,7 +8,11 @@ from gpquad.data.flight import Flight
 from gpquad.data.simulator import TruthModel, completed, pilot_sticks
 from gpquad.engine.kernels.integrator import integrate_step
 from gpquad.engine.kernels.quaternion import euler_from_quat
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.variables import terminal_names
+
+integrate_step = python_callable(integrate_step)
+euler_from_quat = python_callable(euler_from_quat)
 
 
 def eq2_flight(cfg, input_names) -> Flight:

@@ -10,7 +10,11 @@ import pytest
 
 from gpquad.engine.kernels.arctrig import asin, atan2, atan2_lanes
 from gpquad.engine.kernels.quaternion import euler_angle, euler_angle_lanes
-from gpquad.engine.numba_config import njit
+from gpquad.engine.numba_config import njit, python_callable
+
+euler_angle = python_callable(euler_angle)
+euler_angle_lanes = python_callable(euler_angle_lanes)
+atan2_lanes = python_callable(atan2_lanes)
 
 
 @njit(cache=False)

@@ -18,9 +18,12 @@ from gpquad.engine.kernels.integrator import (
 from gpquad.engine.kernels.rollout import rollout
 from gpquad.engine.kernels.step import EULER
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, eval_lanes
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, VAR_BASE
 from gpquad.engine.variables import TARGET_NAMES
+
+eval_lanes = python_callable(eval_lanes)
 
 N_VARS = 13
 finite = st.floats(-3, 3, allow_nan=False)
@@ -68,7 +71,7 @@ def as_tree(nodes, delays=(0, 0, 0, 0)):
 
 @given(unit_quaternions())
 def test_euler_matches_scipy(q):
-    got = np.array(kq.euler_from_quat(*q))
+    got = np.array(python_callable(kq.euler_from_quat)(*q))
     ref = naive.euler(q)
     if abs(abs(ref[1]) - np.pi / 2) < 1e-3:  # gimbal lock: only theta is defined
         assert got[1] == pytest.approx(ref[1], abs=1e-6)
@@ -82,12 +85,12 @@ def test_euler_matches_scipy(q):
 @given(st.tuples(finite, finite, finite).map(np.array), st.sampled_from([0.004, 0.01, 0.04, 0.2]))
 def test_rate_increment_is_the_exponential_map(rates, dt):
     rates = rates * 8  # up to 24 rad/s, both series and libm branches
-    got = np.array(kq.rate_increment(*rates, dt))
+    got = np.array(python_callable(kq.rate_increment)(*rates, dt))
     ref = naive.quat_wxyz(naive.Rotation.from_rotvec(rates * dt))
     assert min(np.abs(got - ref).max(), np.abs(got + ref).max()) < 1e-14  # q and -q agree
     if np.linalg.norm(rates) * dt >= np.pi:  # the inverse is defined for < half a turn per step
         return
-    back = np.array(kq.rate_from_increment(*got, dt))
+    back = np.array(python_callable(kq.rate_from_increment)(*got, dt))
     assert np.abs(back - rates).max() < 1e-9 * max(1.0, np.abs(rates).max())
 
 
@@ -96,7 +99,7 @@ def test_rotations_agree(q, v):
     mat = np.empty((3, 3))
     kq.rotation_matrix(*q, mat)
     assert np.abs(mat - naive.rotation(q).as_matrix()).max() < 1e-12
-    assert np.abs(np.array(kq.rotate_back(*q, *v)) - mat.T @ v).max() < 1e-12
+    assert np.abs(np.array(python_callable(kq.rotate_back)(*q, *v)) - mat.T @ v).max() < 1e-12
 
 
 def test_integrator_matches_naive_reference():

@@ -17,9 +17,17 @@ from gpquad.engine.kernels.tree_tangent import (
     lanes_gradient_work,
     right_children,
 )
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.tree.encoding import Tree
 from gpquad.engine.tree.operators import CONST, VAR_BASE
 from gpquad.engine.variables import TARGET_NAMES
+
+constant_slots = python_callable(constant_slots)
+right_children = python_callable(right_children)
+gradient_work = python_callable(gradient_work)
+eval_with_gradient = python_callable(eval_with_gradient)
+lanes_gradient_work = python_callable(lanes_gradient_work)
+lanes_eval_with_gradient = python_callable(lanes_eval_with_gradient)
 
 STARTS = np.array([10, 400, 900], dtype=np.int64)
 #: A window whose mean error exceeds this (states 1000x the data's) runs away, e.g. under

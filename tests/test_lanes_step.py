@@ -6,6 +6,9 @@ import pytest
 
 from gpquad.engine.kernels.quaternion import SERIES_LIMIT
 from gpquad.engine.kernels.step import euler_lanes_step, euler_step
+from gpquad.engine.numba_config import python_callable
+
+euler_lanes_step = python_callable(euler_lanes_step)
 
 
 @pytest.mark.parametrize("move_vel, move_att", [(True, True), (False, True), (True, False)])

@@ -12,9 +12,12 @@ import naive
 from gpquad.engine.evolve.evaluator import Evaluator
 from gpquad.engine.evolve.gradient_fit import residuals_and_jacobian
 from gpquad.engine.kernels.tree_eval import STACK_ROWS, check_stack, eval_lanes, stack_height
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.tree.encoding import Tree, shallow_sum, tree_depth
 from gpquad.engine.tree.operators import ADD, CONST, MUL, VAR_BASE
 from gpquad.models.equations import DiscoveredModel, Equation
+
+eval_lanes = python_callable(eval_lanes)
 
 N_VARS = 13
 

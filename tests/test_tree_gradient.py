@@ -15,7 +15,13 @@ from gpquad.engine.kernels.tree_tangent import (
     gradient_work,
     right_children,
 )
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.tree.operators import CONST, MUL, VAR_BASE
+
+constant_slots = python_callable(constant_slots)
+right_children = python_callable(right_children)
+gradient_work = python_callable(gradient_work)
+eval_with_gradient = python_callable(eval_with_gradient)
 
 
 def _gradient(tree, leaves, tangents, n_tangent=None):

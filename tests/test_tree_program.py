@@ -10,7 +10,12 @@ from gpquad.engine.kernels.tree_eval import (
     eval_lanes,
     run_program,
 )
+from gpquad.engine.numba_config import python_callable
 from gpquad.engine.tree.variation import VariationParams, random_tree
+
+eval_lanes = python_callable(eval_lanes)
+compile_program = python_callable(compile_program)
+run_program = python_callable(run_program)
 
 
 def test_program_equals_stack_interpreter():

@@ -141,7 +141,7 @@ def atan2(y, x):
     return v if applies else math.atan2(y, x)
 
 
-@njit
+@njit(inner=True)
 def atan2_lanes(y, x, out, n):
     """out[:n] = atan2(y[:n], x[:n]): a vectorised pass, then math.atan2 where it did not
     apply (the same bits as atan2 lane by lane)."""

@@ -12,7 +12,7 @@ STATE_LIMIT = 1e6
 DIVERGED_RESIDUAL = STATE_LIMIT
 
 
-@njit
+@njit(inner=True)
 def uses_leaves(codes, size, first, last):
     """True if the tree reads a variable leaf first .. last (terminal indices)."""
     for i in range(size):
@@ -22,7 +22,7 @@ def uses_leaves(codes, size, first, last):
     return False
 
 
-@njit
+@njit(inner=True)
 def read_leaves(codes, size, n_terminals):
     """(n_terminals,) bool: the variable leaves the tree reads."""
     used = np.zeros(n_terminals, dtype=np.bool_)

@@ -77,7 +77,7 @@ def stage_features(ys, lane, used, features):
             features[6 + i, lane] = ys[W + i, lane]
 
 
-@njit
+@njit(inner=True)
 def first_flown_row(codes, size, linear, angle_read):
     """The first body row a flight steps (the rows above it keep the window's start): the
     attitude where an angle is read (by the tree, or angle_read: the angle is scored or its

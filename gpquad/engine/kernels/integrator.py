@@ -25,7 +25,7 @@ from gpquad.engine.kernels.step import N_STAGES, NODES, WEIGHTS, euler_position_
 from gpquad.engine.numba_config import njit
 
 
-@njit
+@njit(inner=True)
 def integrate_step(quat, vel, rates, pos, acc, dt, mat):
     """Advance one eq. 2 step in place (gpquad.engine.kernels.step.euler_step).
 
@@ -168,7 +168,7 @@ def rk4_body_accelerations(vel, rates, dt, substeps):
     return acc
 
 
-@njit
+@njit(inner=True)
 def solve3(m, b):
     """b <- m^-1 b for a 3 x 3 m, by Gaussian elimination with partial pivoting (m is
     overwritten). numpy.linalg.solve's LAPACK path costs seconds of compilation per kernel

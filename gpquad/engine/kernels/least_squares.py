@@ -21,7 +21,7 @@ import numpy as np
 from gpquad.engine.numba_config import njit
 
 
-@njit
+@njit(inner=True)
 def _householder(at, b, n_rows, n_cols):
     """In place: at (n_cols, n_rows), the matrix transposed (its columns contiguous) -> R^T
     in its lower triangle, b (n_rows,) -> Q^T b."""

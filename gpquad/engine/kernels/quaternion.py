@@ -78,7 +78,7 @@ def increment_series(p, q, r, dt):
     return cosh, p * s, q * s, r * s, h2
 
 
-@njit
+@njit(inner=True)
 def rate_increment(p, q, r, dt):
     """dq = exp(omega dt / 2) for body rates (p, q, r) rad/s held over dt s.
 
@@ -94,14 +94,14 @@ def rate_increment(p, q, r, dt):
     return math.cos(h), p * s, q * s, r * s
 
 
-@njit
+@njit(inner=True)
 def renormalize(q0, q1, q2, q3):
     """First-order renormalisation of a nearly unit quaternion (no sqrt or division)."""
     k = 1.5 - 0.5 * (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     return q0 * k, q1 * k, q2 * k, q3 * k
 
 
-@njit
+@njit(inner=True)
 def rate_from_increment(d0, d1, d2, d3, dt):
     """Inverse of rate_increment: body rates (rad/s) from a unit increment quaternion.
 
@@ -117,7 +117,7 @@ def rate_from_increment(d0, d1, d2, d3, dt):
     return d1 * scale, d2 * scale, d3 * scale
 
 
-@njit
+@njit(inner=True)
 def rotate_back(d0, d1, d2, d3, b0, b1, b2):
     """R(d)^T b: express body_t vector b in body_{t+1} for the increment d (rotation by conj(d))."""
     # v' = b + w t + u' x t with u' = -u and t = 2 (u' x b)
@@ -145,26 +145,26 @@ def rotation_matrix(q0, q1, q2, q3, out):
     out[2, 2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
 
 
-@njit
+@njit(inner=True)
 def euler_phi(q0, q1, q2, q3):
     """Roll (rad) of a body-to-world quaternion, ZYX convention."""
     return math.atan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
 
 
-@njit
+@njit(inner=True)
 def euler_theta(q0, q1, q2, q3):
     """Pitch (rad), ZYX convention; clamped at +-pi/2."""
     s = 2.0 * (q0 * q2 - q3 * q1)
     return math.asin(min(1.0, max(-1.0, s)))
 
 
-@njit
+@njit(inner=True)
 def euler_psi(q0, q1, q2, q3):
     """Yaw (rad), ZYX convention."""
     return math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
 
 
-@njit
+@njit(inner=True)
 def euler_angle(axis, q0, q1, q2, q3):
     """Euler angle `axis` (0 phi, 1 theta, 2 psi) of the attitude."""
     if axis == 0:
@@ -174,7 +174,7 @@ def euler_angle(axis, q0, q1, q2, q3):
     return euler_psi(q0, q1, q2, q3)
 
 
-@njit
+@njit(inner=True)
 def euler_angle_lanes(axis, quat, out, n, y, x):
     """out[:n] = euler_angle(axis) of the attitudes quat (4, n) within 1 ulp, in loops that
     vectorise: gpquad.engine.kernels.arctrig's atan2 and asin (not libm's bits, which
@@ -195,7 +195,7 @@ def euler_angle_lanes(axis, quat, out, n, y, x):
     atan2_lanes(y, x, out, n)
 
 
-@njit
+@njit(inner=True)
 def euler_from_quat(q0, q1, q2, q3):
     """ZYX Euler angles (phi, theta, psi) in rad of a body-to-world quaternion."""
     return euler_phi(q0, q1, q2, q3), euler_theta(q0, q1, q2, q3), euler_psi(q0, q1, q2, q3)

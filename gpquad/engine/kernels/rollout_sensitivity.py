@@ -63,7 +63,7 @@ def _atan2_gradient(num, den, dnum, dden, out, row):
             out[row, i] = 0.0
 
 
-@njit
+@njit(inner=True)
 def euler_gradients(q0, q1, q2, q3, out, dnum, dden):
     """out (3, 4): the gradients of phi, theta, psi (quaternion.euler_phi, euler_theta,
     euler_psi) with respect to (q0, q1, q2, q3); theta's is zero where it is clamped."""

@@ -70,7 +70,7 @@ TANGENT_ROWS = 8
 LANES = 64
 
 
-@njit
+@njit(inner=True)
 def tangent_row(leaf, linear, axis):
     """The tangent row a moving leaf (tangent_leaves) reads."""
     if linear:
@@ -78,7 +78,7 @@ def tangent_row(leaf, linear, axis):
     return TR if leaf == 6 + axis else TA + leaf
 
 
-@njit
+@njit(inner=True)
 def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first):
     """The tangents' stage state of lanes 0..n-1, rows t_first..t_end-1 (stage_state's
     arithmetic, element by element)."""

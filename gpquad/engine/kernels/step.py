@@ -82,7 +82,7 @@ def lag_rate(alpha: float, dt: float) -> float:
     return 0.0 if alpha >= 1.0 else float(-math.log1p(-alpha) / dt)
 
 
-@njit
+@njit(inner=True)
 def lag_rate_kernel(alpha, dt):
     """lag_rate inside a kernel."""
     if alpha >= 1.0:
@@ -122,7 +122,7 @@ def euler_step(q0, q1, q2, q3, v0, v1, v2, p, q, r, a0, a1, a2, a3, a4, a5, dt, 
     )
 
 
-@njit
+@njit(inner=True)
 def euler_lanes_step(
     quat, vel, rates, acc, starts, k, axis, pred, alive, dt, move_vel, move_att, inc
 ):
@@ -188,7 +188,7 @@ def euler_rate_step(rate, angular_acceleration, dt):
     return rate + angular_acceleration * dt
 
 
-@njit
+@njit(inner=True)
 def euler_position_step(quat, vel, pos, dt, mat):
     """Eq. 2's position step x' = x + R(q) V dt, in place on pos (3,); mat (3, 3) work."""
     rotation_matrix(quat[0], quat[1], quat[2], quat[3], mat)
@@ -209,7 +209,7 @@ def euler_velocity_step(rot, idx, v0, v1, v2, a0, a1, a2, dt):
     )
 
 
-@njit
+@njit(inner=True)
 def euler_velocity_tangent(rot, idx, sens, target, grad, dt, tmp):
     """Tangent of euler_velocity_step: S <- D^T (S + e_target dt grad), in place on sens
     (3, n_c); tmp (3, n_c) is a work buffer."""
@@ -228,7 +228,7 @@ def euler_velocity_tangent(rot, idx, sens, target, grad, dt, tmp):
             )
 
 
-@njit
+@njit(inner=True)
 def euler_rate_tangent(
     axis, phi0, theta0, phi1, theta1, q_rate, r_rate, sens, asens, grad, dt, track_angles, kin, jang
 ):
@@ -250,13 +250,13 @@ def euler_rate_tangent(
         sens[c] += grad[c] * dt
 
 
-@njit
+@njit(inner=True)
 def wrap_angle(a):
     """a wrapped to [-pi, pi]."""
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
-@njit
+@njit(inner=True)
 def euler_kinematics(axis, phi, theta, q, r, column, jang):
     """Partials of the Euler-angle rates (phi, theta, psi)_dot (ZYX) at the current state:
     column (3,) w.r.t. body rate `axis` (0 p, 1 q, 2 r), jang (3, 2) w.r.t. phi and theta.
@@ -283,7 +283,7 @@ def euler_kinematics(axis, phi, theta, q, r, column, jang):
 # rk4: classical Runge-Kutta on the continuous-time ODE
 
 
-@njit
+@njit(inner=True)
 def rk4_tangent_buffers(n_rows, n_tangent_rows, n_c):
     """The work of one lane of RK4 with tangents: the state, its stage state, slope and
     weighted sum (n_rows, 1), and the same four for the tangents (n_tangent_rows, n_c)."""
@@ -330,7 +330,7 @@ def unit_attitude(out, lane):
         out[Q + i, lane] *= scale
 
 
-@njit
+@njit(inner=True)
 def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
     """body_stage_state of lanes 0..n_lanes-1, row by row over the lanes, so that the loops
     over lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per
@@ -349,7 +349,7 @@ def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
             unit_attitude(out, lane)
 
 
-@njit
+@njit(inner=True)
 def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first=0):
     """accumulate of lanes 0..n_lanes-1, row by row over the lanes."""
     for i in range(first, n_rows):
@@ -361,7 +361,7 @@ def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first=0):
                 total[i, lane] += weight * k[i, lane]
 
 
-@njit
+@njit(inner=True)
 def lanes_finish_step(y, total, h, n_lanes, n_rows, first=0):
     """finish_step of lanes 0..n_lanes-1, row by row over the lanes."""
     for i in range(first, n_rows):

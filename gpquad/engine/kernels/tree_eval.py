@@ -55,7 +55,7 @@ def check_stack(codes, sizes) -> None:
         )
 
 
-@njit
+@njit(inner=True)
 def eval_lanes(codes, values, size, features, stack, out, n_lanes):
     """Stack evaluation of the prefix tree, right to left, vectorised over lanes."""
     sp = 0
@@ -95,7 +95,7 @@ def eval_lanes(codes, values, size, features, stack, out, n_lanes):
         out[lane] = stack[0, lane]
 
 
-@njit
+@njit(inner=True)
 def compile_program(codes, values, size, n_features, regs, prog):
     """The prefix tree as a register program over regs (n_features + size, n_lanes), whose
     first n_features rows are the leaves: node i's value goes to row n_features + i, and a
@@ -125,7 +125,7 @@ def compile_program(codes, values, size, n_features, regs, prog):
     return n_ops, rows[0]
 
 
-@njit
+@njit(inner=True)
 def run_program(prog, n_ops, regs, n_lanes):
     """Evaluate a compile_program program on the current leaves (rows of regs)."""
     for j in range(n_ops):
@@ -171,7 +171,7 @@ def eval_on_samples(codes, values, size, delays, states, inputs, indices):
     return out
 
 
-@njit
+@njit(inner=True)
 def model_programs(codes, values, sizes, modelled, n_leaves, n_lanes):
     """The register programs of a full model's trees (one per target, compile_program), for
     the rollouts: (regs (6, n_leaves + M, n_lanes), prog (6, M, 4), n_ops (6,), root (6,),
@@ -190,7 +190,7 @@ def model_programs(codes, values, sizes, modelled, n_leaves, n_lanes):
     return regs, prog, n_ops, root, used
 
 
-@njit
+@njit(inner=True)
 def hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, n_state):
     """Write each modelled tree's input slots (rows n_state + j of regs[t]) for sample k of
     every window (lane): input j % n_inputs at the slot's delay, plus the window's
@@ -211,7 +211,7 @@ def hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, n_
                     regs[t, n_state + j, lane] = u
 
 
-@njit
+@njit(inner=True)
 def run_model_tree(regs, prog, n_ops, used, t, features, n_lanes):
     """Evaluate tree t of model_programs over the lanes at the state leaves `features`
     (9, n_lanes) (its input slots written by hold_inputs); its value is

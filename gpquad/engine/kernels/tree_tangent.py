@@ -14,7 +14,7 @@ def residual_rows(target, att_weight):
     return 2 if target >= 3 and att_weight > 0.0 else 1
 
 
-@njit
+@njit(inner=True)
 def constant_slots(codes, size):
     """(size,) column of each CONST node of a prefix tree in the constants' order, -1 for
     the other nodes."""
@@ -27,7 +27,7 @@ def constant_slots(codes, size):
     return slot_of
 
 
-@njit
+@njit(inner=True)
 def right_children(codes, size):
     """(size,) index of each operator node's right operand in a prefix tree (its left one
     is the next node); -1 for the leaves. The stack walk of the evaluation, right to left:
@@ -44,7 +44,7 @@ def right_children(codes, size):
     return right
 
 
-@njit
+@njit(inner=True)
 def tangent_leaves(linear, axis, angles):
     """The leaves whose tangents a per-equation sensitivity kernel follows: a linear
     target's u, v, w; an angular target's own rate, and the Euler angles when `angles`."""
@@ -55,14 +55,14 @@ def tangent_leaves(linear, axis, angles):
     return np.array([6 + axis], dtype=np.int64)
 
 
-@njit
+@njit(inner=True)
 def gradient_work(codes, size, n_terminals):
     """eval_with_gradient's work for one tree: (its right operands (right_children), node
     values, node adjoints (size,), leaf adjoints (n_terminals,))."""
     return right_children(codes, size), np.empty(size), np.empty(size), np.empty(n_terminals)
 
 
-@njit
+@njit(inner=True)
 def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, grad, moving):
     """Value of the tree at one sample and its gradient w.r.t. the constants (grad, (n_c,)),
     by reverse mode: O(size + state leaves read x n_c), where forward mode (every node
@@ -136,7 +136,7 @@ def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, g
     return node_value[0]
 
 
-@njit
+@njit(inner=True)
 def lanes_gradient_work(size, n_terminals, n_lanes):
     """lanes_eval_with_gradient's work for up to n_lanes lanes: node values, node adjoints
     (size, n_lanes) and leaf adjoints (n_terminals, n_lanes)."""
@@ -147,7 +147,7 @@ def lanes_gradient_work(size, n_terminals, n_lanes):
     )
 
 
-@njit
+@njit(inner=True)
 def lanes_eval_with_gradient(codes, values, size, slot_of, right, features, work, grad, pred, n):
     """eval_with_gradient for lanes 0..n-1 at once, the tree walked once for all of them
     (features (n_terminals, L), one column per lane), before the leaves' tangents: pred (L,)
