@@ -1,12 +1,15 @@
 """Inner kernels (gpquad.engine.numba_config): compiled without the wrappers that let Python
 call them, callable from other kernels, and a clear TypeError (not a crash) from Python."""
 
+import ast
 import importlib
 import pkgutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import gpquad
 import gpquad.engine.kernels
 from gpquad.engine.kernels import quaternion as kq
 from gpquad.engine.numba_config import InnerDispatcher, njit, python_callable
@@ -58,3 +61,52 @@ def test_python_callable_is_cached_apart_from_the_inner_kernel():
     copy = python_callable(kq.euler_from_quat)
     assert copy.py_func.__qualname__ != kq.euler_from_quat.py_func.__qualname__
     assert copy.py_func.__code__ is kq.euler_from_quat.py_func.__code__
+
+
+def _jitted(fn) -> bool:
+    return any("njit" in ast.unparse(d) for d in fn.decorator_list)
+
+
+def python_calls_of_inner(sources: dict[str, str]) -> list[str]:
+    """Calls, from Python code (outside any njit function), of a function some source
+    decorates @njit(inner=True): each would raise at run time."""
+    trees = {name: ast.parse(text) for name, text in sources.items()}
+    inner = {
+        fn.name
+        for tree in trees.values()
+        for fn in tree.body
+        if isinstance(fn, ast.FunctionDef)
+        and any("inner=True" in ast.unparse(d) for d in fn.decorator_list)
+    }
+    found = []
+
+    def visit(node, name, in_kernel):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef):
+                visit(child, name, in_kernel or _jitted(child))
+                continue
+            if isinstance(child, ast.Call) and not in_kernel:
+                f = child.func
+                called = f.id if isinstance(f, ast.Name) else getattr(f, "attr", None)
+                if called in inner:
+                    found.append(f"{name}:{child.lineno} {called}")
+            visit(child, name, in_kernel)
+
+    for name, tree in trees.items():
+        visit(tree, name, False)
+    return found
+
+
+def test_no_python_code_calls_an_inner_kernel():
+    root = Path(gpquad.__file__).parent
+    sources = {str(p.relative_to(root)): p.read_text() for p in root.rglob("*.py")}
+    assert python_calls_of_inner(sources) == []
+
+
+def test_the_inner_call_check_finds_a_python_caller():
+    kernel = "@njit(inner=True)\ndef helper(x):\n    return x\n"
+    caller = (
+        "from k import helper\n\n@njit\ndef fine(x):\n    return helper(x)\n\n"
+        "def wrong(x):\n    return k.helper(x)\n"
+    )
+    assert python_calls_of_inner({"k.py": kernel, "c.py": caller}) == ["c.py:8 helper"]

@@ -10,7 +10,7 @@ import numpy as np
 from gpquad.engine.numba_config import njit
 
 
-@njit
+@njit(inner=True)
 def quad12_rhs(th, x, u, out):
     """dX/dt of the paper's state-space model into out (12,)."""
     out[0] = x[1]
@@ -27,7 +27,7 @@ def quad12_rhs(th, x, u, out):
     out[11] = th[9] * x[7] * x[9] + th[10] * u[3]
 
 
-@njit
+@njit(inner=True)
 def _rk4(th, x, u, h, k1, k2, k3, k4, tmp):
     quad12_rhs(th, x, u, k1)
     for i in range(12):

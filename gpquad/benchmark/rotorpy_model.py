@@ -114,14 +114,14 @@ def hover_rotor_speed(params: dict) -> float:
     return math.sqrt(params["mass"] * GRAVITY / (4.0 * params["k_eta"]))
 
 
-@njit
+@njit(inner=True)
 def quat_matrix(q, out):
     """Rotation matrix of quaternion q (x, y, z, w), normalised first (as scipy does)."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     rotation_matrix(q[3] / n, q[0] / n, q[1] / n, q[2] / n, out)
 
 
-@njit
+@njit(inner=True)
 def matrix_quat(m, out):
     """Quaternion (x, y, z, w), w >= 0, of a rotation matrix (Shepperd's method)."""
     tr = m[0, 0] + m[1, 1] + m[2, 2]
@@ -146,7 +146,7 @@ def matrix_quat(m, out):
             out[i] = -out[i]
 
 
-@njit
+@njit(inner=True)
 def attitude_error(r, r_des, out):
     """rotorpy's vee(0.5 (R_des^T R - R^T R_des)), rad."""
     s = 0.5 * (r_des.T @ r - r.T @ r_des)
@@ -268,7 +268,7 @@ def se3_setpoint(s, ref, mass, r_des):
     return u1
 
 
-@njit
+@njit(inner=True)
 def euler_zyx(m):
     """(roll, pitch, yaw) of R = Rz(yaw) Ry(pitch) Rx(roll), rad."""
     return (
@@ -278,7 +278,7 @@ def euler_zyx(m):
     )
 
 
-@njit
+@njit(inner=True)
 def zyx_matrix(roll, pitch, yaw, out):
     """R = Rz(yaw) Ry(pitch) Rx(roll)."""
     cr, sr = math.cos(roll), math.sin(roll)

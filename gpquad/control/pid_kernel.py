@@ -77,7 +77,7 @@ def plant_accelerations(
         acc[t] = pred[0]
 
 
-@njit
+@njit(inner=True)
 def plant_rk4_sample(
     codes,
     values,

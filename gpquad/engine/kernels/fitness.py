@@ -42,7 +42,7 @@ from gpquad.engine.kernels.step import (
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import compile_program, run_program
-from gpquad.engine.numba_config import njit
+from gpquad.engine.numba_config import njit, python_callable
 
 __all__ = [
     "DIVERGED",
@@ -76,7 +76,8 @@ def tree_window_errors(
     scheme, substeps: the integrator (gpquad.engine.kernels.step: EULER, one step per
     sample, or RK4 with `substeps` steps per sample, gpquad.engine.kernels.fitness_rk4).
     The scheme is picked here, in Python, so that a process compiles only the kernels of
-    the schemes it flies.
+    the schemes it flies. (The population kernels call the same kernels from numba; this
+    Python entry compiles their copies for Python, numba_config.python_callable.)
 
     bound: if the summed error of all windows exceeds bound * n_windows * n_steps the
     evaluation is abandoned (the tree cannot beat a parent of mean error `bound`)
@@ -85,7 +86,7 @@ def tree_window_errors(
     Returns True when the evaluation stopped early.
     """
     if scheme == RK4:
-        return rk4_tree_window_errors(
+        return python_callable(rk4_tree_window_errors)(
             codes,
             values,
             size,
@@ -102,7 +103,7 @@ def tree_window_errors(
             substeps,
             np.empty(0),
         )
-    return euler_tree_window_errors(
+    return python_callable(euler_tree_window_errors)(
         codes,
         values,
         size,
@@ -119,7 +120,7 @@ def tree_window_errors(
     )
 
 
-@njit
+@njit(inner=True)
 def euler_tree_window_errors(
     codes,
     values,

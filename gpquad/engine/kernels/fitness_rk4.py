@@ -112,7 +112,7 @@ def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
         y[W + i, lane] = states[idx, 6 + i]
 
 
-@njit
+@njit(inner=True)
 def rk4_tree_window_errors(
     codes,
     values,
