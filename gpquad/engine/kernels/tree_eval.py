@@ -186,7 +186,9 @@ def model_programs(codes, values, sizes, modelled, n_leaves, n_lanes):
             n_ops[t], root[t] = compile_program(
                 codes[t], values[t], sizes[t], n_leaves, regs[t], prog[t]
             )
-            used[t] = read_leaves(codes[t], sizes[t], n_leaves)
+            leaves = read_leaves(codes[t], sizes[t], n_leaves)
+            for i in range(n_leaves):  # a row assignment compiles numba's shape errors
+                used[t, i] = leaves[i]
     return regs, prog, n_ops, root, used
 
 
