@@ -341,6 +341,7 @@ def rk4_rollout(
     slope = np.zeros((n_rows, n))
     total = np.empty((n_rows, n))
     every_state = np.ones(9, dtype=np.bool_)
+    first = np.int64(0)  # every row flies; an int64, as the other callers pass (one signature)
     for lane in range(n):
         s = starts[lane]
         for t in range(6):
@@ -361,7 +362,7 @@ def rk4_rollout(
         hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
         for _ in range(substeps):
             for stage in range(N_STAGES):
-                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows)
+                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows, first)
                 for lane in range(n):
                     stage_features(ys, lane, every_state, features)
                 for t in range(6):
@@ -389,6 +390,6 @@ def rk4_rollout(
                         keep_pos,
                         slope,
                     )
-                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows)
-            lanes_finish_step(y, total, h, n, n_rows)
+                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows, first)
+            lanes_finish_step(y, total, h, n, n_rows, first)
     return out

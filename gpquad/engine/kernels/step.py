@@ -331,7 +331,7 @@ def unit_attitude(out, lane):
 
 
 @njit(inner=True)
-def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
+def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first):
     """body_stage_state of lanes 0..n_lanes-1, row by row over the lanes, so that the loops
     over lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per
     lane; a dead lane is stepped too, to no purpose."""
@@ -350,7 +350,7 @@ def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first=0):
 
 
 @njit(inner=True)
-def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first=0):
+def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first):
     """accumulate of lanes 0..n_lanes-1, row by row over the lanes."""
     for i in range(first, n_rows):
         if stage == 0:
@@ -362,7 +362,7 @@ def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first=0):
 
 
 @njit(inner=True)
-def lanes_finish_step(y, total, h, n_lanes, n_rows, first=0):
+def lanes_finish_step(y, total, h, n_lanes, n_rows, first):
     """finish_step of lanes 0..n_lanes-1, row by row over the lanes."""
     for i in range(first, n_rows):
         for lane in range(n_lanes):
