@@ -4,8 +4,8 @@ recorded by gpquad._machine.
 fastmath stays off: kernels rely on NaN/inf checks to flag diverging trajectories.
 
 A kernel that only other kernels call is compiled `inner`: without the wrappers that let
-Python (and C callbacks) call it. Nothing calls those wrappers, and building them is a
-tenth of a cold compilation (docs/decisions/2026-11-28-inner-kernels.md).
+Python (and C callbacks) call it. Nothing calls those wrappers, and a cold start would
+build them for every kernel (docs/decisions/2026-11-28-inner-kernels.md).
 """
 
 import functools
