@@ -6,6 +6,7 @@ import importlib
 import pkgutil
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
@@ -55,12 +56,19 @@ def test_an_inner_kernel_runs_in_a_kernel_and_through_python_callable():
     assert python_callable(kq.quat_mul) is kq.quat_mul  # not inner: itself
 
 
+def _cache_index(kernel):
+    return kernel._cache._cache_file._index_path
+
+
 def test_python_callable_is_cached_apart_from_the_inner_kernel():
-    """Under the inner kernel's own cache name, a Python call could load code compiled
-    without an entry for Python."""
-    copy = python_callable(kq.euler_from_quat)
-    assert copy.py_func.__qualname__ != kq.euler_from_quat.py_func.__qualname__
-    assert copy.py_func.__code__ is kq.euler_from_quat.py_func.__code__
+    """Under the inner kernel's own cache file, a Python call could load code compiled
+    without an entry for Python: a plain numba.njit of the same function would share it."""
+    kernel = kq.euler_from_quat
+    copy = python_callable(kernel)
+    assert copy.py_func.__code__ is kernel.py_func.__code__
+    assert _cache_index(copy) != _cache_index(kernel)
+    naive = numba.njit(cache=True)(kernel.py_func)
+    assert _cache_index(naive) == _cache_index(kernel)  # the case the name guards against
 
 
 def _jitted(fn) -> bool:

@@ -40,9 +40,9 @@ def njit(func=None, *, inner=False, **overrides):
     def decorate(f):
         if not inner or config.DISABLE_JIT:
             return numba.njit(**flags)(f)
-        cache = flags.pop("cache")
-        kernel = InnerDispatcher(py_func=f, locals={}, targetoptions={**flags, **INNER})
-        if cache:
+        options = {k: v for k, v in flags.items() if k != "cache"}
+        kernel = InnerDispatcher(py_func=f, locals={}, targetoptions={**options, **INNER})
+        if flags["cache"]:
             kernel.enable_caching()
         return kernel
 
@@ -60,4 +60,4 @@ def python_callable(kernel):
     copy = types.FunctionType(f.__code__, f.__globals__, f.__name__, f.__defaults__, f.__closure__)
     copy.__qualname__ = f"{f.__qualname__}__from_python"
     copy.__module__ = f.__module__
-    return numba.njit(**NJIT)(copy)
+    return njit(copy)
