@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from test_engine import TINY
 
 from gpquad.engine.evolve.coevolution import Coevolution
-from gpquad.engine.evolve.stall import EXACT_RSE, best_error, exact, stalled
+from gpquad.engine.evolve.stall import EXACT_RSE, NEAR_EXACT_RSE, best_error, exact, stalled
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import config_from_dict
@@ -131,3 +131,26 @@ def test_the_final_selections_fits_stop_when_they_stop_gaining(monkeypatch):
     tree, train, _ = co.best(state)
     assert rules and set(rules) == {STALL}
     assert exact(train, target_spread(co), co.evaluator.squared)
+
+
+def test_a_search_exact_only_in_the_configured_integrator_stops(median_dataset, monkeypatch):
+    """The median model's flight is flown in continuous time: its a_x = 10 theta - 0.6 u
+    errs in the generations' eq. 2 surrogate (above EXACT_RSE, below NEAR_EXACT_RSE), and is
+    exact once its constants are fitted through RK4, so the search stops there. Without
+    the RK4 check (the bad case) it runs every iteration."""
+    from gpquad.study import loop
+
+    ev = dataclasses.replace(
+        config_from_dict({}).evolution, targets=("a_x",), iterations=4, input_taps=1
+    )
+    assert ev.integrator == "rk4"
+    co = Coevolution(median_dataset, "a_x", ev)
+    state = evolve(co, co.init_state(1), ev.iterations)
+    spread = target_spread(co)
+    assert state.iteration < 4
+    assert not exact(state.best_errors[-1], spread, co.evaluator.squared)
+    assert exact(state.best_errors[-1], spread, co.evaluator.squared, NEAR_EXACT_RSE)
+    assert co.exact_in_model_scheme(state, spread)
+    monkeypatch.setattr(loop, "NEAR_EXACT_RSE", 0.0)
+    full = evolve(Coevolution(median_dataset, "a_x", ev), co.init_state(1), ev.iterations)
+    assert full.iteration == 4

@@ -17,7 +17,7 @@ import numpy as np
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.coevolution import Coevolution
-from gpquad.engine.evolve.stall import best_error, exact, stalled
+from gpquad.engine.evolve.stall import NEAR_EXACT_RSE, best_error, exact, stalled
 from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
@@ -56,11 +56,17 @@ def evolve(
 
 def search_stalled(co: Coevolution, state: RunState) -> bool:
     """Whether the search stopped gaining (gpquad.engine.evolve.stall, the config's
-    stall_iterations and stall_gain) or its best climber is exact."""
+    stall_iterations and stall_gain) or its best climber is exact: in the surrogate the
+    generations fly, or, when it is near that, in the configured integrator."""
     if not state.best_errors:
         return False
-    return stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain) or exact(
-        state.best_errors[-1], target_spread(co), co.evaluator.squared
+    if stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain):
+        return True
+    spread, squared = target_spread(co), co.evaluator.squared
+    if exact(state.best_errors[-1], spread, squared):
+        return True
+    return exact(state.best_errors[-1], spread, squared, NEAR_EXACT_RSE) and (
+        co.exact_in_model_scheme(state, spread)
     )
 
 

@@ -12,6 +12,7 @@ from gpquad.engine.evolve.lm import STALL
 from gpquad.engine.evolve.local_search import fit_constants, prune
 from gpquad.engine.evolve.poles import without_poles
 from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
+from gpquad.engine.evolve.stall import exact
 from gpquad.engine.evolve.state import RunState
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.tree.encoding import Tree
@@ -37,6 +38,20 @@ class FinalChoice:
     def training_errors(self, state: RunState) -> np.ndarray:
         """Each climber's error over the whole training data (NaN: no window fits)."""
         return self.tiled_errors(state.models, self.dataset.train)
+
+    def exact_in_model_scheme(self, state: RunState, spread: float) -> bool:
+        """Whether the best climber over the training data, its constants fitted through the
+        configured integrator (when it is not the surrogate the generations fly), flies the
+        whole training data within EXACT_RSE of `spread` (gpquad.engine.evolve.stall)."""
+        ev = self.model_evaluator
+        fit = self.gradient_fitter(self.cfg.gradient_steps, ev)
+        starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
+        if ev is self.evaluator or fit is None or len(starts) == 0:
+            return False
+        train = self.training_errors(state)
+        model = state.models[int(np.argmin(np.where(np.isnan(train), np.inf, train)))]
+        error = float(ev.window_errors([model], starts, n_steps=steps).mean())
+        return exact(fit(model, error, starts, steps)[1], spread, ev.squared)
 
     def best(self, state: RunState, train=None) -> tuple[Tree, float, float]:
         """The climber with the lowest error over the whole training data, with its training
