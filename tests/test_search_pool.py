@@ -33,6 +33,7 @@ targets = ["a_z", "p_dot", "q_dot"]
 iterations = {iterations}
 model_generations = 20
 input_taps = 1
+{extra}
 """
 
 #: A Python thread started before gpquad: the pool of a notebook's kernel (fresh workers).
@@ -67,7 +68,7 @@ def test_no_fork_off_linux(monkeypatch):
 def test_forked_and_fresh_workers_find_the_same_equations(tmp_path):
     """One clean process runs the same fit with forked workers and with fresh ones."""
     config = tmp_path / "pool.toml"
-    config.write_text(CONFIG.format(iterations=1))
+    config.write_text(CONFIG.format(iterations=1, extra=""))
     script = textwrap.dedent(
         f"""
         import json, sys
@@ -233,9 +234,10 @@ def _group_alive(pgid: int) -> bool:
 
 def _searching_run(tmp_path, pool: str, iterations: int) -> subprocess.Popen:
     """`gpquad run` of CONFIG on two workers (forked, or fresh: a thread runs first) in a
-    process group of its own, returned once its searches are under way."""
+    process group of its own, returned once its searches are under way. Every iteration
+    runs (no stall rule): the noise-free searches would stop once exact."""
     config = tmp_path / "pool.toml"
-    config.write_text(CONFIG.format(iterations=iterations))
+    config.write_text(CONFIG.format(iterations=iterations, extra="stall_iterations = 0"))
     head = ["-m", "gpquad"] if pool == "forked" else ["-c", WITH_A_THREAD]
     cmd = [sys.executable, *head, "run", str(config), "--jobs", "2", "--no-figures"]
     proc = _in_own_group([*cmd, "--out", str(tmp_path / "run")])

@@ -11,6 +11,8 @@ from test_engine import TINY
 
 from gpquad.engine.evolve.coevolution import Coevolution
 from gpquad.engine.evolve.stall import EXACT_RSE, NEAR_EXACT_RSE, best_error, exact, stalled
+from gpquad.engine.tree.encoding import Tree
+from gpquad.engine.tree.operators import CONST
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import config_from_dict
@@ -151,6 +153,10 @@ def test_a_search_exact_only_in_the_configured_integrator_stops(median_dataset, 
     assert not exact(state.best_errors[-1], spread, co.evaluator.squared)
     assert exact(state.best_errors[-1], spread, co.evaluator.squared, NEAR_EXACT_RSE)
     assert co.exact_in_model_scheme(state, spread)
+    # a best climber that no fit of its constants makes exact is not exact there
+    constant = Tree.from_lists([CONST], [0.5], state.models[0].delays)
+    wrong = dataclasses.replace(state, models=[constant] * len(state.models))
+    assert not co.exact_in_model_scheme(wrong, spread)
     monkeypatch.setattr(loop, "NEAR_EXACT_RSE", 0.0)
     full = evolve(Coevolution(median_dataset, "a_x", ev), co.init_state(1), ev.iterations)
     assert full.iteration == 4

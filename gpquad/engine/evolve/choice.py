@@ -42,7 +42,9 @@ class FinalChoice:
     def exact_in_model_scheme(self, state: RunState, spread: float) -> bool:
         """Whether the best climber over the training data, its constants fitted through the
         configured integrator (when it is not the surrogate the generations fly), flies the
-        whole training data within EXACT_RSE of `spread` (gpquad.engine.evolve.stall)."""
+        whole training data within EXACT_RSE of `spread` (gpquad.engine.evolve.stall).
+        It is fitted on the suite's few windows first, and on the whole data only when it is
+        exact there."""
         ev = self.model_evaluator
         fit = self.gradient_fitter(self.cfg.gradient_steps, ev)
         starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
@@ -50,8 +52,12 @@ class FinalChoice:
             return False
         train = self.training_errors(state)
         model = state.models[int(np.argmin(np.where(np.isnan(train), np.inf, train)))]
-        error = float(ev.window_errors([model], starts, n_steps=steps).mean())
-        return exact(fit(model, error, starts, steps)[1], spread, ev.squared)
+        for windows, n_steps in ((state.suite, self.window_steps), (starts, steps)):
+            error = float(ev.window_errors([model], windows, n_steps=n_steps).mean())
+            model, error = fit(model, error, windows, n_steps)
+            if not exact(error, spread, ev.squared):
+                return False
+        return True
 
     def best(self, state: RunState, train=None) -> tuple[Tree, float, float]:
         """The climber with the lowest error over the whole training data, with its training
