@@ -135,11 +135,15 @@ def test_the_final_selections_fits_stop_when_they_stop_gaining(monkeypatch):
     assert exact(train, target_spread(co), co.evaluator.squared)
 
 
-def test_a_search_exact_only_in_the_configured_integrator_stops(median_dataset, monkeypatch):
+def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there(
+    median_dataset, monkeypatch
+):
     """The median model's flight is flown in continuous time: its a_x = 10 theta - 0.6 u
     errs in the generations' eq. 2 surrogate (above EXACT_RSE, below NEAR_EXACT_RSE), and is
-    exact once its constants are fitted through RK4, so the search stops there. Without
-    the RK4 check (the bad case) it runs every iteration."""
+    exact once its constants are fitted through RK4, so the search stops there and its
+    final choice prunes in RK4 only. Without the RK4 check (the bad case) the search runs
+    every iteration."""
+    from gpquad.engine.evolve import choice
     from gpquad.study import loop
 
     ev = dataclasses.replace(
@@ -152,11 +156,33 @@ def test_a_search_exact_only_in_the_configured_integrator_stops(median_dataset, 
     assert state.iteration < 4
     assert not exact(state.best_errors[-1], spread, co.evaluator.squared)
     assert exact(state.best_errors[-1], spread, co.evaluator.squared, NEAR_EXACT_RSE)
-    assert co.exact_in_model_scheme(state, spread)
-    # a best climber that no fit of its constants makes exact is not exact there
+    assert co.exact_in_model_scheme(state)
+    # a best climber that no fit of its constants makes exact is not exact there, past the
+    # gate (opened for it) or not
     constant = Tree.from_lists([CONST], [0.5], state.models[0].delays)
     wrong = dataclasses.replace(state, models=[constant] * len(state.models))
-    assert not co.exact_in_model_scheme(wrong, spread)
+    assert not co.exact_in_model_scheme(wrong)
+    with monkeypatch.context() as opened:
+        opened.setattr(choice, "NEAR_EXACT_RSE", float("inf"))
+        assert not co.exact_in_model_scheme(wrong)
+    # the final choice prunes it in RK4 only, and finds the truth's two terms
+    schemes = []
+    prune = choice.prune_by_bic
+
+    def recorded(evaluator, *args):
+        schemes.append(evaluator.scheme)
+        return prune(evaluator, *args)
+
+    with monkeypatch.context() as patched:
+        patched.setattr(choice, "prune_by_bic", recorded)
+        tree, train, _ = co.best(state)
+        assert schemes == [co.model_evaluator.scheme] and tree.size == 7
+        assert exact(train, spread, co.model_evaluator.squared)
+        # the bad case: not known exact, it is pruned in eq. 2 first
+        schemes.clear()
+        patched.setattr(Coevolution, "exact_in_model_scheme", lambda *a: False)
+        co.best(state)
+        assert schemes == [co.evaluator.scheme, co.model_evaluator.scheme]
     monkeypatch.setattr(loop, "NEAR_EXACT_RSE", 0.0)
     full = evolve(Coevolution(median_dataset, "a_x", ev), co.init_state(1), ev.iterations)
     assert full.iteration == 4

@@ -12,7 +12,7 @@ from gpquad.engine.evolve.lm import STALL
 from gpquad.engine.evolve.local_search import fit_constants, prune
 from gpquad.engine.evolve.poles import without_poles
 from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
-from gpquad.engine.evolve.stall import exact
+from gpquad.engine.evolve.stall import NEAR_EXACT_RSE, exact
 from gpquad.engine.evolve.state import RunState
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.tree.encoding import Tree
@@ -39,19 +39,33 @@ class FinalChoice:
         """Each climber's error over the whole training data (NaN: no window fits)."""
         return self.tiled_errors(state.models, self.dataset.train)
 
-    def exact_in_model_scheme(self, state: RunState, spread: float) -> bool:
+    def target_spread(self) -> float:
+        """Standard deviation of the target state over the training samples."""
+        rows = [np.arange(a, b) for a, b in self.dataset.train]
+        if not rows:
+            return 0.0
+        states = self.dataset.arrays.states[np.concatenate(rows), 3 + self.evaluator.target]
+        return float(np.std(states))
+
+    def exact_in_model_scheme(self, state: RunState, train=None) -> bool:
         """Whether the best climber over the training data, its constants fitted through the
         configured integrator (when it is not the surrogate the generations fly), flies the
-        whole training data within EXACT_RSE of `spread` (gpquad.engine.evolve.stall).
-        It is fitted on the suite's few windows first, and on the whole data only when it is
-        exact there."""
+        whole training data within EXACT_RSE of the target's spread
+        (gpquad.engine.evolve.stall). Checked only when its surrogate error is below
+        NEAR_EXACT_RSE; it is fitted on the suite's few windows first, and on the whole data
+        only when it is exact there; each fit stops when it stops gaining (lm.STALL).
+        `train`: training_errors(state), if computed already."""
         ev = self.model_evaluator
-        fit = self.gradient_fitter(self.cfg.gradient_steps, ev)
+        fit = self.gradient_fitter(self.cfg.gradient_steps, ev, stall=STALL)
         starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
         if ev is self.evaluator or fit is None or len(starts) == 0:
             return False
-        train = self.training_errors(state)
-        model = state.models[int(np.argmin(np.where(np.isnan(train), np.inf, train)))]
+        train = self.training_errors(state) if train is None else train
+        i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
+        spread = self.target_spread()
+        if not exact(float(train[i]), spread, self.evaluator.squared, NEAR_EXACT_RSE):
+            return False
+        model = state.models[i]
         for windows, n_steps in ((state.suite, self.window_steps), (starts, steps)):
             error = float(ev.window_errors([model], windows, n_steps=n_steps).mean())
             model, error = fit(model, error, windows, n_steps)
@@ -131,7 +145,15 @@ class FinalChoice:
         val_starts, val_steps = tile(self.dataset.validation, self.window_steps, cfg.max_delay)
         if len(val_starts) and val_steps == steps:
             chosen_from = np.concatenate([starts, val_starts])
-        ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
+        other_scheme = cfg.integrator != SEARCH_SCHEME
+        best = float(np.nanmin(train)) if np.isfinite(train).any() else np.inf
+        surrogate_exact = exact(best, self.target_spread(), self.evaluator.squared)
+        if other_scheme and not surrogate_exact and self.exact_in_model_scheme(state, train):
+            # exact in the integrator only: pruned there only, where every true term shows,
+            # not in the surrogate, whose discretisation error can hide a small one
+            pruned = model
+        else:
+            ev_mse, fit, pruned = pruned_in(SEARCH_SCHEME, 1, model)
         arrays = self.dataset.arrays
         # a quotient singular where the data went is no choice (gpquad.engine.evolve.poles)
         pruned, *front = without_poles(
@@ -140,7 +162,7 @@ class FinalChoice:
             arrays.inputs,
             samples,
         )
-        if cfg.integrator != SEARCH_SCHEME:
+        if other_scheme:
             # pruned again: terms the surrogate needed only for its own discretisation go
             ev_mse, fit, pruned = pruned_in(cfg.integrator, cfg.substeps, pruned)
             front = fitted_rivals(
