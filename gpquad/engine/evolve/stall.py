@@ -8,10 +8,11 @@ target state's spread, the selection's resolution, below which the final selecti
 error to gain (it still prunes the climber). The generations fly the eq. 2 surrogate, in
 which a continuous-time equation that is exact still errs by its discretisation: a best
 error below NEAR_EXACT_RSE is therefore also checked in the configured integrator, its
-constants fitted there (`exact` of FinalChoice.exact_in_model_scheme). The climbers are scored
-on a co-evolving suite, so the best training error is not monotone; the rule compares with
-the lowest error reached, and an iteration that does not beat it by `gain` counts as
-stalled. The measurements behind the defaults are in docs/decisions/2026-11-26-finish-speed.md.
+constants fitted there (gpquad.engine.evolve.choice, FinalChoice.exact_in_model_scheme).
+The climbers are scored on a co-evolving suite, so the best training error is not
+monotone; the rule compares with the lowest error reached, and an iteration that does not
+beat it by `gain` counts as stalled. The measurements behind the defaults are in
+docs/decisions/2026-11-26-finish-speed.md and docs/decisions/2026-11-28-exact-in-rk4.md.
 """
 
 from __future__ import annotations
