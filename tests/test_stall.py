@@ -16,7 +16,7 @@ from gpquad.engine.tree.operators import CONST
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import config_from_dict
-from gpquad.study.loop import evolve, target_spread
+from gpquad.study.loop import evolve
 
 
 def test_three_iterations_without_one_percent_stop_the_search():
@@ -103,7 +103,7 @@ def test_a_search_that_is_exact_stops_and_the_paper_goes_on():
     co = Coevolution(dataset, "p_dot", ev)
     state = evolve(co, co.init_state(1), ev.iterations)
     assert state.iteration < 4
-    assert exact(state.best_errors[-1], target_spread(co), False)
+    assert exact(state.best_errors[-1], co.target_spread, False)
     never = dataclasses.replace(ev, stall_iterations=0)
     full = evolve(Coevolution(dataset, "p_dot", never), co.init_state(1), ev.iterations)
     assert full.iteration == 6
@@ -132,7 +132,7 @@ def test_the_final_selections_fits_stop_when_they_stop_gaining(monkeypatch):
     rules.clear()
     tree, train, _ = co.best(state)
     assert rules and set(rules) == {STALL}
-    assert exact(train, target_spread(co), co.evaluator.squared)
+    assert exact(train, co.target_spread, co.evaluator.squared)
 
 
 def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there(
@@ -144,7 +144,6 @@ def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there
     final choice prunes in RK4 only. Without the RK4 check (the bad case) the search runs
     every iteration."""
     from gpquad.engine.evolve import choice
-    from gpquad.study import loop
 
     ev = dataclasses.replace(
         config_from_dict({}).evolution, targets=("a_x",), iterations=4, input_taps=1
@@ -152,7 +151,7 @@ def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there
     assert ev.integrator == "rk4"
     co = Coevolution(median_dataset, "a_x", ev)
     state = evolve(co, co.init_state(1), ev.iterations)
-    spread = target_spread(co)
+    spread = co.target_spread
     assert state.iteration < 4
     assert not exact(state.best_errors[-1], spread, co.evaluator.squared)
     assert exact(state.best_errors[-1], spread, co.evaluator.squared, NEAR_EXACT_RSE)
@@ -183,6 +182,6 @@ def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there
         patched.setattr(Coevolution, "exact_in_model_scheme", lambda *a: False)
         co.best(state)
         assert schemes == [co.evaluator.scheme, co.model_evaluator.scheme]
-    monkeypatch.setattr(loop, "NEAR_EXACT_RSE", 0.0)
+    monkeypatch.setattr(choice, "NEAR_EXACT_RSE", 0.0)
     full = evolve(Coevolution(median_dataset, "a_x", ev), co.init_state(1), ev.iterations)
     assert full.iteration == 4

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from gpquad.data.dataset import Dataset
 from gpquad.engine.evolve.coevolution import Coevolution
-from gpquad.engine.evolve.stall import NEAR_EXACT_RSE, best_error, exact, stalled
+from gpquad.engine.evolve.stall import best_error, exact, stalled
 from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
@@ -34,10 +34,12 @@ def evolve(
     """Iterate `state` until `iterations`, or until the search stalls (`search_stalled`);
     after each iteration: its best training error, history, checkpoint, then
     `on_iteration(state)`."""
-    while state.iteration < iterations and not search_stalled(co, state):
+    train = None  # the climbers' training errors of the last iteration, when computed
+    while state.iteration < iterations and not search_stalled(co, state, train):
         co.iterate(state)
         if co.cfg.stall_iterations > 0:
-            state.best_errors.append(best_error(co.training_errors(state)))
+            train = co.training_errors(state)
+            state.best_errors.append(best_error(train))
         if history is not None:
             history.write(state.history)
         state.history.clear()
@@ -52,26 +54,18 @@ def evolve(
     return state
 
 
-def search_stalled(co: Coevolution, state: RunState) -> bool:
+def search_stalled(co: Coevolution, state: RunState, train=None) -> bool:
     """Whether the search stopped gaining (gpquad.engine.evolve.stall, the config's
     stall_iterations and stall_gain) or its best climber is exact: in the surrogate the
-    generations fly, or, when it is near that, in the configured integrator."""
+    generations fly, or in the configured integrator (FinalChoice.exact_in_model_scheme).
+    `train`: the climbers' training errors, if computed already."""
     if not state.best_errors:
         return False
     if stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain):
         return True
-    spread, squared = co.target_spread(), co.evaluator.squared
-    if exact(state.best_errors[-1], spread, squared):
+    if exact(state.best_errors[-1], co.target_spread, co.evaluator.squared):
         return True
-    # near that (the check's own gate, without flying the climbers again): in the integrator?
-    return exact(state.best_errors[-1], spread, squared, NEAR_EXACT_RSE) and (
-        co.exact_in_model_scheme(state)
-    )
-
-
-def target_spread(co: Coevolution) -> float:
-    """Standard deviation of the search's target state over the training samples."""
-    return co.target_spread()
+    return co.exact_in_model_scheme(state, train)
 
 
 def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:

@@ -5,6 +5,8 @@ gpquad.engine.evolve.coevolution.Coevolution, whose state it reads."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from gpquad.engine.evolve.evaluator import Evaluator
@@ -12,7 +14,7 @@ from gpquad.engine.evolve.lm import STALL
 from gpquad.engine.evolve.local_search import fit_constants, prune
 from gpquad.engine.evolve.poles import without_poles
 from gpquad.engine.evolve.selection import fitted_rivals, mse_of, prune_by_bic, select_by_bic
-from gpquad.engine.evolve.stall import NEAR_EXACT_RSE, exact
+from gpquad.engine.evolve.stall import NEAR_EXACT_RSE, best_error, exact
 from gpquad.engine.evolve.state import RunState
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.tree.encoding import Tree
@@ -39,6 +41,7 @@ class FinalChoice:
         """Each climber's error over the whole training data (NaN: no window fits)."""
         return self.tiled_errors(state.models, self.dataset.train)
 
+    @functools.cached_property
     def target_spread(self) -> float:
         """Standard deviation of the target state over the training samples."""
         rows = [np.arange(a, b) for a, b in self.dataset.train]
@@ -56,20 +59,21 @@ class FinalChoice:
         only when it is exact there; each fit stops when it stops gaining (lm.STALL).
         `train`: training_errors(state), if computed already."""
         ev = self.model_evaluator
-        fit = self.gradient_fitter(self.cfg.gradient_steps, ev, stall=STALL)
-        starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
-        if ev is self.evaluator or fit is None or len(starts) == 0:
+        if ev is self.evaluator:
             return False
         train = self.training_errors(state) if train is None else train
-        i = int(np.argmin(np.where(np.isnan(train), np.inf, train)))
-        spread = self.target_spread()
-        if not exact(float(train[i]), spread, self.evaluator.squared, NEAR_EXACT_RSE):
+        error = best_error(train)
+        if not exact(error, self.target_spread, self.evaluator.squared, NEAR_EXACT_RSE):
             return False
-        model = state.models[i]
+        fit = self.gradient_fitter(self.cfg.gradient_steps, ev, stall=STALL)
+        starts, steps = tile(self.dataset.train, self.window_steps, self.cfg.max_delay)
+        if fit is None or len(starts) == 0:
+            return False
+        model = state.models[int(np.argmin(np.where(np.isnan(train), np.inf, train)))]
         for windows, n_steps in ((state.suite, self.window_steps), (starts, steps)):
             error = float(ev.window_errors([model], windows, n_steps=n_steps).mean())
             model, error = fit(model, error, windows, n_steps)
-            if not exact(error, spread, ev.squared):
+            if not exact(error, self.target_spread, ev.squared):
                 return False
         return True
 
@@ -146,8 +150,7 @@ class FinalChoice:
         if len(val_starts) and val_steps == steps:
             chosen_from = np.concatenate([starts, val_starts])
         other_scheme = cfg.integrator != SEARCH_SCHEME
-        best = float(np.nanmin(train)) if np.isfinite(train).any() else np.inf
-        surrogate_exact = exact(best, self.target_spread(), self.evaluator.squared)
+        surrogate_exact = exact(best_error(train), self.target_spread, self.evaluator.squared)
         if other_scheme and not surrogate_exact and self.exact_in_model_scheme(state, train):
             # exact in the integrator only: pruned there only, where every true term shows,
             # not in the surrogate, whose discretisation error can hide a small one

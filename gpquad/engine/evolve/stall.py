@@ -26,7 +26,7 @@ from gpquad.engine.evolve.selection import RSE_RESOLUTION
 EXACT_RSE = RSE_RESOLUTION
 #: A best surrogate error below this fraction of the spread may be an exact equation of the
 #: configured integrator (its discretisation error stays below it; docs/decisions/
-#: 2026-11-28-exact-in-rk4.md), so the run loop checks it there.
+#: 2026-11-28-exact-in-rk4.md), so it is checked there (FinalChoice.exact_in_model_scheme).
 NEAR_EXACT_RSE = 20 * EXACT_RSE
 
 
