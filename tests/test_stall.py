@@ -16,7 +16,7 @@ from gpquad.engine.tree.operators import CONST
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import config_from_dict
-from gpquad.study.loop import evolve
+from gpquad.study.loop import evolve, stop_reason
 
 
 def test_three_iterations_without_one_percent_stop_the_search():
@@ -153,6 +153,10 @@ def test_a_search_exact_only_in_the_configured_integrator_stops_and_prunes_there
     state = evolve(co, co.init_state(1), ev.iterations)
     spread = co.target_spread
     assert state.iteration < 4
+    # it says why: exact, not stalled (the bad case below stalls)
+    assert stop_reason(ev, state) == "its best equation is exact"
+    stuck = dataclasses.replace(state, best_errors=[1.0, 1.0, 1.0, 1.0])
+    assert "lowered its training error by less than 1 %" in stop_reason(ev, stuck)
     assert not exact(state.best_errors[-1], spread, co.evaluator.squared)
     assert exact(state.best_errors[-1], spread, co.evaluator.squared, NEAR_EXACT_RSE)
     assert co.exact_in_model_scheme(state)

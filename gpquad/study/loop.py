@@ -68,6 +68,17 @@ def search_stalled(co: Coevolution, state: RunState, train=None) -> bool:
     return co.exact_in_model_scheme(state, train)
 
 
+def stop_reason(cfg, state: RunState) -> str:
+    """Why a search stopped before its last iteration (search_stalled), in words; cfg: its
+    evolution config."""
+    if stalled(state.best_errors, cfg.stall_iterations, cfg.stall_gain):
+        return (
+            f"the last {cfg.stall_iterations} lowered its training error by less than "
+            f"{100 * cfg.stall_gain:g} %"
+        )
+    return "its best equation is exact"
+
+
 def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:
     """The reported equation and the run's size/error Pareto front (training errors).
 

@@ -16,7 +16,7 @@ from gpquad.engine.threads import one_blas_thread
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
 from gpquad.study.config import Config
-from gpquad.study.loop import evolve, final_equation
+from gpquad.study.loop import evolve, final_equation, stop_reason
 from gpquad.study.seeding import target_seed
 from gpquad.study.store import HistoryWriter
 
@@ -61,11 +61,8 @@ class Progress:
         """A search that stalled before its last iteration: its iterations left are not
         counted in the time left, and one line says so."""
         self.total -= cfg.iterations - state.iteration
-        self.say(
-            f"  {target:6s} stopped after iteration {state.iteration}: the last "
-            f"{cfg.stall_iterations} lowered its training error by less than "
-            f"{100 * cfg.stall_gain:g} %"
-        )
+        why = stop_reason(cfg, state)
+        self.say(f"  {target:6s} stopped after iteration {state.iteration}: {why}")
 
     def say(self, text: str) -> None:
         if self.enabled:
