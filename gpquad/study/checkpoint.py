@@ -138,14 +138,12 @@ def _rng_state(record) -> dict:
 def state_from_dict(fields: dict) -> RunState:
     """The RunState of checked plain data (CorruptCheckpoint when any field is off)."""
     names = {f.name for f in dataclasses.fields(RunState)} - {"history"}
-    # an older checkpoint may lack either record of errors: its run goes on without them
-    optional = ("best_errors", "validation_errors")
-    if not isinstance(fields, dict) or not (names - set(optional) <= set(fields) <= names):
+    # a checkpoint of gpquad 0.2 has no best_errors: its run goes on without them
+    if not isinstance(fields, dict) or set(fields) not in (names, names - {"best_errors"}):
         raise CorruptCheckpoint("the state's fields are not RunState's")
-    records = {name: fields.get(name, []) for name in optional}
-    for name, record in records.items():
-        if not isinstance(record, list) or not all(type(e) in (int, float) for e in record):
-            raise CorruptCheckpoint(f"{name} is not a list of numbers")
+    best_errors = fields.get("best_errors", [])
+    if not isinstance(best_errors, list) or not all(type(e) in (int, float) for e in best_errors):
+        raise CorruptCheckpoint("best_errors is not a list of numbers")
     if (
         not isinstance(fields["target"], str)
         or type(fields["iteration"]) is not int
@@ -168,8 +166,7 @@ def state_from_dict(fields: dict) -> RunState:
         models=models,
         inserted=fields["inserted"],
         rng_state=_rng_state(fields["rng_state"]),
-        best_errors=[float(e) for e in records["best_errors"]],
-        validation_errors=[float(e) for e in records["validation_errors"]],
+        best_errors=[float(e) for e in best_errors],
         **arrays,  # type: ignore[arg-type]
     )
 

@@ -153,8 +153,7 @@ class EvolutionConfig:
     targets: tuple[str, ...] = TARGET_NAMES  # the accelerations to identify, each alone
     iterations: int = 12  # coevolution iterations (paper: 30)
     # Stop a search early when `stall_iterations` iterations in a row (0 = never) did not
-    # lower its best training error, or that climber's validation error, by `stall_gain` of
-    # the lowest so far (gpquad.engine.evolve.stall).
+    # lower its best training error by `stall_gain` of it (docs/decisions).
     stall_iterations: int = 3
     stall_gain: float = 0.01
     model_generations: int = 600  # model hill-climber generations per iteration

@@ -40,9 +40,6 @@ def evolve(
         if co.cfg.stall_iterations > 0:
             train = co.training_errors(state)
             state.best_errors.append(best_error(train))
-            validation = co.best_validation_error(state, train)
-            if validation is not None:
-                state.validation_errors.append(validation)
         if history is not None:
             history.write(state.history)
         state.history.clear()
@@ -59,16 +56,12 @@ def evolve(
 
 def search_stalled(co: Coevolution, state: RunState, train=None) -> bool:
     """Whether the search stopped gaining (gpquad.engine.evolve.stall, the config's
-    stall_iterations and stall_gain) on the training data or on the validation windows, or
-    its best climber is exact: in the surrogate the generations fly, or in the configured
-    integrator (FinalChoice.exact_in_model_scheme). `train`: the climbers' training errors,
-    if computed already."""
+    stall_iterations and stall_gain) or its best climber is exact: in the surrogate the
+    generations fly, or in the configured integrator (FinalChoice.exact_in_model_scheme).
+    `train`: the climbers' training errors, if computed already."""
     if not state.best_errors:
         return False
-    patience, gain = co.cfg.stall_iterations, co.cfg.stall_gain
-    if stalled(state.best_errors, patience, gain):
-        return True
-    if stalled(state.validation_errors, patience, gain):
+    if stalled(state.best_errors, co.cfg.stall_iterations, co.cfg.stall_gain):
         return True
     if exact(state.best_errors[-1], co.target_spread, co.evaluator.squared):
         return True
@@ -78,10 +71,11 @@ def search_stalled(co: Coevolution, state: RunState, train=None) -> bool:
 def stop_reason(cfg, state: RunState) -> str:
     """Why a search stopped before its last iteration (search_stalled), in words; cfg: its
     evolution config."""
-    patience, gain = cfg.stall_iterations, cfg.stall_gain
-    for name, record in (("training", state.best_errors), ("validation", state.validation_errors)):
-        if stalled(record, patience, gain):
-            return f"the last {patience} lowered its {name} error by less than {100 * gain:g} %"
+    if stalled(state.best_errors, cfg.stall_iterations, cfg.stall_gain):
+        return (
+            f"the last {cfg.stall_iterations} lowered its training error by less than "
+            f"{100 * cfg.stall_gain:g} %"
+        )
     return "its best equation is exact"
 
 

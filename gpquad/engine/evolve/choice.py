@@ -41,16 +41,6 @@ class FinalChoice:
         """Each climber's error over the whole training data (NaN: no window fits)."""
         return self.tiled_errors(state.models, self.dataset.train)
 
-    def best_validation_error(self, state: RunState, train) -> float | None:
-        """The validation error of the climber with the lowest training error `train`
-        (training_errors(state)), flown by the search's evaluator; None when the data has no
-        validation window."""
-        starts, steps = tile(self.dataset.validation, self.window_steps, self.cfg.max_delay)
-        if len(starts) == 0:
-            return None
-        model = state.models[int(np.argmin(np.where(np.isnan(train), np.inf, train)))]
-        return float(self.evaluator.window_errors([model], starts, n_steps=steps).mean())
-
     @functools.cached_property
     def target_spread(self) -> float:
         """Standard deviation of the target state over the training samples."""

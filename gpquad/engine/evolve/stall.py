@@ -1,12 +1,9 @@
 """When a search stops gaining: the stall rule of the run loop (gpquad.study.loop).
 
 After every iteration the run loop records the best climber's error over the whole
-training data (`RunState.best_errors`) and that climber's error on the validation windows
-(`RunState.validation_errors`, where the data has them). The search stops early when
-`patience` iterations in a row did not lower either record's lowest error so far by at
-least the fraction `gain` of it (on a noisy log the training error goes on falling while
-the terms it gains fit the noise: the validation error stops falling first), or at once
-when the best error is `exact`: below EXACT_RSE of the
+training data (`RunState.best_errors`). The search stops early when `patience`
+iterations in a row did not lower the best error recorded so far by at least the
+fraction `gain` of it, or at once when the best error is `exact`: below EXACT_RSE of the
 target state's spread, the selection's resolution, below which the final selection sees no
 error to gain (it still prunes the climber). The generations fly the eq. 2 surrogate, in
 which a continuous-time equation that is exact still errs by its discretisation: a best
@@ -15,8 +12,7 @@ constants fitted there (gpquad.engine.evolve.choice, FinalChoice.exact_in_model_
 The climbers are scored on a co-evolving suite, so the best training error is not
 monotone; the rule compares with the lowest error reached, and an iteration that does not
 beat it by `gain` counts as stalled. The measurements behind the defaults are in
-docs/decisions/2026-11-26-finish-speed.md, docs/decisions/2026-11-28-exact-in-rk4.md and
-docs/decisions/2026-12-04-validation-stall.md.
+docs/decisions/2026-11-26-finish-speed.md and docs/decisions/2026-11-28-exact-in-rk4.md.
 """
 
 from __future__ import annotations

@@ -31,9 +31,6 @@ class RunState:
     history: list[dict] = field(default_factory=list)  # rows not yet flushed to disk
     #: The best climber's training error after each iteration (the stall rule reads it).
     best_errors: list[float] = field(default_factory=list)
-    #: That climber's validation error after each iteration, where the data has validation
-    #: windows (the stall rule reads it too).
-    validation_errors: list[float] = field(default_factory=list)
 
 
 #: Steps of data each short-horizon fit flies: windows are spread over the training data up
@@ -96,5 +93,4 @@ def clone_state(state: RunState) -> RunState:
         rng_state=dict(state.rng_state),
         history=list(state.history),
         best_errors=list(state.best_errors),
-        validation_errors=list(state.validation_errors),
     )
