@@ -19,6 +19,7 @@ from gpquad.engine.evolve.stall import best_error, exact, stalled
 from gpquad.engine.evolve.state import RunState
 from gpquad.models.equations import Equation
 from gpquad.study import checkpoint
+from gpquad.study.config import EvolutionConfig
 from gpquad.study.store import HistoryWriter
 
 
@@ -68,9 +69,10 @@ def search_stalled(co: Coevolution, state: RunState, train=None) -> bool:
     return co.exact_in_model_scheme(state, train)
 
 
-def stop_reason(cfg, state: RunState) -> str:
-    """Why a search stopped before its last iteration (search_stalled), in words; cfg: its
-    evolution config."""
+def stop_reason(cfg: EvolutionConfig, state: RunState) -> str:
+    """Why a search stopped before its last iteration (search_stalled), in words: its
+    training record stalled, or else its best climber was exact (search_stalled's other
+    reasons)."""
     if stalled(state.best_errors, cfg.stall_iterations, cfg.stall_gain):
         return (
             f"the last {cfg.stall_iterations} lowered its training error by less than "

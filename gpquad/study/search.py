@@ -58,8 +58,8 @@ class Progress:
         )
 
     def stopped(self, target: str, state: RunState, cfg) -> None:
-        """A search that stalled before its last iteration: its iterations left are not
-        counted in the time left, and one line says so."""
+        """A search that stopped before its last iteration: its iterations left are not
+        counted in the time left, and one line says why (stop_reason)."""
         self.total -= cfg.iterations - state.iteration
         why = stop_reason(cfg, state)
         self.say(f"  {target:6s} stopped after iteration {state.iteration}: {why}")
