@@ -10,7 +10,7 @@ import pytest
 
 from gpquad.benchmark import table
 from gpquad.benchmark.engine import ENGINE_SOURCE, engine_config, load_engine
-from gpquad.benchmark.runner import collect, done_line, run_benchmark
+from gpquad.benchmark.runner import collect, done_line, run_benchmark, run_order
 from gpquad.cli.benchmark import write_report
 from gpquad.cli.commands import main
 
@@ -269,3 +269,29 @@ def test_the_progress_line_says_when_windows_diverged():
     assert "diverged" not in done_line(cell, 153)  # the check can fail
     cell["metrics"] = {"7s": {"mean": None, "windows": 12, "diverged": 12}}
     assert "no score" in done_line(cell, 153)
+
+
+def test_one_job_runs_each_scenarios_cells_back_to_back():
+    """With --jobs 1 a scenario's methods run one after the other, so that a machine that
+    drifts in speed over the run slows a scenario's gpquad and PySINDy cells alike; in
+    parallel the longest method's cells go first."""
+
+    class Scenario:
+        def __init__(self, name):
+            self.name = name
+
+    a, b = Scenario("a"), Scenario("b")
+    missing = [(b, "zero", 0), (a, "sindy", 0), (b, "gpquad", 1), (a, "gpquad", 2)]
+    missing += [(a, "gpquad", 1), (b, "sindy", 0)]
+    one = [(c[0].name, c[1], c[2]) for c in run_order(missing, 1)]
+    assert one == [
+        ("a", "gpquad", 1),
+        ("a", "gpquad", 2),
+        ("a", "sindy", 0),
+        ("b", "gpquad", 1),
+        ("b", "sindy", 0),
+        ("b", "zero", 0),
+    ]
+    two = [(c[0].name, c[1]) for c in run_order(missing, 2)]
+    assert [m for _, m in two] == ["gpquad"] * 3 + ["sindy"] * 2 + ["zero"]
+    assert two != [(n, m) for n, m, _ in one]  # the two orders differ: the check can fail

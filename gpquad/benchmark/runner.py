@@ -188,9 +188,7 @@ def run_benchmark(
     if missing:
         from joblib import Parallel, delayed
 
-        # the longest cells first, so that the last ones running in parallel are short
-        order = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
-        missing.sort(key=lambda c: (order.get(c[1], 9), c[0].name, c[2]))
+        missing = run_order(missing, jobs)
         parallel = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
         # the cores a cell's gpquad fit may use for its six searches (same equations)
         fit_jobs = max(1, (os.cpu_count() or 1) // jobs)
@@ -211,6 +209,22 @@ def run_benchmark(
 
     fidelity.update(out, collect(out, info), built, horizons_s, log)
     return info
+
+
+#: The methods by their cells' usual length, longest first.
+BY_LENGTH = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
+
+
+def run_order(missing: list, jobs: int) -> list:
+    """The (scenario, method, seed) cells in the order they are started. One at a time
+    (jobs 1), each scenario's cells back to back: a machine that changes speed during a run
+    of half an hour then changes every method's fit time of a scenario alike, and the table
+    compares them fairly (same cells, same bits, when the machine drifted 20-40 %:
+    docs/decisions/2026-12-04-whole-benchmark.md). In parallel, the longest cells first, so
+    that the last ones running side by side are short."""
+    if jobs == 1:
+        return sorted(missing, key=lambda c: (c[0].name, BY_LENGTH.get(c[1], 9), c[2]))
+    return sorted(missing, key=lambda c: (BY_LENGTH.get(c[1], 9), c[0].name, c[2]))
 
 
 def done_line(cell: dict, elapsed: float) -> str:
