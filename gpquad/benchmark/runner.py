@@ -218,9 +218,8 @@ BY_LENGTH = {"gpquad": 0, "operon": 1, "sindy": 2, "ols": 3, "zero": 4}
 def run_order(missing: list, jobs: int) -> list:
     """The (scenario, method, seed) cells in the order they are started. One at a time
     (jobs 1), each scenario's cells back to back: a machine that changes speed during a run
-    of half an hour then changes every method's fit time of a scenario alike, and the table
-    compares them fairly (same cells, same bits, when the machine drifted 20-40 %:
-    docs/decisions/2026-12-04-whole-benchmark.md). In parallel, the longest cells first, so
+    of half an hour then changes every method's fit time of a scenario alike
+    (docs/decisions/2026-12-04-whole-benchmark.md). In parallel, the longest cells first, so
     that the last ones running side by side are short."""
     if jobs == 1:
         return sorted(missing, key=lambda c: (c[0].name, BY_LENGTH.get(c[1], 9), c[2]))
