@@ -99,3 +99,20 @@ def test_a_model_written_by_gpquad_loads(tmp_path):
     run = write_run(tmp_path / "run")
     model = DiscoveredModel.load(run)
     assert set(model.equations) == {"a_x", "a_y", "a_z", "p_dot", "q_dot", "r_dot"}
+
+
+def test_a_long_sum_reads_as_the_terms_added_left_to_right():
+    """A sum is built as one Add of its terms; it must be the expression that adding them
+    one at a time gives, like terms merged and subtraction kept."""
+    rng = np.random.default_rng(3)
+    names = ["p", "q", "r", "u_R", "u_T"]
+    parts, reference = [], sp.Integer(0)
+    for k in range(300):
+        a, b = rng.choice(names, 2)
+        c = round(float(rng.normal(0, 5)), 4)
+        sign = "-" if k and rng.random() < 0.5 else "+"
+        term = sp.Float(str(c)) * SYMBOLS[a] * SYMBOLS[b]
+        reference = reference - term if sign == "-" else reference + term
+        parts.append(f"{sign} {c}*{a}*{b}" if k else f"{c}*{a}*{b}")
+    text = " ".join(parts) + " - 2.5"
+    assert parse_in_symbols(text, SYMBOLS) == reference - sp.Float("2.5")

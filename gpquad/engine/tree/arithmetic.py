@@ -93,12 +93,13 @@ class _Parser:
         return expr
 
     def expr(self) -> sp.Expr:
-        out = self.term()
+        # one Add of every term: adding them one by one re-sorts the growing sum each time
+        terms = [self.term()]
         while self.at("+", "-"):
             op = self.take()[1]
             right = self.term()
-            out = out + right if op == "+" else out - right
-        return out
+            terms.append(right if op == "+" else -right)
+        return terms[0] if len(terms) == 1 else sp.Add(*terms)
 
     def term(self) -> sp.Expr:
         out = self.unary()
