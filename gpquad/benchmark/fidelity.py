@@ -37,15 +37,14 @@ import re
 from pathlib import Path
 
 import numpy as np
-import sympy as sp
 
 from gpquad.benchmark.cells import settings_fingerprint
 from gpquad.benchmark.evaluate import score
-from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_names
+from gpquad.benchmark.peer_predictor import peer_predictor
+from gpquad.benchmark.rollout import fly
 from gpquad.data.score import FIDELITY_SUBSTEPS
-from gpquad.engine.tree.arithmetic import parse_in_symbols
 from gpquad.engine.tree.export import from_sympy, parse_equation
-from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
+from gpquad.engine.variables import TARGET_NAMES
 from gpquad.errors import GpquadError
 from gpquad.study.store import write_json
 
@@ -92,24 +91,6 @@ def model_from_text(equations: dict, input_names, dt: float, integrator: str, su
     return DiscoveredModel(
         eqs, names, {}, float(dt), 0, {}, integrator=integrator, substeps=substeps
     )
-
-
-def peer_predictor(equations: dict, input_names):
-    """predict(features, idx) -> (W, 6) of a peer's expressions in the lagged features."""
-    names = list(STATE_NAMES) + lagged_names(input_names, MAX_LAG)
-    syms = {n: sp.Symbol(n, real=True) for n in names}
-    funcs = []
-    for target in TARGET_NAMES:
-        expr = parse_in_symbols(equations[target], syms, caret_power=True, field=target)
-        funcs.append(sp.lambdify(list(syms.values()), expr, "numpy"))
-
-    def predict(features, idx):
-        cols = list(features.T)
-        return np.column_stack(
-            [np.broadcast_to(np.asarray(f(*cols), dtype=float), (len(idx),)) for f in funcs]
-        )
-
-    return predict
 
 
 def own_scheme(cell: dict, group: str | None = None) -> tuple[str, int]:
