@@ -13,6 +13,7 @@ from gpquad.benchmark.peer_predictor import (
     PolynomialPredictor,
     peer_predictor,
     polynomial_terms,
+    shared_terms,
 )
 from gpquad.benchmark.rollout import MAX_LAG, lagged_names
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
@@ -39,7 +40,7 @@ def test_polynomials_evaluate_as_their_sum_of_terms(data):
         rows = rng.choice(len(pool), rng.integers(0, len(pool) + 1), replace=False)
         polynomials.append((pool[rows], rng.normal(0.0, 3.0, len(rows))))
     x = rng.normal(0.0, 1.5, (5, n_features))
-    got = PolynomialPredictor(polynomials, n_features)(x)
+    got = PolynomialPredictor(*shared_terms(polynomials, n_features))(x)
     for t, (exponents, coefficients) in enumerate(polynomials):
         expected = np.zeros(len(x))
         for e, c in zip(exponents, coefficients, strict=True):
@@ -86,3 +87,30 @@ def test_a_peers_texts_predict_what_lambdify_gives():
         func = sp.lambdify(syms, sp.sympify(texts[target].replace("^", "**"), locals=table))
         expected = np.broadcast_to(np.asarray(func(*x.T), dtype=float), (len(x),))
         assert got[:, t] == pytest.approx(expected, rel=1e-11, abs=1e-11), target
+
+
+def test_a_fitted_librarys_predictor_uses_its_terms_in_the_reordered_features():
+    """gpquad.benchmark.peers.polynomial_predictor (PySINDy's fits): library powers in the
+    reordered features, coefficients (6, T) with unused terms; a plain sum of terms."""
+    from gpquad.benchmark.peers import polynomial_predictor
+
+    rng = np.random.default_rng(5)
+    n_features = 6
+    powers = np.array(
+        [[0] * n_features] + [list(r) for r in rng.integers(0, 2, (20, n_features))],
+        dtype=np.int64,
+    )
+    powers[3] = 0
+    powers[3, 2] = 3  # a cube
+    coef = rng.normal(0.0, 1.0, (6, len(powers)))
+    coef[:, 5] = 0.0  # a term no equation uses
+    coef[2, 1::2] = 0.0
+
+    def reorder(f):
+        return f[:, ::-1]
+
+    x = rng.normal(0.0, 1.0, (9, n_features))
+    got = polynomial_predictor(powers, coef, reorder)(x, np.arange(len(x)))
+    z = reorder(x)
+    library = np.column_stack([np.prod(z**row, axis=1) for row in powers])
+    assert got == pytest.approx(library @ coef.T, rel=1e-12, abs=1e-12)

@@ -47,38 +47,47 @@ def polynomial_terms(expr: sp.Expr, symbols) -> tuple[np.ndarray, np.ndarray] | 
 
 
 class PolynomialPredictor:
-    """predict(features (W, F)) -> (W, T) of T polynomials in the F features.
+    """predict(features (W, F)) -> (W, T): output t is the sum over monomials m of
+    coefficients[m, t] * prod_f features[:, f] ** exponents[m, f].
 
-    polynomials: T pairs (exponents (M_t, F), coefficients (M_t,)) of `polynomial_terms`.
-    """
+    exponents (M, F) whole numbers >= 0; coefficients (M, T). Each monomial is computed once
+    per call, as the product of its factors, and the outputs are one matrix product."""
 
-    def __init__(self, polynomials, n_features: int):
-        monomials: dict[tuple[int, ...], int] = {}
-        self.rows, self.coefficients = [], []
-        for exponents, coefficients in polynomials:
-            rows = [monomials.setdefault(tuple(e), len(monomials)) for e in exponents]
-            self.rows.append(np.array(rows, dtype=np.int64))
-            self.coefficients.append(np.asarray(coefficients, dtype=float))
-        degree = max((sum(m) for m in monomials), default=0)
+    def __init__(self, exponents: np.ndarray, coefficients: np.ndarray):
+        exponents = np.asarray(exponents, dtype=np.int64)
+        n_features = exponents.shape[1]
+        degree = int(exponents.sum(axis=1).max()) if len(exponents) else 0
         # factors[m, d]: the feature of monomial m's d-th factor; n_features is the constant 1
-        self.factors = np.full((len(monomials), max(degree, 1)), n_features, dtype=np.int64)
-        for m, row in monomials.items():
-            names = np.repeat(np.arange(n_features), m)
-            self.factors[row, : len(names)] = names
+        self.factors = np.full((len(exponents), max(degree, 1)), n_features, dtype=np.int64)
+        for m, row in enumerate(exponents):
+            names = np.repeat(np.arange(n_features), row)
+            self.factors[m, : len(names)] = names
+        self.coefficients = np.ascontiguousarray(coefficients, dtype=float)
         self.n_features = n_features
 
     def __call__(self, features: np.ndarray) -> np.ndarray:
-        n = features.shape[0]
-        padded = np.empty((n, self.n_features + 1))
+        padded = np.empty((features.shape[0], self.n_features + 1))
         padded[:, : self.n_features] = features
         padded[:, self.n_features] = 1.0
         values = padded[:, self.factors[:, 0]]
         for d in range(1, self.factors.shape[1]):
             values *= padded[:, self.factors[:, d]]
-        out = np.empty((n, len(self.rows)))
-        for t, (rows, coefficients) in enumerate(zip(self.rows, self.coefficients, strict=True)):
-            out[:, t] = values[:, rows] @ coefficients if len(rows) else 0.0
-        return out
+        return values @ self.coefficients
+
+
+def shared_terms(polynomials, n_features: int) -> tuple[np.ndarray, np.ndarray]:
+    """(exponents (M, F), coefficients (M, T)) of T polynomials, each a pair (exponents,
+    coefficients) of `polynomial_terms`, over the monomials any of them has."""
+    rows: dict[tuple[int, ...], int] = {}
+    for exponents, _ in polynomials:
+        for e in exponents:
+            rows.setdefault(tuple(int(x) for x in e), len(rows))
+    coefficients = np.zeros((len(rows), len(polynomials)))
+    for t, (exponents, values) in enumerate(polynomials):
+        for e, c in zip(exponents, values, strict=True):
+            coefficients[rows[tuple(int(x) for x in e)], t] += c
+    exponents = np.array(list(rows), dtype=np.int64).reshape(len(rows), n_features)
+    return exponents, coefficients
 
 
 def peer_predictor(equations: dict, input_names):
@@ -97,7 +106,7 @@ def _predictor(texts: tuple[str, ...], input_names: tuple[str, ...]):
     exprs = [parse_in_symbols(equations[t], table, caret_power=True, field=t) for t in TARGET_NAMES]
     terms = [polynomial_terms(e, syms) for e in exprs]
     polynomial = [t for t, found in enumerate(terms) if found is not None]
-    poly = PolynomialPredictor([terms[t] for t in polynomial], len(syms))
+    poly = PolynomialPredictor(*shared_terms([terms[t] for t in polynomial], len(syms)))
     others = {
         t: sp.lambdify(syms, exprs[t], "numpy") for t, found in enumerate(terms) if found is None
     }

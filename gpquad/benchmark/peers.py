@@ -24,6 +24,7 @@ from importlib import metadata
 
 import numpy as np
 
+from gpquad.benchmark.peer_predictor import PolynomialPredictor
 from gpquad.benchmark.rollout import MAX_LAG, fly, lagged_inputs, lagged_names
 from gpquad.engine.evolve.windows import tile
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
@@ -148,30 +149,16 @@ def _validation_rse(predict, dataset, horizon_steps: int) -> float:
 
 
 def polynomial_predictor(powers: np.ndarray, coef: np.ndarray, reorder):
-    """predict(features, idx) of a degree <= 2 polynomial library with coefficients (6, T).
-
-    powers (T, F) are the library's exponents (PolynomialLibrary.powers_); the library is
-    evaluated as products of two columns of [features, 1], which is exact for degree 2 and
-    much faster per step than the library's own transform.
-    """
-    if powers.sum(axis=1).max() > 2:
-        raise ValueError("only degree <= 2 libraries")
-    n_feat = powers.shape[1]
-    first = np.full(len(powers), n_feat)
-    second = np.full(len(powers), n_feat)
-    for k, row in enumerate(powers):
-        cols = np.repeat(np.arange(n_feat), row)
-        if len(cols) >= 1:
-            first[k] = cols[0]
-        if len(cols) == 2:
-            second[k] = cols[1]
-    keep = np.flatnonzero(np.any(coef != 0.0, axis=0))  # only terms some equation uses
-    first, second, weights = first[keep], second[keep], coef[:, keep].T.copy()
+    """predict(features, idx) of a polynomial library with coefficients (6, T): powers
+    (T, F) are the library's exponents (PolynomialLibrary.powers_) in the features that
+    `reorder` makes; only the terms some equation uses are computed, each as the product
+    of its factors (gpquad.benchmark.peer_predictor), much faster per step than the
+    library's own transform."""
+    keep = np.flatnonzero(np.any(coef != 0.0, axis=0))
+    poly = PolynomialPredictor(powers[keep], coef[:, keep].T)
 
     def predict(features, idx):
-        z = reorder(features)
-        z1 = np.hstack([z, np.ones((len(z), 1))])
-        return (z1[:, first] * z1[:, second]) @ weights
+        return poly(reorder(features))
 
     return predict
 
