@@ -9,8 +9,9 @@ dozen windows (`sympy.lambdify`), one stage costs thousands of small numpy opera
 An expression that is a polynomial in the features is therefore evaluated as one: every
 monomial of any of the six expressions is computed once per call, as the product of its
 factors (x**2 y is x * x * y), and the accelerations are one matrix product of those
-values and the coefficients (zero where an expression lacks the monomial). An expression that is not a polynomial (an operon model's division or
-exp) is evaluated by its `sympy.lambdify` function.
+values and the coefficients (zero where an expression lacks the monomial). An expression
+that is not a polynomial (an operon model's division or exp) is evaluated by its
+`sympy.lambdify` function.
 """
 
 from __future__ import annotations
