@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import sympy as sp
 from conftest import INPUTS
 
 from gpquad.data.dataset import build_dataset
@@ -123,6 +124,22 @@ def test_terms_a_fit_drove_to_round_off_are_dropped_and_real_ones_kept(dataset):
     assert without_negligible_terms(lag_filter, dataset.arrays, rows) is lag_filter
     model = DiscoveredModel({"p_dot": noisy}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
     assert "q" not in with_printed_digits(model, dataset).equations["p_dot"].text()
+
+
+def test_an_equation_whose_expanded_form_is_too_large_is_kept_as_found(dataset):
+    """A product of sums expands to thousands of terms, some negligible: the equation is
+    kept as it is instead of failing the fit (a refined Betaflight equation did; the check
+    can fail: the expanded form itself exceeds from_sympy's limit)."""
+    from gpquad.engine.tree.export import TreeTooLarge
+    from gpquad.models.precision import without_negligible_terms
+
+    big = _equation("(p + q + r + phi + theta + u_R + u_P + 1e-9)**6 - 4.15*p", dataset)
+    rows = sample_rows(dataset.train, 5)
+    with pytest.raises(TreeTooLarge):
+        from_sympy(sp.expand(big.sympy()), big.delays, big.input_names)
+    assert without_negligible_terms(big, dataset.arrays, rows) is big
+    model = DiscoveredModel({"p_dot": big}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
+    with_printed_digits(model, dataset)  # the last finishing step: no error
 
 
 def test_the_finishing_steps_fit_the_printed_terms(dataset, monkeypatch):

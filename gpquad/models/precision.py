@@ -24,7 +24,7 @@ import numpy as np
 import sympy as sp
 
 from gpquad.engine.taps import base_input
-from gpquad.engine.tree.export import from_sympy, round_constants
+from gpquad.engine.tree.export import TreeTooLarge, from_sympy, round_constants
 from gpquad.engine.variables import STATE_NAMES
 
 TOLERANCE = 1e-3
@@ -100,7 +100,8 @@ def without_negligible_terms(equation, arrays, rows):
     """`equation` without the additive terms (of its expanded form) that together move its
     value by at most half of TOLERANCE x RMS on `rows`, smallest first: terms a fit drove
     to round-off (a coupling the search needed under eq. 2 and a continuous-time refit set
-    to 1e-6) would otherwise be printed and exported. The same equation when none is."""
+    to 1e-6) would otherwise be printed and exported. The same equation when none is, or
+    when its expanded form is too large to encode (from_sympy's MAX_ENCODED_NODES)."""
     expr = sp.expand(equation.sympy())
     terms = sp.Add.make_args(expr)
     if len(terms) < 2:
@@ -123,7 +124,10 @@ def without_negligible_terms(equation, arrays, rows):
     if not dropped:
         return equation
     kept = sp.Add(*[t for k, t in enumerate(terms) if k not in dropped])
-    tree = from_sympy(kept, equation.delays, equation.input_names)
+    try:
+        tree = from_sympy(kept, equation.delays, equation.input_names)
+    except TreeTooLarge:  # the expanded form of a product of sums: kept as found
+        return equation
     return dataclasses.replace(equation, tree=tree)
 
 
@@ -132,7 +136,7 @@ def with_exact_raw_constant(equation, arrays, rows):
     constant moves the equation by at most half of BIAS_TOLERANCE x RMS on `rows`: a fit
     leaves the trimmed constant of p_dot = 10.3 (u_R - trim) - 4.15 p at 1e-6 of its value,
     and the raw form would print the difference (+ 2.6e-8) as a constant the data do not
-    have. The same equation otherwise."""
+    have. The same equation otherwise, or when that form is too large to encode."""
     if not equation.trims():
         return equation
     expr = equation.sympy()
@@ -145,7 +149,10 @@ def with_exact_raw_constant(equation, arrays, rows):
         return equation
     if abs(constant) > 0.5 * BIAS_TOLERANCE * float(np.sqrt(np.mean(values**2))):
         return equation
-    tree = from_sympy(expr - constant, equation.delays, equation.input_names)
+    try:
+        tree = from_sympy(expr - constant, equation.delays, equation.input_names)
+    except TreeTooLarge:  # as without_negligible_terms
+        return equation
     return dataclasses.replace(equation, tree=tree)
 
 

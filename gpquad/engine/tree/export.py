@@ -114,6 +114,10 @@ def parse_equation(text: str, input_names, *, source: str = "equation") -> tuple
 MAX_ENCODED_NODES = 4095
 
 
+class TreeTooLarge(GpquadError):
+    """from_sympy's expression needs more than MAX_ENCODED_NODES tree nodes."""
+
+
 def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
     """Encode a sympy expression of + - * / (integer powers allowed) as a Tree; `delays`
     may hold taps (u_R__tap1, gpquad.engine.taps), which widen the tree's delay slots.
@@ -133,7 +137,7 @@ def from_sympy(expr: sp.Expr, delays: dict[str, int], input_names) -> Tree:
 
     def emit(e):
         if len(codes) > MAX_ENCODED_NODES:
-            raise GpquadError(f"the equation expands to more than {MAX_ENCODED_NODES} tree nodes")
+            raise TreeTooLarge(f"the equation expands to more than {MAX_ENCODED_NODES} tree nodes")
         if e.is_Number:
             if not np.isfinite(float(e)):
                 raise GpquadError(f"'{e}' is not a finite number")
