@@ -182,7 +182,7 @@ def fit(
     """
     from gpquad._machine import warn_if_late
     from gpquad.data.io import dataset_of, load_dataset
-    from gpquad.study.fit import fit_dataset, warn_unmeasured
+    from gpquad.study.fit import fit_dataset
     from gpquad.study.runner import run_experiment
     from gpquad.study.search import Progress
     from gpquad.study.workers import default_jobs
@@ -205,7 +205,6 @@ def fit(
             in_process=jobs is None,  # every iteration checkpointed
         )
     else:
-        warn_unmeasured(dataset, cfg.evolution.targets)
         ev = cfg.evolution
         if jobs is not None and jobs < 1:
             raise GpquadError(f"jobs must be >= 1, got {jobs}", field="jobs")

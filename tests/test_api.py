@@ -218,30 +218,99 @@ def test_time_left_leaves_out_the_first_iteration():
     assert progress.time_left(62.0) == "~4.0 s"  # 2 s per iteration, 2 to go; not 31 s each
 
 
-def test_equations_of_unmeasured_states_are_marked_everywhere(flight):
-    """A log without horizontal velocity: a_x and a_y are marked in the text, LaTeX,
-    Markdown and model.json (the check can fail: a measured state has no mark)."""
+def _blind(flight, states=("u", "v")):
+    """The flight's dataset with `states` marked as not measured (a PX4 log without GPS)."""
     import dataclasses
 
-    from gpquad.models.equations import DiscoveredModel
-    from gpquad.study.fit import unmeasured_notes
-
     dataset = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
-    assert unmeasured_notes(dataset, ["a_x", "p_dot"]) is None
     info = [
-        dict(f, measured={"u": "not measured (no GPS)", "v": "not measured (no GPS)"})
-        for f in dataset.flight_info
+        dict(f, measured={s: "not measured (no GPS)" for s in states}) for f in dataset.flight_info
     ]
-    blind = dataclasses.replace(dataset, flight_info=info)
-    notes = unmeasured_notes(blind, ["a_x", "a_y", "p_dot"])
-    assert set(notes) == {"a_x", "a_y"} and "u not measured" in notes["a_x"]
-    model = gpquad.fit(flight, seed=1, iterations=1, input_taps=1, targets=["a_x"])
-    marked = dataclasses.replace(model.discovered, unmeasured=notes)
-    assert "[u not measured" in marked.text() and "u not measured" in marked.markdown()
-    assert r"\text{(u not measured" in marked.latex()
-    assert DiscoveredModel.from_dict(marked.to_dict()).unmeasured == notes
-    assert "not measured" not in model.discovered.text() + model.discovered.markdown()
-    assert "nan" not in marked.markdown().lower()
+    return dataclasses.replace(dataset, flight_info=info)
+
+
+def test_targets_of_unmeasured_states_are_not_identified(flight, capsys):
+    """A log without horizontal velocity: a_x and a_y are not searched (their placeholder
+    values are no measurement), each left out with one warning, and the model says why
+    in its text, Markdown and model.json; its flights take the log's a_x. The check can
+    fail: on the measured dataset every target is searched and nothing is marked."""
+    from gpquad.models.equations import DiscoveredModel
+    from gpquad.study.fit import fit_dataset, measured_targets, unmeasured_notes
+
+    cfg = config_from_dict(
+        {
+            "evolution": {
+                "iterations": 1,
+                "input_taps": 1,
+                "targets": ["a_x", "a_y", "p_dot"],
+                "finish": [],
+            }
+        }
+    )
+    measured = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
+    assert unmeasured_notes(measured, ["a_x", "p_dot"]) is None
+    assert measured_targets(cfg, measured) is cfg
+    blind = _blind(flight)
+    kept = measured_targets(cfg, blind)
+    assert kept.evolution.targets == ("p_dot",)
+    err = capsys.readouterr().err
+    assert "a_x: not identified: the log does not measure u" in err and "p_dot" not in err
+
+    seconds: dict = {}
+    found = fit_dataset(blind, cfg, seconds=seconds)
+    assert set(found.equations) == {"p_dot"} and set(seconds["search"]) == {"p_dot"}
+    assert found.note("a_x") == "not identified: the log does not measure u"
+    assert "a_x: not identified" in found.text() and "a_y: not identified" in found.text()
+    assert "| a_x | - | - | - | not identified" in found.markdown()
+    assert DiscoveredModel.from_dict(found.to_dict()).unmeasured == found.unmeasured
+    start = blind.train[0][0] + 10
+    flown = found.simulate(blind, np.array([start]), 50)
+    logged = blind.arrays.states[start : start + 51, 3]
+    # u follows the log's a_x (rotated by the flown attitude), not a fitted equation
+    assert np.max(np.abs(flown[0, :, 3] - logged)) < 0.02 * np.max(np.abs(logged))
+
+    whole = fit_dataset(measured, cfg)
+    assert set(whole.equations) == {"a_x", "a_y", "p_dot"}
+    assert "not identified" not in whole.text() + whole.markdown()
+
+
+def test_whole_model_steps_run_without_the_unmeasured_targets(flight):
+    """The stability repair and the joint refit fly the full model: they run on a model
+    that lacks only the targets of unmeasured states (those fly the log's accelerations),
+    and leave out a model that lacks a measured one (the check can fail: on the measured
+    dataset the same model is partial)."""
+    import dataclasses
+
+    from gpquad.models.finish import finish_model
+    from gpquad.models.joint_fit import is_whole
+    from gpquad.study.fit import fit_dataset
+
+    cfg = config_from_dict(
+        {"evolution": {"iterations": 1, "input_taps": 1, "finish": ["repair", "joint_fit"]}}
+    )
+    blind = _blind(flight)
+    found = fit_dataset(blind, cfg)
+    assert set(found.equations) == {"a_z", "p_dot", "q_dot", "r_dot"}
+    assert is_whole(found, blind) and found.stability is not None
+    assert found.joint_fit is not None and found.joint_fit["states"] == ["w", "p", "q", "r"]
+    measured = build_dataset([flight_from_frame(flight, INPUTS)], validation_fraction=0.15)
+    bare = dataclasses.replace(found, stability=None, joint_fit=None)
+    assert not is_whole(bare, measured)
+    again = finish_model(bare, measured, cfg.evolution)
+    assert again.stability is None and again.joint_fit is None
+
+
+def test_a_fit_of_only_unmeasured_states_fails_before_searching(flight, capsys):
+    """Every target's state unmeasured: one line naming evolution.targets, before any
+    search (the check can fail: with p_dot among the targets the fit goes on)."""
+    from gpquad.errors import GpquadError
+    from gpquad.study.fit import measured_targets
+
+    cfg = config_from_dict({"evolution": {"targets": ["a_x", "a_y"]}})
+    with pytest.raises(GpquadError, match="evolution.targets"):
+        measured_targets(cfg, _blind(flight))
+    both = config_from_dict({"evolution": {"targets": ["a_x", "p_dot"]}})
+    assert measured_targets(both, _blind(flight)).evolution.targets == ("p_dot",)
 
 
 def test_fit_reports_where_its_time_went(model, tmp_path):

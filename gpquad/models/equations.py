@@ -206,6 +206,8 @@ class DiscoveredModel:
                     f"| {t} | ${e.latex()}$ | {_shown(e.error)} | "
                     f"{_shown(e.validation_error)} | {self.note(t)} |"
                 )
+            elif self.note(t):
+                lines.append(f"| {t} | - | - | - | {self.note(t)} |")
         return "\n".join(lines) + "\n"
 
     def __str__(self) -> str:
@@ -215,8 +217,10 @@ class DiscoveredModel:
         """The equations, one per line (raw=True: in the untrimmed inputs)."""
         return "\n".join(
             self.equations[t].text(raw=raw) + (f"   [{self.note(t)}]" if self.note(t) else "")
-            for t in TARGET_NAMES
             if t in self.equations
+            else f"{t}: {self.note(t)}"
+            for t in TARGET_NAMES
+            if t in self.equations or self.note(t)
         )
 
     def fly_states(self, inputs, initial_state=None, raw_inputs: bool = True) -> np.ndarray:

@@ -9,8 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 from gpquad.engine.threads import one_blas_thread
-from gpquad.engine.variables import TARGET_NAMES
-from gpquad.models.joint_fit import joint_refit
+from gpquad.models.joint_fit import is_whole, joint_refit
 from gpquad.models.precision import with_printed_digits, without_negligible
 from gpquad.models.refine import refine
 from gpquad.models.stability import repair_stability
@@ -33,14 +32,14 @@ def _refine(model, dataset, evolution, flipped, workers):
 
 
 def _repair(model, dataset, evolution, flipped, workers):
-    if not all(t in model.equations for t in TARGET_NAMES):
+    if not is_whole(model, dataset):
         return model
     repaired, report = repair_stability(model, dataset, mirror=flipped)
     return dataclasses.replace(repaired, stability=report)
 
 
 def _joint_fit(model, dataset, evolution, flipped, workers):
-    if not all(t in model.equations for t in TARGET_NAMES):
+    if not is_whole(model, dataset):
         return model
     refitted, report = joint_refit(model, dataset, workers=workers)
     return dataclasses.replace(refitted, joint_fit=report)
@@ -54,7 +53,8 @@ def finish_model(model, dataset, evolution, vehicle=None, on_step=None, workers:
     """The model after `evolution.finish`'s steps, in their order, with the significant
     digits its printed equations need. `vehicle` (the config's [vehicle], or None: no
     mirror) says which inputs a left-right mirror flips; "repair" and "joint_fit" need
-    all six equations and leave a partial model as it is. `on_step(name)` is called
+    an equation for every target whose state the data measure (joint_fit.is_whole) and
+    leave a partial model as it is. `on_step(name)` is called
     before each step (progress). workers: threads a step may use (the refinement's
     equations, the joint refit's Jacobian); the result is the same for any number. After
     each step an RK4 model flies with as many steps per sample as its stiffest loop needs

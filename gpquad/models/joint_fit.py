@@ -112,6 +112,13 @@ SIGNIFICANCE = 2.0
 LARGE_DROP = 0.5
 
 
+def is_whole(model, dataset) -> bool:
+    """Whether the model flies every measured state by an equation of its own: each target
+    has one, or the data do not measure its state (such a target is not identified,
+    gpquad.study.fit.measured_targets, and its flights take the data's acceleration)."""
+    return all(t in model.equations or dataset.unmeasured(TARGET_STATE[t]) for t in TARGET_NAMES)
+
+
 def constant_nodes(model) -> list[tuple[str, np.ndarray]]:
     """(target, indices of its CONST nodes) for each target the model has an equation for."""
     return [
@@ -278,7 +285,7 @@ def joint_refit(model, dataset, horizons_s=JOINT_HORIZONS_S, workers: int = 1):
     # windows of the longest horizon, shortened to the longest validation range if need be
     judge_starts, judge_steps, judged_on = judged_windows(dataset, model, horizons_s[-1])
     report["horizon_s"] = round(float(judge_steps * dataset.dt), 9)
-    if x0.size == 0 or not states or len(judge_starts) == 0 or len(model.equations) < 6:
+    if x0.size == 0 or not states or len(judge_starts) == 0 or not is_whole(model, dataset):
         report.update(
             judged_on=None, error_before=None, error_after=None, time_s=time.perf_counter() - t0
         )

@@ -55,7 +55,7 @@ from gpquad.engine.tree.export import round_constants
 from gpquad.engine.variables import STATE_NAMES, TARGET_NAMES
 from gpquad.models.earned import earn_terms
 from gpquad.models.equation import Equation
-from gpquad.models.joint_fit import CHECK_HORIZON_S, judged_windows
+from gpquad.models.joint_fit import CHECK_HORIZON_S, is_whole, judged_windows
 from gpquad.models.lag_fit import choose_lag, polish_lag
 from gpquad.models.refine_problem import RefineProblem, monomials
 from gpquad.models.stability import FullModelFlights
@@ -315,7 +315,7 @@ def keep_what_flies(refined, found, dataset, mirror=()) -> tuple[object, list[st
         for t in TARGET_NAMES
         if t in refined.equations and refined.equations[t] is not found.equations[t]
     ]
-    if not changed or not all(t in refined.equations for t in TARGET_NAMES):
+    if not changed or not is_whole(refined, dataset):
         return refined, []
     starts, steps, _ = judged_windows(dataset, refined, CHECK_HORIZON_S)
     if len(starts) == 0:

@@ -39,6 +39,7 @@ from gpquad.engine.variables import TARGET_NAMES
 from gpquad.models.joint_fit import (
     CHECK_HORIZON_S,
     FullModelError,
+    is_whole,
     judged_windows,
     measured_states,
 )
@@ -79,7 +80,7 @@ def repair_stability(model, dataset, seconds: float = CHECK_HORIZON_S, mirror=()
     with mirror also "mirrored", "mirrored_diverged_before" and "_after"; why is
     "diverged" or "mirror diverged". None when the model lacks an equation or no window fits.
     """
-    if not all(t in model.equations for t in TARGET_NAMES):
+    if not is_whole(model, dataset):
         return model, None
     starts, steps, judged_on = judged_windows(dataset, model, seconds)
     if len(starts) == 0:
@@ -105,14 +106,14 @@ def repair_stability(model, dataset, seconds: float = CHECK_HORIZON_S, mirror=()
     if mirrored is not None:
         report.update(mirrored=list(mirror), mirrored_diverged_before=best[1])
     alternatives = (
-        {t: model.equations[t].alternatives() for t in TARGET_NAMES} if best[0] or best[1] else {}
+        {t: e.alternatives() for t, e in model.equations.items()} if best[0] or best[1] else {}
     )
     for _ in range(MAX_ROUNDS):
         if best[0] == 0 and best[1] == 0:
             break
         pick = None
         for target in TARGET_NAMES:
-            for alt in alternatives[target]:
+            for alt in alternatives.get(target, ()):
                 score = fly(_swap(model, target, alt))[0]
                 report["flights"] += 1
                 if score < (pick[0] if pick else best):

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from gpquad.data.dataset import Dataset
-from gpquad.engine.variables import TARGET_STATE
+from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.errors import GpquadError
 from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
@@ -41,10 +41,30 @@ FINISH_WORDS = {
 }
 
 
-def warn_unmeasured(dataset: Dataset, targets) -> None:
-    """One line per target whose integrated state the data does not measure."""
-    for target, note in (unmeasured_notes(dataset, targets) or {}).items():
+def measured_targets(cfg: Config, dataset: Dataset, source: str = "config") -> Config:
+    """`cfg` with evolution.targets left to those whose integrated state the data measures,
+    one line on stderr for each target left out.
+
+    A state that a log does not measure (u and v of a PX4 flight without GPS, every velocity
+    of a Betaflight log) holds placeholder values, and an equation fitted to them describes
+    the placeholder, not the vehicle: such a target is not identified. No other equation
+    reads that state (gpquad.engine.evolve.leaves), and the model flies the log's own
+    acceleration for it where it flies data, zero from inputs alone. Raises GpquadError
+    (before any long work) when no target is left."""
+    notes = unmeasured_notes(dataset, cfg.evolution.targets) or {}
+    kept = tuple(t for t in cfg.evolution.targets if t not in notes)
+    if not kept:
+        raise GpquadError(
+            f"the data measure none of the targets' states ({', '.join(notes.values())}); "
+            "choose targets whose states the log measures",
+            source=source,
+            field="evolution.targets",
+        )
+    for target, note in notes.items():
         print(f"gpquad: warning: {target}: {note}", file=sys.stderr)
+    if not notes:
+        return cfg
+    return dataclasses.replace(cfg, evolution=dataclasses.replace(cfg.evolution, targets=kept))
 
 
 def _finished_record(path: Path, dataset) -> tuple[Equation, int] | None:
@@ -260,7 +280,7 @@ def longest_first(targets) -> list[str]:
 def unmeasured_notes(dataset: Dataset, targets) -> dict[str, str] | None:
     """{target: note} for the targets whose integrated state the data does not measure."""
     notes = {
-        t: f"{TARGET_STATE[t]} not measured by the log: fitted to its placeholder values"
+        t: f"not identified: the log does not measure {TARGET_STATE[t]}"
         for t in targets
         if dataset.unmeasured(TARGET_STATE[t])
     }
@@ -277,7 +297,7 @@ def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> 
         cfg.seed,
         cfg.to_dict(),
         envelope=training_envelope(dataset),
-        unmeasured=unmeasured_notes(dataset, equations),
+        unmeasured=unmeasured_notes(dataset, TARGET_NAMES),
     )
 
 
@@ -350,7 +370,9 @@ def fit_dataset(
     folder the searches may run in `jobs` processes (the same equations for any value).
     `seconds`, if given, receives the fit's profile: {"search": {target: s}, "finish":
     {step: s}} (each search's own time, each finishing step's wall time)."""
+    cfg = measured_targets(cfg, dataset)
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
+    report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
     steps: dict[str, float] = {}
     model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)

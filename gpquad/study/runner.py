@@ -13,7 +13,7 @@ from gpquad.data.io import load_dataset
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
-from gpquad.study.fit import finish, new_model, search_equations, warn_unmeasured
+from gpquad.study.fit import finish, measured_targets, new_model, search_equations
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -175,6 +175,8 @@ def run_experiment(
         report.say("gpquad: loading the flight data ...")
         dataset = load_dataset(cfg)
     load_seconds = time.perf_counter() - t_load
+    cfg = measured_targets(cfg, dataset)
+    report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     resuming = claim_run_folder(run_dir, cfg)
     info = {
         "schema": RUN_SCHEMA,
@@ -188,7 +190,6 @@ def run_experiment(
         write_json(run_dir / "config.json", folder_config_dict(cfg))
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
-    warn_unmeasured(dataset, ev.targets)
     report.say(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"

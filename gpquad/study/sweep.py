@@ -28,6 +28,7 @@ from gpquad.engine.variables import target_index
 from gpquad.errors import GpquadError
 from gpquad.study import checkpoint
 from gpquad.study.config import Config, folder_config_dict
+from gpquad.study.fit import measured_targets
 from gpquad.study.loop import evolve, final_equation
 from gpquad.study.seeding import run_seed
 from gpquad.study.store import HistoryWriter, checked_name, provenance, write_json
@@ -325,6 +326,7 @@ def run_sweep(
     if n_runs < 1:
         raise GpquadError("must be >= 1", field="--runs")
     dataset = load_dataset(cfg)  # bad data fails here, before any long work
+    cfg = measured_targets(cfg, dataset)
     for t in cfg.evolution.targets:  # window too long for the data fails here too
         Coevolution(dataset, t, cfg.evolution)
     prepare(cfg, out, n_runs)
