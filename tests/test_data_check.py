@@ -230,8 +230,10 @@ def test_run_refuses_a_dataset_that_fails_the_check(sim_flight, tmp_path):
 
 
 @needs_shared
-def test_gpquad_run_on_s250aq_gives_six_equations(tmp_path, capsys):
-    """The experiments/px4_s250.toml config with a tiny budget (1 iteration, 5 generations)."""
+def test_gpquad_run_on_s250aq_gives_the_measured_equations(tmp_path, capsys):
+    """The experiments/px4_s250.toml config with a tiny budget (1 iteration, 5 generations):
+    the four equations of measured states; a_x and a_y (u, v not measured: no GPS) are not
+    identified, and the model and the run's warnings say so."""
     import tomllib
 
     root = Path(__file__).resolve().parents[1]
@@ -245,7 +247,9 @@ def test_gpquad_run_on_s250aq_gives_six_equations(tmp_path, capsys):
     from gpquad.study.runner import run_experiment
 
     model = run_experiment(cfg, tmp_path / "run", progress=False)
-    assert sorted(model.equations) == sorted(["a_x", "a_y", "a_z", "p_dot", "q_dot", "r_dot"])
+    assert sorted(model.equations) == sorted(["a_z", "p_dot", "q_dot", "r_dot"])
+    assert "a_x: not identified: the log does not measure u" in model.text()
+    assert "a_y: not identified" in capsys.readouterr().err
     saved = json.loads((tmp_path / "run" / "model.json").read_text())
     assert sorted(saved["targets"]) == sorted(model.equations)
     config = json.loads((tmp_path / "run" / "config.json").read_text())

@@ -32,6 +32,7 @@ def test_wrapped_function_runs_on_one_thread_and_the_limit_is_lifted_after():
 
 @needs_blas
 def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
+    from gpquad.engine.variables import TARGET_NAMES
     from gpquad.models import finish
     from gpquad.study import search
 
@@ -52,7 +53,7 @@ def test_identify_and_finish_model_run_on_one_thread(monkeypatch):
             pytest.skip("no BLAS here runs on two threads")
         with pytest.raises(Stop):
             search.identify(None, "p_dot", type("C", (), {"evolution": None})())
-        model = type("M", (), {"equations": dict.fromkeys(finish.TARGET_NAMES)})()
+        model = type("M", (), {"equations": dict.fromkeys(TARGET_NAMES)})()
         evolution = type(
             "E", (), {"finish": ("repair",), "refine_for": staticmethod(lambda target: 0)}
         )()

@@ -150,7 +150,9 @@ class EvolutionConfig:
     """How each equation is searched and finished. The defaults are the best engine measured
     (docs/decisions); `preset = "paper"` is the paper's method (gpquad.study.presets)."""
 
-    targets: tuple[str, ...] = TARGET_NAMES  # the accelerations to identify, each alone
+    # The accelerations to identify, each alone; a target whose state the log does not
+    # measure is left out (docs/guide.md).
+    targets: tuple[str, ...] = TARGET_NAMES
     iterations: int = 12  # coevolution iterations (paper: 30)
     # Stop a search early when `stall_iterations` iterations in a row (0 = never) did not
     # lower its best training error by `stall_gain` of it (docs/decisions).
