@@ -333,6 +333,25 @@ def test_fit_reports_where_its_time_went(model, tmp_path):
         "repair",
         "joint_fit",
     }
+    run = json.loads((tmp_path / "r" / "run.json").read_text())
+    assert run["search_phase_time_s"] == two.profile["phases"]
+
+
+def test_a_search_profile_splits_its_time_into_phases(model):
+    """Each search's phases (coevolution.PHASES): every phase the default engine runs is
+    there and took time, and together they are most of the search's own seconds and not
+    more (phases timed inside one another would add up to more than the search)."""
+    from gpquad.engine.evolve.coevolution import PHASES
+    from gpquad.study.runner import phase_profile
+
+    phases = model.profile["phases"]
+    assert set(phases) == set(FAST["targets"])
+    for target, seconds in phases.items():
+        assert set(seconds) == set(PHASES) and all(s > 0 for s in seconds.values())
+        assert 0.5 * model.profile["search"][target] < sum(seconds.values())
+        assert sum(seconds.values()) <= model.profile["search"][target]
+    line = phase_profile(phases)
+    assert line.startswith("searches, summed: ") and "final choice" in line
 
 
 def test_parallel_searches_give_the_same_equations(flight):

@@ -154,7 +154,7 @@ def test_a_worker_search_is_given_its_pool_share(monkeypatch):
     """_identify_in_worker hands the search the threads its pool's share allows."""
     seen = []
 
-    def spy(dataset, target, cfg, rows, threads=None):
+    def spy(dataset, target, cfg, rows, threads=None, seconds=None):
         seen.append(threads())
         return types.SimpleNamespace(target=target), None
 

@@ -115,12 +115,16 @@ class RowCollector:
 def _identify_in_worker(
     dataset: Dataset, target: str, cfg: Config, keep_rows: bool, share: str, jobs: int
 ):
-    """(target, equation, history rows or [], seconds) of one search in a worker process,
-    with the threads its pool's CoreShare file `share` allows (workers.threads_of)."""
+    """(target, equation, history rows or [], seconds, its phases' seconds) of one search in
+    a worker process, with the threads its pool's CoreShare file `share` allows
+    (workers.threads_of)."""
     t0 = time.perf_counter()
     rows = RowCollector() if keep_rows else None
-    equation, _ = identify(dataset, target, cfg, rows, threads=workers.threads_of(share, jobs))
-    return target, equation, rows.rows if rows else [], time.perf_counter() - t0
+    phases: dict[str, float] = {}
+    equation, _ = identify(
+        dataset, target, cfg, rows, threads=workers.threads_of(share, jobs), seconds=phases
+    )
+    return target, equation, rows.rows if rows else [], time.perf_counter() - t0, phases
 
 
 def _history_start(run_dir: Path) -> int:
@@ -137,8 +141,10 @@ def search_equations(
     jobs: int = 1,
     in_process: bool = False,
     idle=None,
+    phases: dict | None = None,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
-    """Every target's equation ({target: Equation}) and search time (s). With run_dir, the
+    """Every target's equation ({target: Equation}) and search time (s); `phases`, if given,
+    receives each search's phases ({target: {phase: s}}, coevolution.PHASES). With run_dir, the
     history and checkpoints are written there and finished targets are resumed from it. On
     KeyboardInterrupt the exception carries `equations` = the equations found so far.
 
@@ -155,6 +161,7 @@ def search_equations(
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
+    phases = {} if phases is None else phases
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
     inside = workers.inside_worker()
     parallel = jobs > 1 and len(ev.targets) > 1 and not inside and not in_process
@@ -188,6 +195,7 @@ def search_equations(
                     checkpoint_path=None if done is None else done.with_suffix(".ckpt"),
                     history_start=history_end,
                     threads=lambda: threads,
+                    seconds=phases.setdefault(target, {}),
                 )
                 timings[target] = time.perf_counter() - t0
                 history_end = _record(equations[target], done, history, [])
@@ -195,9 +203,10 @@ def search_equations(
         if pending:
             if history is not None:
                 history.truncate(history_end)
-            _search_in_workers(
+            found = _search_in_workers(
                 dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle
             )
+            phases.update(found)
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
         if partial is not None:
@@ -235,9 +244,11 @@ def _say_found(report: Progress, equation: Equation, seconds: float | None = Non
 
 def _search_in_workers(
     dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle=None
-) -> None:
+) -> dict[str, dict[str, float]]:
     """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
-    target order as soon as every target before it is (search_equations' notes)."""
+    target order as soon as every target before it is (search_equations' notes); returns
+    each search's phases ({target: {phase: s}})."""
+    phases: dict[str, dict[str, float]] = {}
     pool = workers.processes(jobs, len(cfg.evolution.targets))
     searches = f"{len(pending)} equation{'s' if len(pending) > 1 else ''}"
     report.say(f"gpquad: searching {searches} in {pool} processes ...")
@@ -253,9 +264,10 @@ def _search_in_workers(
         idle_after = max(0, len(pending) - pool + 1)
         if idle is not None and idle_after == 0:
             idle()
-        for left, (target, equation, rows, seconds) in enumerate(
+        for left, (target, equation, rows, seconds, phase_seconds) in enumerate(
             workers.completed(futures), start=1
         ):
+            phases[target] = phase_seconds
             share.set(len(pending) - left)
             if idle is not None and left == idle_after:
                 idle()
@@ -268,6 +280,7 @@ def _search_in_workers(
                 equation, rows = ready.pop(name)
                 done = run_dir / "checkpoints" / f"{name}.json" if run_dir is not None else None
                 _record(equation, done, history, rows)
+    return phases
 
 
 def longest_first(targets) -> list[str]:
@@ -368,14 +381,18 @@ def fit_dataset(
 ) -> DiscoveredModel:
     """Search every configured target and finish the model (module notes). Without a run
     folder the searches may run in `jobs` processes (the same equations for any value).
-    `seconds`, if given, receives the fit's profile: {"search": {target: s}, "finish":
-    {step: s}} (each search's own time, each finishing step's wall time)."""
+    `seconds`, if given, receives the fit's profile: {"search": {target: s}, "phases":
+    {target: {phase: s}}, "finish": {step: s}} (each search's own time and its phases',
+    each finishing step's wall time)."""
     cfg = measured_targets(cfg, dataset)
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
-    equations, timings = search_equations(dataset, cfg, report, run_dir, resuming, jobs)
+    phases: dict[str, dict[str, float]] = {}
+    equations, timings = search_equations(
+        dataset, cfg, report, run_dir, resuming, jobs, phases=phases
+    )
     steps: dict[str, float] = {}
     model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)
     if seconds is not None:
-        seconds.update(search=timings, finish=steps)
+        seconds.update(search=timings, phases=phases, finish=steps)
     return model

@@ -82,6 +82,12 @@ def stop_reason(cfg: EvolutionConfig, state: RunState) -> str:
 
 
 def final_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:
+    """The reported equation and its front (chosen_equation), timed as the search's
+    "final choice" (Coevolution.seconds)."""
+    return co.timed("final choice", chosen_equation, co, state, dataset, target)
+
+
+def chosen_equation(co: Coevolution, state: RunState, dataset: Dataset, target: str) -> Equation:
     """The reported equation and the run's size/error Pareto front (training errors).
 
     The equation is the final climbers' best, pruned or chosen by the configured

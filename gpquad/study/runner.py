@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from gpquad.data.io import load_dataset
+from gpquad.engine.evolve.coevolution import PHASES
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
@@ -190,13 +191,14 @@ def run_experiment(
         write_json(run_dir / "config.json", folder_config_dict(cfg))
     write_json(run_dir / "run.json", info)
     ev = cfg.evolution
+    phases: dict[str, dict[str, float]] = {}
     report.say(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
     try:
         equations, timings = search_equations(
-            dataset, cfg, report, run_dir, resuming, jobs, in_process, idle
+            dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases
         )
     except KeyboardInterrupt as exc:
         model = new_model(getattr(exc, "equations", {}), dataset, cfg)
@@ -220,15 +222,26 @@ def run_experiment(
         wall_time_s=wall,
         load_time_s=load_seconds,
         target_time_s=timings,
+        search_phase_time_s=phases,
         finish_time_s=finish_seconds,
     )
     write_json(run_dir / "run.json", info)
     if seconds is not None:
-        seconds.update(search=timings, finish=finish_seconds)
+        seconds.update(search=timings, phases=phases, finish=finish_seconds)
     report.say(time_profile(wall, load_seconds, timings, finish_seconds))
+    if phases:
+        report.say(phase_profile(phases))
     if after is not None:
         after(model, dataset)
     return model
+
+
+def phase_profile(phases: dict[str, dict[str, float]]) -> str:
+    """One line: the searches' phases (gpquad.engine.evolve.coevolution.PHASES), each summed
+    over the searches (searches run side by side: these are process seconds, not wall)."""
+    total = {p: sum(one.get(p, 0.0) for one in phases.values()) for p in PHASES}
+    parts = [f"{p} {s:.1f}" for p, s in total.items() if s > 0]
+    return f"searches, summed: {sum(total.values()):.1f} s; " + ", ".join(parts) + " (s)"
 
 
 def time_profile(

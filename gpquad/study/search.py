@@ -80,10 +80,12 @@ def identify(
     checkpoint_path: Path | None = None,
     history_start: int | None = None,
     threads=None,
+    seconds: dict | None = None,
 ) -> tuple[Equation, RunState]:
     """Run the coevolution for one target; returns its best equation and final state.
     `threads`: a callable giving the threads its final choice may use now (default 1; the
-    equation is the same for any number).
+    equation is the same for any number). `seconds`, if given, receives the wall seconds of
+    the search's phases (gpquad.engine.evolve.coevolution.PHASES).
 
     With checkpoint_path, the state is saved atomically after every iteration together
     with the history file's size, and a run is continued from an existing checkpoint
@@ -116,7 +118,10 @@ def identify(
             state,
         )
         raise
-    return final_equation(co, state, dataset, target), state
+    equation = final_equation(co, state, dataset, target)
+    if seconds is not None:
+        seconds.update(co.seconds)
+    return equation, state
 
 
 def _resumed_state(

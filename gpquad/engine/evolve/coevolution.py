@@ -8,6 +8,7 @@ suite, and one bloat simplification of every model.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -46,14 +47,27 @@ from gpquad.engine.tree.variation import (
 from gpquad.engine.variables import N_STATE
 from gpquad.study.config import EvolutionConfig
 
+#: The parts of a search that `Coevolution.seconds` times: an iteration's phases in their
+#: order, then the final choice of the reported equation (gpquad.study.loop.final_equation).
+PHASES = (
+    "generations",
+    "constants and delays",
+    "term insertion",
+    "tests",
+    "simplification",
+    "final choice",
+)
+
 
 class Coevolution(FinalChoice):
-    """Coevolutionary identification of one target's equation."""
+    """Coevolutionary identification of one target's equation. `seconds`: the wall seconds
+    of each of PHASES so far, summed over the iterations (a profile; no result reads it)."""
 
     def __init__(self, dataset: Dataset, target: str, cfg: EvolutionConfig):
         # this target's taps, depth and degree (each may be a per-target table); with taps,
         # the kernels see every input once per tap (gpquad.engine.taps)
         cfg = cfg.for_target(target)
+        self.seconds: dict[str, float] = {}
         self.dataset = dataset = with_taps(dataset, cfg.input_taps)
         self.target = target
         self.cfg = cfg
@@ -244,10 +258,25 @@ class Coevolution(FinalChoice):
 
         return fit
 
+    def timed(self, phase: str, step: Callable, *args):
+        """step(*args), its wall time added to seconds[phase]."""
+        t0 = time.perf_counter()
+        try:
+            return step(*args)
+        finally:
+            self.seconds[phase] = self.seconds.get(phase, 0.0) + time.perf_counter() - t0
+
     def local_search_phase(self, state: RunState) -> None:
-        """Optional local search of delays and constants (not in the paper; see config)."""
+        """Optional local search of delays and constants (not in the paper; see config),
+        then term insertion on the best climber."""
         if self.cfg.constant_fit == "none":
             return
+        self.timed("constants and delays", self.climber_fits, state)
+        if self.cfg.term_search:
+            self.timed("term insertion", self.term_phase, state)
+
+    def climber_fits(self, state: RunState) -> None:
+        """Every climber's constants, then its delays, refitted on the suite."""
         refit = self.cfg.nelder_mead_evals // 5
         fit = self.gradient_fitter(self.cfg.gradient_steps)
         refit_fit = self.gradient_fitter(max(self.cfg.gradient_steps // 4, 1))
@@ -260,8 +289,6 @@ class Coevolution(FinalChoice):
                 self.evaluator, model, err, state.suite, self.cfg.max_delay, refit, refit_fit
             )
             state.models[i], state.model_errors[i] = model, err
-        if self.cfg.term_search:
-            self.term_phase(state)
 
     def term_phase(self, state: RunState) -> None:
         """Greedy term insertion on the best climber (gpquad.engine.evolve.term_search)."""
@@ -308,10 +335,10 @@ class Coevolution(FinalChoice):
         rng = np.random.default_rng()
         rng.bit_generator.state = state.rng_state
         stream = RandomStream(rng)  # scalar draws for the variation operators
-        self.model_phase(state, stream)
+        self.timed("generations", self.model_phase, state, stream)
         self.local_search_phase(state)
-        self.test_phase(state, rng)
-        self.simplify_phase(state, stream)
+        self.timed("tests", self.test_phase, state, rng)
+        self.timed("simplification", self.simplify_phase, state, stream)
         state.iteration += 1
         state.rng_state = rng.bit_generator.state
         return state
