@@ -147,6 +147,10 @@ def test_resume_skips_finished_cells_and_jobs_2_gives_the_same_table(tiny):
     profile = json.loads(cells[0].read_text())["fit_profile_s"]
     assert set(profile["search"]) == set(json.loads(cells[0].read_text())["equations"])
     assert profile["finish"] == {}  # the paper preset has no finishing step
+    assert set(profile["phases"]) == set(profile["search"])
+    assert "| scenario | generations s |" in text and "final choice s" in text
+    old = {**json.loads(cells[0].read_text()), "fit_profile_s": {"search": {}, "finish": {}}}
+    assert table.phase_markdown([old]) == ""  # a cell fitted before the phases were kept
     assert "## Where gpquad's fit time went" in text and "| tiny | " in text.split("went")[1]
     assert table.fit_profile({"method": "zero"}) is None
     grouped = {"fit_profile_s": {"a": profile, "b": profile}}  # a per-vehicle cell

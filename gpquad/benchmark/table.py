@@ -121,6 +121,36 @@ def profile_markdown(cells: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def phase_markdown(cells: list[dict]) -> str:
+    """The gpquad searches' phases per scenario (gpquad.engine.evolve.coevolution.PHASES;
+    seconds summed over a fit's searches, mean over seeds); empty for cells fitted before
+    the phases were kept."""
+    from gpquad.engine.evolve.coevolution import PHASES
+
+    rows: dict[str, list[dict]] = {}
+    for cell in cells:
+        profile = cell.get("fit_profile_s") if cell["method"] == "gpquad" else None
+        if not profile:
+            continue
+        fits = [profile] if "search" in profile else list(profile.values())
+        if not all(fit.get("phases") for fit in fits):
+            continue
+        summed = {
+            p: sum(s.get(p, 0.0) for fit in fits for s in fit["phases"].values()) for p in PHASES
+        }
+        rows.setdefault(cell["scenario"], []).append(summed)
+    if not rows:
+        return ""
+    lines = [
+        "| scenario | " + " | ".join(f"{p} s" for p in PHASES) + " |",
+        "|" + "---|" * (len(PHASES) + 1),
+    ]
+    for scenario, group in rows.items():
+        means = [_num(_stats([r[p] for r in group])) for p in PHASES]
+        lines.append(f"| {scenario} | " + " | ".join(means) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _num(stats, spread: bool = False) -> str:
     if stats is None:
         return "-"

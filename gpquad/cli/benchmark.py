@@ -140,6 +140,13 @@ def write_report(out: Path, info: dict) -> dict:
             "",
             profile,
         ]
+    phases = table.phase_markdown(found)
+    if phases:
+        head += [
+            "The searches' phases, each summed over a fit's searches:",
+            "",
+            phases,
+        ]
     head += ["## Per state", "", table.markdown(agg)]
     atomic_write_text(out / "benchmark.md", "\n".join(head))
     for name in info["scenarios"]:
