@@ -42,7 +42,8 @@ def fake_workers(monkeypatch, arrival, threads: list | None = None):
             if threads is not None:
                 threads.append(fit.workers.threads_of(share, jobs)())
             eq = equation(target, ("*", 2.0, "p"), [0, 0, 0, 0], HAND_TRIM)
-            yield target, eq, [{"target": target, "iteration": 0, "generation": 0}], 1.0
+            rows = [{"target": target, "iteration": 0, "generation": 0}]
+            yield target, eq, rows, 1.0, {"generations": 0.5}
 
     monkeypatch.setattr(fit.workers, "submit_all", submit_all)
     monkeypatch.setattr(fit.workers, "completed", completed)
@@ -64,11 +65,12 @@ def test_searches_go_longest_first_and_are_recorded_in_target_order(tmp_path, mo
     report = Progress(True, 6, stream=said)
     equations: dict = {}
     timings: dict = {}
-    fit._search_in_workers(
+    phases = fit._search_in_workers(
         None, Config(), report, tmp_path, history, list(TARGET_NAMES), 2, equations, timings
     )
     history.close()
     assert handed == list(fit.SEARCH_ORDER)
+    assert phases == {t: {"generations": 0.5} for t in TARGET_NAMES}  # each search's own
     # the history rows in target order, whatever the order they arrived in
     rows = (tmp_path / "history.csv").read_text().splitlines()[1:]
     assert [r.split(",")[0] for r in rows] == list(TARGET_NAMES)

@@ -203,10 +203,11 @@ def search_equations(
         if pending:
             if history is not None:
                 history.truncate(history_end)
-            found = _search_in_workers(
-                dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle
+            phases.update(
+                _search_in_workers(
+                    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle
+                )
             )
-            phases.update(found)
     except KeyboardInterrupt as exc:
         partial = getattr(exc, "partial", None)
         if partial is not None:
