@@ -256,6 +256,32 @@ def test_gpquad_run_on_s250aq_gives_the_measured_equations(tmp_path, capsys):
     assert config["data"]["filter_taps"] == 200 and config["data"]["downsample"] == 4
 
 
+@needs_shared
+def test_run_of_only_unmeasured_targets_exits_with_one_line(tmp_path):
+    """`gpquad run px4_s250.toml --target a_x --target a_y` (u, v not measured): exit code 2
+    and one line naming evolution.targets and the states, before any search."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    config = root / "experiments" / "px4_s250.toml"
+    out = tmp_path / "r"
+    command = [sys.executable, "-m", "gpquad", "run", str(config), "--out", str(out)]
+    proc = subprocess.run(
+        [*command, "--target", "a_x", "--target", "a_y"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "evolution.targets" in errors[0] and "a_x: u" in errors[0]
+    assert not (out / "checkpoints").exists() or not any((out / "checkpoints").iterdir())
+
+
 def test_config_rejects_bad_pipeline_settings():
     for bad, field in (
         ({"segment": "sometimes"}, "data.segment"),

@@ -54,9 +54,10 @@ def measured_targets(cfg: Config, dataset: Dataset, source: str = "config") -> C
     notes = unmeasured_notes(dataset, cfg.evolution.targets) or {}
     kept = tuple(t for t in cfg.evolution.targets if t not in notes)
     if not kept:
+        missing = ", ".join(f"{t}: {TARGET_STATE[t]}" for t in notes)
         raise GpquadError(
-            f"the data measure none of the targets' states ({', '.join(notes.values())}); "
-            "choose targets whose states the log measures",
+            f"the log measures none of the targets' states ({missing}); "
+            "choose targets whose states it measures",
             source=source,
             field="evolution.targets",
         )
