@@ -78,7 +78,8 @@ def repair_stability(model, dataset, seconds: float = CHECK_HORIZON_S, mirror=()
     report: {"horizon_s", "judged_on", "windows", "diverged_before", "diverged_after",
     "error_before", "error_after", "swaps": [{"target", "from", "to", "why"}], "flights"},
     with mirror also "mirrored", "mirrored_diverged_before" and "_after"; why is
-    "diverged" or "mirror diverged". None when the model lacks an equation or no window fits.
+    "diverged" or "mirror diverged". None when the model lacks the equation of a measured
+    state (joint_fit.is_whole) or no window fits.
     """
     if not is_whole(model, dataset):
         return model, None
