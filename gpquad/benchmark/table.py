@@ -125,7 +125,7 @@ def phase_markdown(cells: list[dict]) -> str:
     """The gpquad searches' phases per scenario (gpquad.engine.evolve.coevolution.PHASES;
     seconds summed over a fit's searches, mean over seeds); empty for cells fitted before
     the phases were kept."""
-    from gpquad.engine.evolve.coevolution import PHASES
+    from gpquad.engine.evolve.coevolution import PHASES, summed_phases
 
     rows: dict[str, list[dict]] = {}
     for cell in cells:
@@ -135,10 +135,8 @@ def phase_markdown(cells: list[dict]) -> str:
         fits = [profile] if "search" in profile else list(profile.values())
         if not all(fit.get("phases") for fit in fits):
             continue
-        summed = {
-            p: sum(s.get(p, 0.0) for fit in fits for s in fit["phases"].values()) for p in PHASES
-        }
-        rows.setdefault(cell["scenario"], []).append(summed)
+        searches = {f"{k} {t}": s for k, fit in enumerate(fits) for t, s in fit["phases"].items()}
+        rows.setdefault(cell["scenario"], []).append(summed_phases(searches))
     if not rows:
         return ""
     lines = [

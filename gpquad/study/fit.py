@@ -41,7 +41,7 @@ FINISH_WORDS = {
 }
 
 
-def measured_targets(cfg: Config, dataset: Dataset, source: str = "config") -> Config:
+def measured_targets(cfg: Config, dataset: Dataset) -> Config:
     """`cfg` with evolution.targets left to those whose integrated state the data measures,
     one line on stderr for each target left out.
 
@@ -58,7 +58,6 @@ def measured_targets(cfg: Config, dataset: Dataset, source: str = "config") -> C
         raise GpquadError(
             f"the log measures none of the targets' states ({missing}); "
             "choose targets whose states it measures",
-            source=source,
             field="evolution.targets",
         )
     for target, note in notes.items():

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from gpquad.data.io import load_dataset
-from gpquad.engine.evolve.coevolution import PHASES
+from gpquad.engine.evolve.coevolution import summed_phases
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study.config import Config, folder_config_dict
@@ -239,7 +239,7 @@ def run_experiment(
 def phase_profile(phases: dict[str, dict[str, float]]) -> str:
     """One line: the searches' phases (gpquad.engine.evolve.coevolution.PHASES), each summed
     over the searches (searches run side by side: these are process seconds, not wall)."""
-    total = {p: sum(one.get(p, 0.0) for one in phases.values()) for p in PHASES}
+    total = summed_phases(phases)
     parts = [f"{p} {s:.1f}" for p, s in total.items() if s > 0]
     return f"searches, summed: {sum(total.values()):.1f} s; " + ", ".join(parts) + " (s)"
 

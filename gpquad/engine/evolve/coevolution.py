@@ -59,6 +59,11 @@ PHASES = (
 )
 
 
+def summed_phases(phases: dict[str, dict[str, float]]) -> dict[str, float]:
+    """{phase: seconds} of PHASES summed over several searches' {target: {phase: s}}."""
+    return {p: sum(one.get(p, 0.0) for one in phases.values()) for p in PHASES}
+
+
 class Coevolution(FinalChoice):
     """Coevolutionary identification of one target's equation. `seconds`: the wall seconds
     of each of PHASES so far, summed over the iterations (a profile; no result reads it)."""
