@@ -224,7 +224,9 @@ def rk4_rollout_sensitivities(
                 _finish_tangent(y, total, tan, tan_total, h, n_c)
 
 
-@njit(inline="always")
+# The tangent helpers are called, not inlined (their loops over the constants outweigh a
+# call): the kernel then compiles in less time and runs no slower.
+@njit(inner=True)
 def _stage_tangent(y, slope, tan, tan_slope, node, h, ys, tan_s, n_c):
     """ys = the stage state (step.body_stage_state) and tan_s its tangent."""
     body_stage_state(y, slope, node, h, ys, 0, N_ROWS)
@@ -250,7 +252,7 @@ def _stage_tangent(y, slope, tan, tan_slope, node, h, ys, tan_s, n_c):
         tan_s[Q + 3, c] = (d3 - q3 * dot) * inv
 
 
-@njit(inline="always")
+@njit(inner=True)
 def _body_tangent(ys, tan_s, da, tan_slope, n_c):
     """tan_slope's body rows: the derivative of step.body_derivative at ys along tan_s,
     with the accelerations' tangents da (6, n_c)."""
@@ -273,7 +275,7 @@ def _body_tangent(ys, tan_s, da, tan_slope, n_c):
         tan_slope[W + 2, c] = da[5, c]
 
 
-@njit(inline="always")
+@njit(inner=True)
 def _finish_tangent(y, total, tan, tan_total, h, n_c):
     """y += h total, renormalised as step.finish_step does, and its tangent likewise."""
     for i in range(N_ROWS):
