@@ -40,6 +40,32 @@ def thread_map(func, items, workers: int) -> list:
     return [func(item) for item in items]
 
 
+def thread_map_until(func, items, workers: int, stop) -> list:
+    """[func(item) for item in items] up to and including the first result after which
+    stop(results so far) is true. In up to `workers` threads, the items queued in order
+    (the threads never wait for each other); past the stop the items not yet started are
+    cancelled and the results of those started are dropped, so the same for any number of
+    workers."""
+    items, results = list(items), []
+    if workers <= 1 or len(items) <= 1:
+        for item in items:
+            results.append(func(item))
+            if stop(results):
+                break
+        return results
+    with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
+        futures = [pool.submit(func, item) for item in items]
+        try:
+            for future in futures:
+                results.append(future.result())
+                if stop(results):
+                    break
+        finally:  # at the stop, or an error: what has not started does not
+            for future in futures:
+                future.cancel()
+    return results
+
+
 def chunks(n: int, workers: int) -> list[np.ndarray]:
     """range(n) in at most `workers` contiguous, non-empty index chunks of nearly equal
     size: windows flown side by side in threads (each window's arithmetic is its own)."""

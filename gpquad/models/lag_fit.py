@@ -1,11 +1,12 @@
 """An equation's first-order lag, fitted (gpquad.engine.lag; steps of gpquad.models.refine).
 
-`choose_lag` tries every time constant of LAG_GRID on the found equation's own terms.
-The grid is coarse (a factor of about 1.4 between neighbours) and it is searched before
-the refinement adds its terms, which then make up for a lag off the vehicle's. `polish_lag`
-fits the chosen equation's time constant as one more constant: every constant refitted
-through the integrator at each trial lag, the trials placed by parabolas in log tau from
-the grid's neighbours (docs/decisions/2026-11-26-lag-fit.md).
+`choose_lag` tries the time constants of LAG_GRID on the found equation's own terms, from
+the smallest up, until RISES of them in a row fly no better than the lowest error before
+them. The grid is coarse (a factor of about 1.4 between neighbours) and it is searched
+before the refinement adds its terms, which then make up for a lag off the vehicle's.
+`polish_lag` fits the chosen equation's time constant as one more constant: every constant
+refitted through the integrator at each trial lag, the trials placed by parabolas in log
+tau from the grid's neighbours (docs/decisions/2026-11-26-lag-fit.md).
 """
 
 from __future__ import annotations
@@ -16,9 +17,14 @@ import numpy as np
 import sympy as sp
 
 from gpquad.engine.lag import LAG_GRID
-from gpquad.engine.threads import thread_map
+from gpquad.engine.threads import thread_map, thread_map_until
 from gpquad.models.refine_problem import monomials
 
+#: The lag grid's fits stop once this many time constants in a row (from the smallest up)
+#: fly no better than the lowest error before them, the found equation's included: the
+#: rest of the grid then changed neither the lag chosen nor the polish's start in any of
+#: the grids measured (docs/decisions/2026-12-07-lag-grid-stop.md).
+RISES = 2
 #: Fits of the polish after its two bracketing neighbours (each one LM fit of every
 #: constant through the integrator).
 POLISH_FITS = 3
@@ -35,10 +41,13 @@ def printed_lag(tau: float) -> float:
 def choose_lag(problem, expr: sp.Expr, error: float, gain: float, workers: int = 1):
     """(tau, refitted expr, its training error, every lag's fit): the LAG_GRID time
     constant whose refit of the equation's own terms flies best, if it beats the found
-    equation by `gain`; the time constants are fitted in up to `workers` threads, each on
-    a problem of its own. `problem` is a gpquad.models.refine_problem.RefineProblem; its lag
-    is set to the one chosen. The fits, {tau: (expr, training error, problem at tau)}, are
-    polish_lag's `known` when the chosen equation is the one returned here."""
+    equation by `gain`. The time constants are fitted from the smallest up, in up to
+    `workers` threads (each on a problem of its own), until RISES in a row fly no better
+    than the lowest error before them (`error` included); fits past that point are
+    cancelled or dropped, so the result is the same for any number of workers.
+    `problem` is a gpquad.models.refine_problem.RefineProblem; its lag is set to the one
+    chosen. The fits, {tau: (expr, training error, problem at tau)}, are polish_lag's
+    `known` when the chosen equation is the one returned here."""
     best = (0.0, expr, error)
     terms = monomials(expr)
     columns = np.column_stack([problem.values(m) for m in terms])  # the same for every lag
@@ -50,8 +59,12 @@ def choose_lag(problem, expr: sp.Expr, error: float, gain: float, workers: int =
         fit, fit_error = lagged.fit(start)
         return fit, fit_error if np.isfinite(fit_error) else np.inf, lagged
 
+    def risen(results) -> bool:  # RISES in a row no lower than the lowest before them
+        errors = [error] + [r[1] for r in results]
+        return len(errors) > RISES and min(errors[-RISES:]) >= min(errors[:-RISES])
+
     taus = list(LAG_GRID[1:])
-    fits = dict(zip(taus, thread_map(fitted, taus, workers), strict=True))
+    fits = dict(zip(taus, thread_map_until(fitted, taus, workers, risen), strict=False))
     for tau, (fit, fit_error, _) in fits.items():
         if fit_error < best[2] - gain:
             best = (tau, fit, fit_error)

@@ -9,11 +9,11 @@ of the roll and pitch set-points at several delays, filtered by the motors
 
 0. beyond FREE_TERMS terms, those that do not lower the validation error are removed
    (gpquad.models.earned); the found equation is then no longer a choice of step 3;
-1. a lag, tau da/dt + a = expr (gpquad.engine.lag): every tau of LAG_GRID is tried
-   (gpquad.models.lag_fit.choose_lag), the equation's own terms refitted (one-step least
-   squares on the inverse-filtered target, then Levenberg-Marquardt through the
-   integrator with a growing horizon); a lag is kept when it lowers the training error by
-   more than term_min_gain (relative);
+1. a lag, tau da/dt + a = expr (gpquad.engine.lag): the taus of LAG_GRID are tried from
+   the smallest up until two in a row do no better (gpquad.models.lag_fit.choose_lag), the
+   equation's own terms refitted (one-step least squares on the inverse-filtered target,
+   then Levenberg-Marquardt through the integrator with a growing horizon); a lag is kept
+   when it lowers the training error by more than term_min_gain (relative);
 2. up to `refine_terms` new terms, one at a time: every product of two of the states (not
    psi) and input taps at delays 0..max_delay, and every tap alone, is screened by how much
    of the one-step residual it explains beyond the equation's terms; the SCREENED best are
