@@ -6,10 +6,19 @@ fastmath stays off: kernels rely on NaN/inf checks to flag diverging trajectorie
 A kernel that only other kernels call is compiled `inner`: without the wrappers that let
 Python (and C callbacks) call it. Nothing calls those wrappers, and a cold start would
 build them for every kernel (docs/decisions/2026-11-28-inner-kernels.md).
+
+The compiled kernels are cached in a folder named by a digest of every kernel source
+(`KERNEL_SOURCES`, `cache_folder`). numba keys a cached kernel on its own file only, so a
+kernel that inlines a helper from another file would otherwise keep the helper's old code
+after that file changed (an edit, a `git pull` into an editable install).
 """
 
+import contextlib
 import functools
+import hashlib
+import os
 import types
+from pathlib import Path
 
 import numba
 from numba.core import config
@@ -19,6 +28,61 @@ NJIT = {"cache": True, "nogil": True, "fastmath": False, "error_model": "numpy"}
 
 #: The target options of an inner kernel beyond NJIT's.
 INNER = {"nopython": True, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+
+
+#: Every source file whose code or constants a kernel compiles in, relative to the package:
+#: the files that define kernels and the gpquad modules they import
+#: (tests/test_numba_config.py checks that the list is whole).
+KERNEL_SOURCES = (
+    "engine/kernels/*.py",
+    "engine/numba_config.py",
+    "engine/tree/operators.py",
+    "baselines/body_kernels.py",
+    "baselines/quad12_kernels.py",
+    "benchmark/rollout.py",
+    "benchmark/rotorpy_model.py",
+    "control/lq_kernel.py",
+    "control/pid_kernel.py",
+)
+PACKAGE = Path(__file__).resolve().parent.parent
+
+
+def kernel_files(root: Path = PACKAGE, patterns=KERNEL_SOURCES) -> list[Path]:
+    """The files of `patterns` under root, sorted."""
+    return sorted({f for pattern in patterns for f in root.glob(pattern)})
+
+
+def sources_digest(files, root: Path = PACKAGE) -> str:
+    """A digest of the files' paths (relative to root) and contents."""
+    h = hashlib.sha256()
+    for f in files:
+        h.update(Path(f).relative_to(root).as_posix().encode() + b"\0")
+        h.update(Path(f).read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def cache_folder(digest: str) -> Path:
+    """Where the kernels of sources with `digest` are cached: under NUMBA_CACHE_DIR when it
+    is set, else under the user's cache folder (XDG_CACHE_HOME, default ~/.cache)."""
+    base = os.environ.get("NUMBA_CACHE_DIR") or (
+        Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gpquad"
+    )
+    return Path(base) / f"kernels-{digest}"
+
+
+CACHE_FOLDER = cache_folder(sources_digest(kernel_files()))
+
+
+@contextlib.contextmanager
+def _caching_in(folder: Path):
+    """numba's cache folder set to `folder` while a kernel is created (its cache locator
+    reads it then), and given back afterwards: other packages' numba caches do not move."""
+    previous = config.CACHE_DIR
+    config.CACHE_DIR = str(folder)
+    try:
+        yield
+    finally:
+        config.CACHE_DIR = previous
 
 
 class InnerDispatcher(CPUDispatcher):
@@ -39,11 +103,13 @@ def njit(func=None, *, inner=False, **overrides):
 
     def decorate(f):
         if not inner or config.DISABLE_JIT:
-            return numba.njit(**flags)(f)
+            with _caching_in(CACHE_FOLDER):
+                return numba.njit(**flags)(f)
         options = {k: v for k, v in flags.items() if k != "cache"}
         kernel = InnerDispatcher(py_func=f, locals={}, targetoptions={**options, **INNER})
         if flags["cache"]:
-            kernel.enable_caching()
+            with _caching_in(CACHE_FOLDER):
+                kernel.enable_caching()
         return kernel
 
     return decorate if func is None else decorate(func)
