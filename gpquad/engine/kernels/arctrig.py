@@ -28,7 +28,6 @@ and `atan2` calls math.atan2 (a lane loop redoes those lanes after the vectorise
 
 import math
 
-import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
@@ -49,40 +48,17 @@ def fma(typingctx, a, b, c):
     return sig, codegen
 
 
-# H (hi, lo) by 6 (x < 0) + 3 (|y| > |x|) + interval: atan of the interval's centre, pi/2
-# minus it, pi minus it, pi/2 plus it.
-_HI = np.array(
-    [
-        0.0,
-        0.4636476090008061,
-        0.7853981633974483,
-        1.5707963267948966,
-        1.1071487177940904,
-        0.7853981633974483,
-        3.141592653589793,
-        2.677945044588987,
-        2.356194490192345,
-        1.5707963267948966,
-        2.0344439357957027,
-        2.356194490192345,
-    ]
-)
-_LO = np.array(
-    [
-        0.0,
-        2.2698777452961687e-17,
-        3.061616997868383e-17,
-        6.123233995736766e-17,
-        9.40447137356638e-17,
-        3.061616997868383e-17,
-        1.2246467991473532e-16,
-        1.5527705369303147e-16,
-        9.184850993605148e-17,
-        6.123233995736766e-17,
-        2.841996617907152e-17,
-        9.184850993605148e-17,
-    ]
-)
+# H (hi, lo): atan of the interval's centre (0, atan(1/2), pi/4), pi/2 minus it (|y| > |x|),
+# pi minus it (x < 0), pi/2 plus it (both). Picked by selects, not by a table index: a
+# gather of a table stops the lane loop's booleans from staying in vector registers.
+_ATAN_HALF = (0.4636476090008061, 2.2698777452961687e-17)
+_ATAN_TWO = (1.1071487177940904, 9.40447137356638e-17)
+_PI_4 = (0.7853981633974483, 3.061616997868383e-17)
+_PI_2 = (1.5707963267948966, 6.123233995736766e-17)
+_PI_2_PLUS = (2.0344439357957027, 2.841996617907152e-17)
+_PI_3_4 = (2.356194490192345, 9.184850993605148e-17)
+_PI_MINUS = (2.677945044588987, 1.5527705369303147e-16)
+_PI = (3.141592653589793, 1.2246467991473532e-16)
 # fdlibm s_atan.c: atan(x) = x - x (s1 + s2) for |x| <= 7/16.
 _AT0 = 3.33333333333329318027e-01
 _AT1 = -1.99999999998764832476e-01
@@ -100,6 +76,26 @@ _HUGE = 2.0**500
 
 
 @njit(inline="always")
+def _pick(top, mid, centre, half, quarter):
+    """The (hi, lo) of the interval: `quarter` when top, `half` when mid, else `centre`."""
+    hi = quarter[0] if top else (half[0] if mid else centre[0])
+    lo = quarter[1] if top else (half[1] if mid else centre[1])
+    return hi, lo
+
+
+@njit(inline="always")
+def _offset(neg, swap, top, mid):
+    """H (hi, lo) of atan2_fast (module notes), by selects."""
+    if neg:
+        if swap:
+            return _pick(top, mid, _PI_2, _PI_2_PLUS, _PI_3_4)
+        return _pick(top, mid, _PI, _PI_MINUS, _PI_3_4)
+    if swap:
+        return _pick(top, mid, _PI_2, _ATAN_TWO, _PI_4)
+    return _pick(top, mid, (0.0, 0.0), _ATAN_HALF, _PI_4)
+
+
+@njit(inline="always")
 def atan2_fast(y, x):
     """(atan2(y, x), applies): the value is right only where applies (module notes)."""
     ax = abs(x)
@@ -109,7 +105,7 @@ def atan2_fast(y, x):
     b = ay if swap else ax
     top = a >= 0.6875 * b
     mid = a >= 0.4375 * b
-    c = 2.0 if mid and not top else 1.0
+    c = 1.0 if top else (2.0 if mid else 1.0)
     d = 1.0 if mid else 0.0
     cb = c * b
     num = c * a - d * b  # exact
@@ -119,17 +115,16 @@ def atan2_fast(y, x):
     x0 = num / den
     x_lo = (fma(-x0, den, num) - x0 * e) / den  # num / (den + e) - x0, to first order
     neg = x < 0.0
-    i = 6 * neg + 3 * swap + top + mid
     s = 1.0 if swap == neg else -1.0
+    hi, lo = _offset(neg, swap, top, mid)
     xr = s * x0
     z = xr * xr
     w = z * z
     s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
     s2 = w * (_AT1 + w * (_AT3 + w * (_AT5 + w * (_AT7 + w * _AT9))))
-    hi = _HI[i]
     head = hi + xr  # exact with tail: |hi| >= |xr| or hi = 0
     tail = xr - (head - hi)
-    v = head + (((_LO[i] + s * x_lo) - xr * (s1 + s2)) + tail)
+    v = head + (((lo + s * x_lo) - xr * (s1 + s2)) + tail)
     applies = (b >= _TINY) and (b <= _HUGE) and ((a >= _TINY) or (a == 0.0))
     return math.copysign(v, y), applies
 
