@@ -102,6 +102,10 @@ def test_the_folder_is_under_numba_cache_dir_or_the_user_cache(monkeypatch, tmp_
     monkeypatch.delenv("NUMBA_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache_folder("abc") == tmp_path / "xdg" / "gpquad" / "kernels-abc"
+    assert (tmp_path / "xdg" / "gpquad" / "kernels-abc").is_dir()
+    (tmp_path / "a-file").write_text("")  # a cache home that cannot hold a folder
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "a-file"))
+    assert cache_folder("abc") == PACKAGE / "__pycache__" / "kernels-abc"
 
 
 def test_kernels_cache_there_and_numba_setting_is_given_back():

@@ -63,11 +63,17 @@ def sources_digest(files, root: Path = PACKAGE) -> str:
 
 def cache_folder(digest: str) -> Path:
     """Where the kernels of sources with `digest` are cached: under NUMBA_CACHE_DIR when it
-    is set, else under the user's cache folder (XDG_CACHE_HOME, default ~/.cache)."""
-    base = os.environ.get("NUMBA_CACHE_DIR") or (
-        Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gpquad"
-    )
-    return Path(base) / f"kernels-{digest}"
+    is set, else under the user's cache folder (XDG_CACHE_HOME, default ~/.cache), else,
+    when that cannot be made, in the package's __pycache__."""
+    name = f"kernels-{digest}"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"]) / name
+    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gpquad" / name
+    try:
+        user.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return PACKAGE / "__pycache__" / name
+    return user
 
 
 CACHE_FOLDER = cache_folder(sources_digest(kernel_files()))
