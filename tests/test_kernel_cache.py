@@ -20,6 +20,7 @@ from gpquad.engine.numba_config import (
     PACKAGE,
     cache_folder,
     kernel_files,
+    prune_stale,
     sources_digest,
 )
 
@@ -106,6 +107,32 @@ def test_the_folder_is_under_numba_cache_dir_or_the_user_cache(monkeypatch, tmp_
     (tmp_path / "a-file").write_text("")  # a cache home that cannot hold a folder
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "a-file"))
     assert cache_folder("abc") == PACKAGE / "__pycache__" / "kernels-abc"
+
+
+def test_stale_folders_of_other_sources_are_deleted(monkeypatch, tmp_path):
+    day = 86400.0
+    parent = tmp_path / "xdg" / "gpquad"
+    for name, age_days in (("kernels-old", 40), ("kernels-recent", 5), ("kernels-mine", 90)):
+        (parent / name / "sub").mkdir(parents=True)
+        (parent / name / "sub" / "k.nbi").write_text("")
+        then = os.stat(parent / name).st_mtime - age_days * day
+        os.utime(parent / name, (then, then))
+    (parent / "other-old").mkdir()  # not a kernel folder: left alone
+    then = os.stat(parent / "other-old").st_mtime - 90 * day
+    os.utime(parent / "other-old", (then, then))
+    assert prune_stale(parent, parent / "kernels-mine") == [parent / "kernels-old"]
+    assert sorted(p.name for p in parent.iterdir()) == [
+        "kernels-mine",
+        "kernels-recent",
+        "other-old",
+    ]
+    # cache_folder marks its own folder as used now and prunes the rest
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    then = os.stat(parent / "kernels-recent").st_mtime - 30 * day
+    os.utime(parent / "kernels-recent", (then, then))
+    assert cache_folder("mine") == parent / "kernels-mine"
+    assert sorted(p.name for p in parent.iterdir()) == ["kernels-mine", "other-old"]
 
 
 def test_kernels_cache_there_and_numba_setting_is_given_back():

@@ -17,6 +17,8 @@ import contextlib
 import functools
 import hashlib
 import os
+import shutil
+import time
 import types
 from pathlib import Path
 
@@ -61,19 +63,43 @@ def sources_digest(files, root: Path = PACKAGE) -> str:
     return h.hexdigest()[:16]
 
 
+#: A cache folder of other kernel sources (an older gpquad) not used for this many days is
+#: deleted when gpquad starts.
+STALE_DAYS = 30
+
+
 def cache_folder(digest: str) -> Path:
     """Where the kernels of sources with `digest` are cached: under NUMBA_CACHE_DIR when it
     is set, else under the user's cache folder (XDG_CACHE_HOME, default ~/.cache), else,
-    when that cannot be made, in the package's __pycache__."""
+    when that cannot be made, in the package's __pycache__. The user cache folder's time
+    is set to now (its last use) and its stale siblings are deleted (`prune_stale`)."""
     name = f"kernels-{digest}"
     if os.environ.get("NUMBA_CACHE_DIR"):
         return Path(os.environ["NUMBA_CACHE_DIR"]) / name
     user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gpquad" / name
     try:
         user.mkdir(parents=True, exist_ok=True)
+        os.utime(user)
     except OSError:
         return PACKAGE / "__pycache__" / name
+    prune_stale(user.parent, user)
     return user
+
+
+def prune_stale(parent: Path, keep: Path, days: float = STALE_DAYS) -> list[Path]:
+    """Delete the kernels-* folders of `parent` other than `keep` last used (their time)
+    more than `days` ago; returns them."""
+    now = time.time()
+    gone = []
+    for folder in parent.glob("kernels-*"):
+        try:
+            stale = folder != keep and now - folder.stat().st_mtime > days * 86400
+        except OSError:
+            continue
+        if stale and folder.is_dir():
+            shutil.rmtree(folder, ignore_errors=True)
+            gone.append(folder)
+    return gone
 
 
 CACHE_FOLDER = cache_folder(sources_digest(kernel_files()))
