@@ -34,7 +34,7 @@ INNER = {"nopython": True, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 
 #: Every source file whose code or constants a kernel compiles in, relative to the package:
 #: the files that define kernels and the gpquad modules they import
-#: (tests/test_numba_config.py checks that the list is whole).
+#: (tests/test_kernel_cache.py checks that the list is whole).
 KERNEL_SOURCES = (
     "engine/kernels/*.py",
     "engine/numba_config.py",
