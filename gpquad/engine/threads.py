@@ -33,11 +33,7 @@ def thread_map(func, items, workers: int) -> list:
     """[func(item) for item in items], in up to `workers` threads when there are several
     items (func must be thread-safe and release the GIL for its work, as the numba kernels
     do); in the items' order, so the same for any number of workers."""
-    items = list(items)
-    if workers > 1 and len(items) > 1:
-        with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
-            return list(pool.map(func, items))
-    return [func(item) for item in items]
+    return thread_map_until(func, items, workers, lambda results: False)
 
 
 def thread_map_until(func, items, workers: int, stop) -> list:
