@@ -159,9 +159,6 @@ class EvolutionConfig:
     stall_iterations: int = 3
     stall_gain: float = 0.01
     model_generations: int = 600  # model hill-climber generations per iteration
-    # After the first iteration, stop an iteration's model generations when the climbers'
-    # geometric-mean suite error fell by less than 0.2 % over this many (0 = never).
-    stall_generations: int = 100
     test_generations: int = 80  # test hill-climber generations per iteration
     n_models: int = 14  # model hill climbers
     n_tests: int = 5  # test hill climbers

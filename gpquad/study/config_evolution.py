@@ -63,7 +63,6 @@ def validate_evolution(cfg: Config, source: str) -> None:
         )
     for name in (
         "stall_iterations",
-        "stall_generations",
         "test_generations",
         "simplify_generations",
         "max_delay",

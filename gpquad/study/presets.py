@@ -21,7 +21,6 @@ PRESETS: dict[str, dict] = {
         "evolution": {
             "iterations": 30,
             "stall_iterations": 0,
-            "stall_generations": 0,
             "window_s": 30.0,
             "max_depth": 5,
             "max_degree": 0,

@@ -3,9 +3,7 @@
 One iteration = `model_generations` generations of the model hill climbers on
 the test suite, `test_generations` generations of the test hill climbers
 (fitness: variance of the models' errors), insertion of the best test into the
-suite, and one bloat simplification of every model. After the first iteration the model
-generations stop early when the climbers stop gaining (gpquad.engine.evolve.stall,
-`stall_generations`).
+suite, and one bloat simplification of every model.
 """
 
 from __future__ import annotations
@@ -25,7 +23,6 @@ from gpquad.engine.evolve.local_search import (
     improve_constants,
     improve_delays,
 )
-from gpquad.engine.evolve.stall import climbers_level, generations_stalled
 from gpquad.engine.evolve.state import (
     SEED_HORIZONS,
     SEED_WINDOWS,
@@ -163,13 +160,9 @@ class Coevolution(FinalChoice):
 
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:
-        """Hill climbers: each parent makes one mutant, kept if strictly better. After the
-        first iteration the generations stop when the climbers stop gaining
-        (gpquad.engine.evolve.stall.generations_stalled)."""
+        """Hill climbers: each parent makes one mutant, kept if strictly better."""
         ev = self.evaluator
         state.model_errors = ev.mean_errors(state.models, state.suite)
-        window = self.cfg.stall_generations if state.iteration > 0 else 0
-        levels = [climbers_level(state.model_errors)]
         for gen in range(self.cfg.model_generations):
             mutants = [mutate(rng, m, self.params) for m in state.models]
             errors = ev.mean_errors(mutants, state.suite, bounds=state.model_errors)
@@ -187,9 +180,6 @@ class Coevolution(FinalChoice):
                     "best_size": state.models[best].size,
                 }
             )
-            levels.append(climbers_level(state.model_errors))
-            if generations_stalled(levels, window):
-                break
 
     def test_phase(self, state: RunState, rng: np.random.Generator) -> None:
         """Test hill climbers maximise disagreement; the best joins the suite."""

@@ -13,20 +13,11 @@ The climbers are scored on a co-evolving suite, so the best training error is no
 monotone; the rule compares with the lowest error reached, and an iteration that does not
 beat it by `gain` counts as stalled. The measurements behind the defaults are in
 docs/decisions/2026-11-26-finish-speed.md and docs/decisions/2026-11-28-exact-in-rk4.md.
-
-Within an iteration after the first, the model generations stop once the climbers' level
-(their geometric-mean suite error, `climbers_level`) fell by less than GENERATION_GAIN of
-it over the last `stall_generations` generations (`generations_stalled`): after the first
-iteration the hill climbers mostly sit at their suite's optima, and the rest of the
-iteration (constants, delays, terms, a new test) is where the search gains
-(docs/decisions/2026-12-07-generation-stall.md).
 """
 
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 from gpquad.engine.evolve.selection import RSE_RESOLUTION
 
@@ -37,12 +28,6 @@ EXACT_RSE = RSE_RESOLUTION
 #: configured integrator (its discretisation error stays below it; docs/decisions/
 #: 2026-11-28-exact-in-rk4.md), so it is checked there (FinalChoice.exact_in_model_scheme).
 NEAR_EXACT_RSE = 20 * EXACT_RSE
-#: The model generations of an iteration after the first stop when the climbers' level fell
-#: by less than this fraction of it over the last `stall_generations` generations.
-GENERATION_GAIN = 0.002
-#: An error below this counts as this in the climbers' geometric mean (an exact climber
-#: would otherwise send it to zero and hide the others' gains and losses).
-GENERATION_FLOOR = 1e-300
 
 
 def stalled(best_errors: list[float], patience: int, gain: float) -> bool:
@@ -76,23 +61,3 @@ def exact(error: float, spread: float, squared: bool, rse: float = EXACT_RSE) ->
     `spread`."""
     floor = rse * spread
     return math.isfinite(error) and error <= (floor * floor if squared else floor)
-
-
-def climbers_level(errors) -> float:
-    """The geometric mean of the finite climber errors, each at least GENERATION_FLOOR
-    (inf when none is finite): a level every climber's gain moves in proportion."""
-    e = np.asarray(errors, dtype=np.float64)
-    e = e[np.isfinite(e)]
-    if e.size == 0:
-        return math.inf
-    return float(np.exp(np.mean(np.log(np.maximum(e, GENERATION_FLOOR)))))
-
-
-def generations_stalled(levels: list[float], window: int, gain: float = GENERATION_GAIN) -> bool:
-    """True when the last entry of `levels` (the climbers' level before the first generation,
-    then after each) is not below (1 - gain) x the entry `window` generations earlier; False
-    for window 0 (the rule is off) or a record of fewer than `window` generations."""
-    if window <= 0 or len(levels) <= window:
-        return False
-    then, now = levels[-1 - window], levels[-1]
-    return math.isfinite(then) and not now < then * (1.0 - gain)
