@@ -42,7 +42,6 @@ from gpquad.engine.kernels.step import (
     Q,
     V,
     W,
-    accumulate,
     body_derivative,
     euler_kinematics,
     lag_rate_kernel,
@@ -81,18 +80,102 @@ def tangent_row(leaf, linear, axis):
 @njit(inner=True)
 def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first):
     """The tangents' stage state of lanes 0..n-1, rows t_first..t_end-1 (stage_state's
-    arithmetic, element by element)."""
+    arithmetic, element by element; tangents are (row, constant, lane))."""
     if node == 0.0:
-        for lane in range(n):
-            for i in range(t_first, t_end):
-                for c in range(n_c):
-                    tan_s[lane, i, c] = tan[lane, i, c]
-        return
-    step = node * h
-    for lane in range(n):
         for i in range(t_first, t_end):
             for c in range(n_c):
-                tan_s[lane, i, c] = tan[lane, i, c] + step * tan_slope[lane, i, c]
+                for lane in range(n):
+                    tan_s[i, c, lane] = tan[i, c, lane]
+        return
+    step = node * h
+    for i in range(t_first, t_end):
+        for c in range(n_c):
+            for lane in range(n):
+                tan_s[i, c, lane] = tan[i, c, lane] + step * tan_slope[i, c, lane]
+
+
+@njit(inner=True)
+def lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c):
+    """grad[c, lane] += (the leaf's adjoint) x (its tangent) for the moving leaves in order,
+    where the adjoint is not zero: eval_with_gradient's sum, a select so that it runs over
+    the lanes together."""
+    for m in range(moving.shape[0]):
+        lf, r = moving[m], rows_of[m]
+        for c in range(n_c):
+            for lane in range(n):
+                g = leaf_adjoint[lf, lane]
+                v = grad[c, lane]
+                t = v + g * tan_s[r, c, lane]
+                grad[c, lane] = t if g != 0.0 else v
+
+
+@njit(inner=True)
+def lanes_tangent_slopes(
+    tan_s, tan_slope, grad, ys, kins, jangs, rate, lagged, linear, target, track_angles, n, n_c
+):
+    """The tangents' slopes of lanes 0..n-1 at a stage (module notes), element by element."""
+    for c in range(n_c):
+        if lagged:
+            for lane in range(n):
+                tan_slope[TL, c, lane] = rate * (grad[c, lane] - tan_s[TL, c, lane])
+        if linear:
+            for lane in range(n):
+                df = tan_s[TL, c, lane] if lagged else grad[c, lane]
+                p_s, q_s, r_s = ys[W, lane], ys[W + 1, lane], ys[W + 2, lane]
+                s0, s1, s2 = tan_s[TV, c, lane], tan_s[TV + 1, c, lane], tan_s[TV + 2, c, lane]
+                d0 = -(q_s * s2 - r_s * s1)
+                d1 = -(r_s * s0 - p_s * s2)
+                d2 = -(p_s * s1 - q_s * s0)
+                if target == 0:
+                    d0 += df
+                elif target == 1:
+                    d1 += df
+                else:
+                    d2 += df
+                tan_slope[TV, c, lane] = d0
+                tan_slope[TV + 1, c, lane] = d1
+                tan_slope[TV + 2, c, lane] = d2
+        else:
+            for lane in range(n):
+                tan_slope[TR, c, lane] = tan_s[TL, c, lane] if lagged else grad[c, lane]
+            if track_angles:
+                for lane in range(n):
+                    a0, a1, s = tan_s[TA, c, lane], tan_s[TA + 1, c, lane], tan_s[TR, c, lane]
+                    for i in range(3):
+                        tan_slope[TA + i, c, lane] = (
+                            jangs[i, 0, lane] * a0 + jangs[i, 1, lane] * a1 + kins[i, lane] * s
+                        )
+
+
+@njit(inner=True)
+def lanes_tangent_accumulate(tan_total, tan_slope, weight, stage, n, n_c, t_end, t_first):
+    """accumulate of the tangents of lanes 0..n-1 (stage 0 overwrites)."""
+    for i in range(t_first, t_end):
+        for c in range(n_c):
+            if stage == 0:
+                for lane in range(n):
+                    tan_total[i, c, lane] = weight * tan_slope[i, c, lane]
+            else:
+                for lane in range(n):
+                    tan_total[i, c, lane] += weight * tan_slope[i, c, lane]
+
+
+@njit(inner=True)
+def lanes_body_slope(ys, slope, pred, acc, starts, first, k, target, lagged, rate, n):
+    """The body state's and the lag's slopes of lanes 0..n-1 at a stage: the tree's
+    acceleration (or the lag's state) for the target, the data's for the other five,
+    held over the sample (step.body_derivative's arithmetic, over the lanes together)."""
+    for lane in range(n):
+        idx = starts[first + lane] + k
+        own = ys[LAG, lane] if lagged else pred[lane]
+        a0 = own if target == 0 else acc[idx, 0]
+        a1 = own if target == 1 else acc[idx, 1]
+        a2 = own if target == 2 else acc[idx, 2]
+        a3 = own if target == 3 else acc[idx, 3]
+        a4 = own if target == 4 else acc[idx, 4]
+        a5 = own if target == 5 else acc[idx, 5]
+        body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
+        slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
 
 
 @njit
@@ -138,10 +221,13 @@ def rk4_window_residuals(
     pred = np.empty(width)
     y, ys, total = np.empty((n_y, width)), np.empty((n_y, width)), np.empty((n_y, width))
     slope = np.zeros((n_y, width))
-    tan = np.zeros((width, TANGENT_ROWS, n_c))
-    tan_s = np.zeros((width, TANGENT_ROWS, n_c))
-    tan_slope = np.zeros((width, TANGENT_ROWS, n_c))
-    tan_total = np.zeros((width, TANGENT_ROWS, n_c))
+    # tangents as (row, constant, lane): each stage's arithmetic runs over the lanes together
+    tan = np.zeros((TANGENT_ROWS, n_c, width))
+    tan_s = np.zeros((TANGENT_ROWS, n_c, width))
+    tan_slope = np.zeros((TANGENT_ROWS, n_c, width))
+    tan_total = np.zeros((TANGENT_ROWS, n_c, width))
+    kins = np.zeros((3, width))
+    jangs = np.zeros((3, 2, width))
     alive = np.ones(width, dtype=np.bool_)
     # the leaves computed at each stage: those the tree reads, and the angles the Euler
     # kinematics of the angles' tangents read
@@ -156,7 +242,6 @@ def rk4_window_residuals(
     # are tracked, the lag's when there is one
     t_first = TV if linear else TR
     t_end = TANGENT_ROWS if lagged else (TV + 3 if linear else (TA + 3 if track_angles else TR + 1))
-    a = np.empty(6)
     kin = np.zeros(3)
     jang = np.zeros((3, 2))
     n_diverged = 0
@@ -195,50 +280,44 @@ def rk4_window_residuals(
                     lanes_eval_with_gradient(
                         codes, values, size, slot_of, right, leaf, work, grad, pred, n
                     )
+                    lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c)
+                    lanes_body_slope(
+                        ys, slope, pred, acc, starts, first, k, target, lagged, rate, n
+                    )
                     for lane in range(n):
-                        ts, tsl = tan_s[lane], tan_slope[lane]
-                        for m in range(moving.shape[0]):  # the leaves' tangents, in order
-                            g = leaf_adjoint[moving[m], lane]
-                            if g != 0.0:
-                                for c in range(n_c):
-                                    grad[c, lane] += g * ts[rows_of[m], c]
-                        idx = starts[first + lane] + k
-                        for i in range(6):
-                            a[i] = acc[idx, i]
-                        a[target] = ys[LAG, lane] if lagged else pred[lane]
-                        body_derivative(ys, lane, a[0], a[1], a[2], a[3], a[4], a[5], False, slope)
-                        slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
-                        p_s, q_s, r_s = ys[W, lane], ys[W + 1, lane], ys[W + 2, lane]
                         if track_angles:
+                            q_s, r_s = ys[W + 1, lane], ys[W + 2, lane]
                             euler_kinematics(
                                 axis, leaf[0, lane], leaf[1, lane], q_s, r_s, kin, jang
                             )
-                        for c in range(n_c):
-                            df = ts[TL, c] if lagged else grad[c, lane]
-                            tsl[TL, c] = rate * (grad[c, lane] - ts[TL, c]) if lagged else 0.0
-                            if linear:
-                                s0, s1, s2 = ts[TV, c], ts[TV + 1, c], ts[TV + 2, c]
-                                tsl[TV, c] = -(q_s * s2 - r_s * s1)
-                                tsl[TV + 1, c] = -(r_s * s0 - p_s * s2)
-                                tsl[TV + 2, c] = -(p_s * s1 - q_s * s0)
-                                tsl[TV + target, c] += df
-                            else:
-                                tsl[TR, c] = df
-                                if track_angles:
-                                    a0, a1 = ts[TA, c], ts[TA + 1, c]
-                                    for i in range(3):
-                                        tsl[TA + i, c] = (
-                                            jang[i, 0] * a0 + jang[i, 1] * a1 + kin[i] * ts[TR, c]
-                                        )
-                            accumulate(
-                                tan_total[lane], tsl, WEIGHTS[stage], stage, c, t_end, t_first
-                            )
+                            for i in range(3):
+                                kins[i, lane] = kin[i]
+                                jangs[i, 0, lane] = jang[i, 0]
+                                jangs[i, 1, lane] = jang[i, 1]
+                    lanes_tangent_slopes(
+                        tan_s,
+                        tan_slope,
+                        grad,
+                        ys,
+                        kins,
+                        jangs,
+                        rate,
+                        lagged,
+                        linear,
+                        target,
+                        track_angles,
+                        n,
+                        n_c,
+                    )
+                    lanes_tangent_accumulate(
+                        tan_total, tan_slope, WEIGHTS[stage], stage, n, n_c, t_end, t_first
+                    )
                     lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_y, flown)
                 lanes_finish_step(y, total, h, n, n_y, flown)
-                for lane in range(n):
-                    for i in range(t_first, t_end):
-                        for c in range(n_c):
-                            tan[lane, i, c] += h * tan_total[lane, i, c]
+                for i in range(t_first, t_end):
+                    for c in range(n_c):
+                        for lane in range(n):
+                            tan[i, c, lane] += h * tan_total[i, c, lane]
             for lane in range(n):
                 if not alive[lane]:
                     continue
@@ -252,12 +331,12 @@ def rk4_window_residuals(
                     continue
                 res[row] = x - states[idx + 1, 3 + target]
                 for c in range(n_c):
-                    jac[row, c] = tan[lane, TV + target, c] if linear else tan[lane, TR, c]
+                    jac[row, c] = tan[TV + target, c, lane] if linear else tan[TR, c, lane]
                 if n_rows == 2:
                     angle = euler_angle(
                         axis, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
                     )
                     res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, axis])
                     for c in range(n_c):
-                        jac[row + 1, c] = att_weight * tan[lane, TA + axis, c]
+                        jac[row + 1, c] = att_weight * tan[TA + axis, c, lane]
     return n_diverged
