@@ -113,6 +113,24 @@ def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
 
 
 @njit(inner=True)
+def lanes_body_slope(ys, slope, pred, acc, starts, first, k, target, lagged, rate, n):
+    """The body state's and the lag's slopes of lanes 0..n-1 at a stage: the tree's
+    acceleration (or the lag's state) for the target, the data's for the other five,
+    held over the sample (step.body_derivative's arithmetic, over the lanes together)."""
+    for lane in range(n):
+        idx = starts[first + lane] + k
+        own = ys[LAG, lane] if lagged else pred[lane]
+        a0 = own if target == 0 else acc[idx, 0]
+        a1 = own if target == 1 else acc[idx, 1]
+        a2 = own if target == 2 else acc[idx, 2]
+        a3 = own if target == 3 else acc[idx, 3]
+        a4 = own if target == 4 else acc[idx, 4]
+        a5 = own if target == 5 else acc[idx, 5]
+        body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
+        slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
+
+
+@njit(inner=True)
 def rk4_tree_window_errors(
     codes,
     values,
@@ -188,27 +206,8 @@ def rk4_tree_window_errors(
                         if alive[lane]:
                             stage_features(ys, lane, used, features)
                 run_program(prog, n_ops, regs, n)
-                for lane in range(n):
-                    if not alive[lane]:
-                        continue
-                    idx = starts[lane] + k
-                    a0, a1, a2 = acc[idx, 0], acc[idx, 1], acc[idx, 2]
-                    a3, a4, a5 = acc[idx, 3], acc[idx, 4], acc[idx, 5]
-                    f = ys[LAG, lane] if lagged else pred[lane]
-                    if target == 0:
-                        a0 = f
-                    elif target == 1:
-                        a1 = f
-                    elif target == 2:
-                        a2 = f
-                    elif target == 3:
-                        a3 = f
-                    elif target == 4:
-                        a4 = f
-                    else:
-                        a5 = f
-                    body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
-                    slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
+                # a dead lane's slopes too, to no purpose (its error is no longer read)
+                lanes_body_slope(ys, slope, pred, acc, starts, 0, k, target, lagged, rate, n)
                 lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows, first)
             lanes_finish_step(y, total, h, n, n_rows, first)
 

@@ -31,6 +31,7 @@ from gpquad.engine.kernels.fitness_rk4 import (
     attitude_and_rates_from_data,
     body_from_data,
     first_flown_row,
+    lanes_body_slope,
     stage_features,
 )
 from gpquad.engine.kernels.quaternion import euler_angle
@@ -42,7 +43,6 @@ from gpquad.engine.kernels.step import (
     Q,
     V,
     W,
-    body_derivative,
     euler_kinematics,
     lag_rate_kernel,
     lanes_accumulate,
@@ -158,24 +158,6 @@ def lanes_tangent_accumulate(tan_total, tan_slope, weight, stage, n, n_c, t_end,
             else:
                 for lane in range(n):
                     tan_total[i, c, lane] += weight * tan_slope[i, c, lane]
-
-
-@njit(inner=True)
-def lanes_body_slope(ys, slope, pred, acc, starts, first, k, target, lagged, rate, n):
-    """The body state's and the lag's slopes of lanes 0..n-1 at a stage: the tree's
-    acceleration (or the lag's state) for the target, the data's for the other five,
-    held over the sample (step.body_derivative's arithmetic, over the lanes together)."""
-    for lane in range(n):
-        idx = starts[first + lane] + k
-        own = ys[LAG, lane] if lagged else pred[lane]
-        a0 = own if target == 0 else acc[idx, 0]
-        a1 = own if target == 1 else acc[idx, 1]
-        a2 = own if target == 2 else acc[idx, 2]
-        a3 = own if target == 3 else acc[idx, 3]
-        a4 = own if target == 4 else acc[idx, 4]
-        a5 = own if target == 5 else acc[idx, 5]
-        body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
-        slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
 
 
 @njit
