@@ -14,7 +14,7 @@ from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     gradient_work,
     lanes_eval_with_gradient,
-    lanes_gradient_work,
+    lanes_gradient_program,
     right_children,
 )
 from gpquad.engine.numba_config import python_callable
@@ -26,7 +26,7 @@ constant_slots = python_callable(constant_slots)
 right_children = python_callable(right_children)
 gradient_work = python_callable(gradient_work)
 eval_with_gradient = python_callable(eval_with_gradient)
-lanes_gradient_work = python_callable(lanes_gradient_work)
+lanes_gradient_program = python_callable(lanes_gradient_program)
 lanes_eval_with_gradient = python_callable(lanes_eval_with_gradient)
 
 STARTS = np.array([10, 400, 900], dtype=np.int64)
@@ -110,16 +110,16 @@ def test_lanes_gradient_is_the_one_lane_gradient_of_each_lane(nodes, n_lanes, se
     tangents = rng.normal(size=(n_lanes, 13, n_c))
     moving = np.array([3, 7, 0], dtype=np.int64)
     slot_of = constant_slots(tree.codes, tree.size)
-    work = lanes_gradient_work(tree.size, 13, n_lanes)
+    program = lanes_gradient_program(tree.codes, tree.values, tree.size, 13, n_lanes)
+    program[0][:13] = features  # the register program's leaf rows
+    leaf_adjoint = program[6]
     grad, pred = np.empty((n_c, n_lanes)), np.empty(n_lanes)
     lanes_eval_with_gradient(
         tree.codes,
-        tree.values,
         tree.size,
         slot_of,
         right_children(tree.codes, tree.size),
-        features,
-        work,
+        program,
         grad,
         pred,
         n_lanes,
@@ -128,8 +128,8 @@ def test_lanes_gradient_is_the_one_lane_gradient_of_each_lane(nodes, n_lanes, se
         value, one = _one_lane(tree, features[:, lane].copy(), tangents[lane], moving)
         lanes = grad[:, lane].copy()
         for k in moving:
-            if work[2][k, lane] != 0.0:
-                lanes += work[2][k, lane] * tangents[lane, k]
+            if leaf_adjoint[k, lane] != 0.0:
+                lanes += leaf_adjoint[k, lane] * tangents[lane, k]
         assert value == pred[lane]
         np.testing.assert_array_equal(one, lanes)
 

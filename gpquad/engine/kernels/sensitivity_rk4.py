@@ -53,7 +53,7 @@ from gpquad.engine.kernels.step import (
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     lanes_eval_with_gradient,
-    lanes_gradient_work,
+    lanes_gradient_program,
     residual_rows,
     right_children,
     tangent_leaves,
@@ -196,9 +196,9 @@ def rk4_window_residuals(
     rows_of = np.array([tangent_row(k, linear, axis) for k in moving])
     n_y = BODY_ROWS + 1
     width = max(1, min(LANES, n_windows))
-    leaf = np.zeros((9 + n_in, width))
-    work = lanes_gradient_work(size, 9 + n_in, width)
-    leaf_adjoint = work[2]
+    program = lanes_gradient_program(codes, values, size, 9 + n_in, width)
+    leaf = program[0][: 9 + n_in]  # the register program's leaf rows
+    leaf_adjoint = program[6]
     grad = np.empty((n_c, width))
     pred = np.empty(width)
     y, ys, total = np.empty((n_y, width)), np.empty((n_y, width)), np.empty((n_y, width))
@@ -259,9 +259,7 @@ def rk4_window_residuals(
                     if uses_state:
                         for lane in range(n):
                             stage_features(ys, lane, used, leaf)
-                    lanes_eval_with_gradient(
-                        codes, values, size, slot_of, right, leaf, work, grad, pred, n
-                    )
+                    lanes_eval_with_gradient(codes, size, slot_of, right, program, grad, pred, n)
                     lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c)
                     lanes_body_slope(
                         ys, slope, pred, acc, starts, first, k, target, lagged, rate, n

@@ -3,6 +3,7 @@
 
 import numpy as np
 
+from gpquad.engine.kernels.tree_eval import compile_program, run_program
 from gpquad.engine.numba_config import njit
 from gpquad.engine.tree.operators import ADD, CONST, DIV_EPS, MUL, SUB, VAR_BASE
 
@@ -137,47 +138,36 @@ def eval_with_gradient(codes, values, size, slot_of, features, tangents, work, g
 
 
 @njit(inner=True)
-def lanes_gradient_work(size, n_terminals, n_lanes):
-    """lanes_eval_with_gradient's work for up to n_lanes lanes: node values, node adjoints
-    (size, n_lanes) and leaf adjoints (n_terminals, n_lanes)."""
-    return (
-        np.empty((size, n_lanes)),
-        np.empty((size, n_lanes)),
-        np.empty((n_terminals, n_lanes)),
-    )
+def lanes_gradient_program(codes, values, size, n_terminals, n_lanes):
+    """lanes_eval_with_gradient's program and work for up to n_lanes lanes: (regs
+    (n_terminals + size, n_lanes), whose first n_terminals rows are the leaves the caller
+    writes; prog, n_ops, root: the tree as a register program over regs
+    (tree_eval.compile_program, its constants' rows filled once); row_of (size,): the regs
+    row holding each node's value; node adjoints (size, n_lanes); leaf adjoints
+    (n_terminals, n_lanes))."""
+    regs = np.zeros((n_terminals + size, n_lanes))
+    prog = np.empty((size, 4), dtype=np.int64)
+    n_ops, root = compile_program(codes, values, size, n_terminals, regs, prog)
+    row_of = np.empty(size, dtype=np.int64)
+    for i in range(size):
+        row_of[i] = codes[i] - VAR_BASE if codes[i] >= VAR_BASE else n_terminals + i
+    node_adjoint = np.empty((size, n_lanes))
+    leaf_adjoint = np.empty((n_terminals, n_lanes))
+    return regs, prog, n_ops, root, row_of, node_adjoint, leaf_adjoint
 
 
 @njit(inner=True)
-def lanes_eval_with_gradient(codes, values, size, slot_of, right, features, work, grad, pred, n):
+def lanes_eval_with_gradient(codes, size, slot_of, right, program, grad, pred, n):
     """eval_with_gradient for lanes 0..n-1 at once, the tree walked once for all of them
-    (features (n_terminals, L), one column per lane), before the leaves' tangents: pred (L,)
-    gets the values, grad (n_c, L) the gradients through the constants' own nodes, and
-    work[2] (lanes_gradient_work's leaf adjoints) each leaf's adjoint, whose product with
-    the leaf's tangents the caller adds in eval_with_gradient's order (`moving` first to
-    last). Each lane's arithmetic is eval_with_gradient's, in its order: the same bits.
+    (program: lanes_gradient_program's, its leaf rows holding one column per lane), before
+    the leaves' tangents: pred (L,) gets the values, grad (n_c, L) the gradients through the
+    constants' own nodes, and the program's leaf adjoints each leaf's adjoint, whose product
+    with the leaf's tangents the caller adds in eval_with_gradient's order (`moving` first
+    to last). The values come from the register program (no copies of the leaves); each
+    lane's arithmetic is eval_with_gradient's, in its order: the same bits.
     right: right_children(codes, size)."""
-    node_value, node_adjoint, leaf_adjoint = work
-    for i in range(size - 1, -1, -1):
-        c = codes[i]
-        if c >= VAR_BASE:
-            for lane in range(n):
-                node_value[i, lane] = features[c - VAR_BASE, lane]
-        elif c == CONST:
-            for lane in range(n):
-                node_value[i, lane] = values[i]
-        elif c == ADD:
-            for lane in range(n):
-                node_value[i, lane] = node_value[i + 1, lane] + node_value[right[i], lane]
-        elif c == SUB:
-            for lane in range(n):
-                node_value[i, lane] = node_value[i + 1, lane] - node_value[right[i], lane]
-        elif c == MUL:
-            for lane in range(n):
-                node_value[i, lane] = node_value[i + 1, lane] * node_value[right[i], lane]
-        else:
-            for lane in range(n):
-                b = node_value[right[i], lane]
-                node_value[i, lane] = 1.0 if abs(b) < DIV_EPS else node_value[i + 1, lane] / b
+    regs, prog, n_ops, root, row_of, node_adjoint, leaf_adjoint = program
+    run_program(prog, n_ops, regs, n)
     grad[:, :n] = 0.0
     leaf_adjoint[:, :n] = 0.0
     node_adjoint[0, :n] = 1.0
@@ -201,18 +191,20 @@ def lanes_eval_with_gradient(codes, values, size, slot_of, right, features, work
                     node_adjoint[left, lane] = node_adjoint[i, lane]
                     node_adjoint[r, lane] = -node_adjoint[i, lane]
             elif c == MUL:
+                a, b = row_of[left], row_of[r]
                 for lane in range(n):
                     g = node_adjoint[i, lane]
-                    node_adjoint[left, lane] = g * node_value[r, lane]
-                    node_adjoint[r, lane] = g * node_value[left, lane]
+                    node_adjoint[left, lane] = g * regs[b, lane]
+                    node_adjoint[r, lane] = g * regs[a, lane]
             else:
+                b, own = row_of[r], row_of[i]
                 for lane in range(n):
-                    g, b = node_adjoint[i, lane], node_value[r, lane]
-                    if abs(b) < DIV_EPS:
+                    g, den = node_adjoint[i, lane], regs[b, lane]
+                    if abs(den) < DIV_EPS:
                         node_adjoint[left, lane] = 0.0
                         node_adjoint[r, lane] = 0.0
                     else:
-                        node_adjoint[left, lane] = g / b
-                        node_adjoint[r, lane] = -g * node_value[i, lane] / b
+                        node_adjoint[left, lane] = g / den
+                        node_adjoint[r, lane] = -g * regs[own, lane] / den
     for lane in range(n):
-        pred[lane] = node_value[0, lane]
+        pred[lane] = regs[root, lane]
