@@ -111,8 +111,8 @@ def test_lanes_gradient_is_the_one_lane_gradient_of_each_lane(nodes, n_lanes, se
     moving = np.array([3, 7, 0], dtype=np.int64)
     slot_of = constant_slots(tree.codes, tree.size)
     program = lanes_gradient_program(tree.codes, tree.values, tree.size, 13, n_lanes)
-    program[0][:13] = features  # the register program's leaf rows
-    leaf_adjoint = program[6]
+    regs, _, _, _, _, _, leaf_adjoint = program
+    regs[:13] = features  # the register program's leaf rows
     grad, pred = np.empty((n_c, n_lanes)), np.empty(n_lanes)
     lanes_eval_with_gradient(
         tree.codes,

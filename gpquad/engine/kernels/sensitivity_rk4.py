@@ -197,8 +197,8 @@ def rk4_window_residuals(
     n_y = BODY_ROWS + 1
     width = max(1, min(LANES, n_windows))
     program = lanes_gradient_program(codes, values, size, 9 + n_in, width)
-    leaf = program[0][: 9 + n_in]  # the register program's leaf rows
-    leaf_adjoint = program[6]
+    regs, _, _, _, _, _, leaf_adjoint = program
+    leaf = regs[: 9 + n_in]  # the register program's leaf rows
     grad = np.empty((n_c, width))
     pred = np.empty(width)
     y, ys, total = np.empty((n_y, width)), np.empty((n_y, width)), np.empty((n_y, width))
@@ -264,8 +264,8 @@ def rk4_window_residuals(
                     lanes_body_slope(
                         ys, slope, pred, acc, starts, first, k, target, lagged, rate, n
                     )
-                    for lane in range(n):
-                        if track_angles:
+                    if track_angles:
+                        for lane in range(n):
                             q_s, r_s = ys[W + 1, lane], ys[W + 2, lane]
                             euler_kinematics(
                                 axis, leaf[0, lane], leaf[1, lane], q_s, r_s, kin, jang
