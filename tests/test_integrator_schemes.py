@@ -236,6 +236,30 @@ def test_rk4_rollout_equals_the_fitness_path(short_dataset):
         )
 
 
+@pytest.mark.parametrize(
+    ("leaves", "linear", "angle_read", "expected"),
+    [
+        ([6], False, False, "W"),  # an angular tree of rates: the rates alone
+        ([0, 6], False, False, "QW"),  # it reads an angle: the attitude, not the velocity
+        ([6], False, True, "QW"),  # the angle is scored: the same
+        ([3, 6], False, False, "VW"),  # it reads the velocity
+        ([0, 3], False, False, "QVW"),
+        ([6], True, False, "VW"),  # a linear target flies its velocity
+        ([1, 6], True, False, "QVW"),
+    ],
+)
+def test_flown_rows_are_the_rows_something_reads(leaves, linear, angle_read, expected):
+    """The RK4 lanes step the attitude only where an angle is read, the velocity only for a
+    linear target or a tree that reads it, the rates and the rows after them always."""
+    from gpquad.engine.kernels.fitness_rk4 import flown_rows
+
+    codes = np.array([VAR_BASE + k for k in leaves], dtype=np.int64)
+    blocks = {"Q": range(ks.Q, ks.V), "V": range(ks.V, ks.W), "W": range(ks.W, ks.BODY_ROWS)}
+    want = [i for b in expected for i in blocks[b]] + [ks.BODY_ROWS]
+    got = python_callable(flown_rows)(codes, len(leaves), linear, angle_read, ks.BODY_ROWS + 1)
+    assert list(got) == want
+
+
 RATE_LEAVES = [VAR_BASE + k for k in range(6, 13)]
 
 

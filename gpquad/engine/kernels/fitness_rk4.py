@@ -39,11 +39,13 @@ from gpquad.engine.kernels.step import (
     V,
     W,
     X,
+    attitude_derivative,
     body_derivative,
     lag_rate_kernel,
     lanes_accumulate,
     lanes_finish_step,
     lanes_stage_state,
+    velocity_derivative,
     wrap_angle,
 )
 from gpquad.engine.kernels.tree_eval import (
@@ -78,16 +80,21 @@ def stage_features(ys, lane, used, features):
 
 
 @njit(inner=True)
-def first_flown_row(codes, size, linear, angle_read):
-    """The first body row a flight steps (the rows above it keep the window's start): the
+def flown_rows(codes, size, linear, angle_read, n_rows):
+    """The rows a flight steps, ascending (the others keep the window's start): the
     attitude where an angle is read (by the tree, or angle_read: the angle is scored or its
-    tangents followed), else the velocity for a linear target or a tree that reads it, else
-    the rates, which are always flown."""
-    if uses_leaves(codes, size, 0, 2) or angle_read:
-        return Q
-    if linear or uses_leaves(codes, size, 3, 5):
-        return V
-    return W
+    tangents followed), the velocity for a linear target or a tree that reads it, the rates
+    always, and the rows after the body's (a lag) up to n_rows."""
+    attitude = uses_leaves(codes, size, 0, 2) or angle_read
+    velocity = linear or uses_leaves(codes, size, 3, 5)
+    rows = np.empty(n_rows, dtype=np.int64)
+    n = 0
+    for i in range(n_rows):
+        if (i < V and not attitude) or (V <= i < W and not velocity):
+            continue
+        rows[n] = i
+        n += 1
+    return rows[:n]
 
 
 @njit(inline="always")
@@ -113,20 +120,34 @@ def attitude_and_rates_from_data(y, lane, quat_d, states, idx):
 
 
 @njit(inner=True)
-def lanes_body_slope(ys, slope, pred, acc, starts, first, k, target, lagged, rate, n):
-    """The body state's and the lag's slopes of lanes 0..n-1 at a stage: the tree's
-    acceleration (or the lag's state) for the target, the data's for the other five,
-    held over the sample (step.body_derivative's arithmetic, over the lanes together)."""
+def lanes_body_slope(ys, slope, pred, acc, starts, first, k, target, lagged, rate, n, rows):
+    """The slopes of the flown `rows` (flown_rows) and the lag's, lanes 0..n-1, at a stage:
+    the tree's acceleration (or the lag's state) for the target, the data's for the other
+    five, held over the sample (step.body_derivative's arithmetic, row by row over the
+    lanes). A row not flown is not written."""
+    attitude = rows[0] == Q
+    velocity = False
+    for r in range(rows.shape[0]):
+        velocity = velocity or rows[r] == V
+    if attitude:
+        for lane in range(n):
+            attitude_derivative(ys, lane, slope)
+    if velocity:
+        for lane in range(n):
+            idx = starts[first + lane] + k
+            own = ys[LAG, lane] if lagged else pred[lane]
+            a0 = own if target == 0 else acc[idx, 0]
+            a1 = own if target == 1 else acc[idx, 1]
+            a2 = own if target == 2 else acc[idx, 2]
+            velocity_derivative(ys, lane, a0, a1, a2, slope)
+    for i in range(3):
+        if target == 3 + i:
+            for lane in range(n):
+                slope[W + i, lane] = ys[LAG, lane] if lagged else pred[lane]
+        else:
+            for lane in range(n):
+                slope[W + i, lane] = acc[starts[first + lane] + k, 3 + i]
     for lane in range(n):
-        idx = starts[first + lane] + k
-        own = ys[LAG, lane] if lagged else pred[lane]
-        a0 = own if target == 0 else acc[idx, 0]
-        a1 = own if target == 1 else acc[idx, 1]
-        a2 = own if target == 2 else acc[idx, 2]
-        a3 = own if target == 3 else acc[idx, 3]
-        a4 = own if target == 4 else acc[idx, 4]
-        a5 = own if target == 5 else acc[idx, 5]
-        body_derivative(ys, lane, a0, a1, a2, a3, a4, a5, False, slope)
         slope[LAG, lane] = rate * (pred[lane] - ys[LAG, lane]) if lagged else 0.0
 
 
@@ -185,7 +206,7 @@ def rk4_tree_window_errors(
         body_from_data(y, lane, quat_d, states, s)
     used = read_leaves(codes, size, 9 + n_in)
     uses_state = uses_leaves(codes, size, 0, 8)
-    first = first_flown_row(codes, size, linear, att_err)
+    rows = flown_rows(codes, size, linear, att_err, n_rows)
     for i in range(n_rows):  # element by element: a broadcast copy compiles shape checks
         for lane in range(n):
             ys[i, lane] = y[i, lane]
@@ -200,16 +221,16 @@ def rk4_tree_window_errors(
                     features[9 + j, lane] = inputs[idx - delays[j], j]
         for _ in range(substeps):
             for stage in range(N_STAGES):
-                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows, first)
+                lanes_stage_state(y, slope, NODES[stage], h, ys, n, rows)
                 if uses_state:
                     for lane in range(n):
                         if alive[lane]:
                             stage_features(ys, lane, used, features)
                 run_program(prog, n_ops, regs, n)
                 # a dead lane's slopes too, to no purpose (its error is no longer read)
-                lanes_body_slope(ys, slope, pred, acc, starts, 0, k, target, lagged, rate, n)
-                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows, first)
-            lanes_finish_step(y, total, h, n, n_rows, first)
+                lanes_body_slope(ys, slope, pred, acc, starts, 0, k, target, lagged, rate, n, rows)
+                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, rows)
+            lanes_finish_step(y, total, h, n, rows)
 
         step_total = 0.0
         for lane in range(n):
@@ -340,7 +361,7 @@ def rk4_rollout(
     slope = np.zeros((n_rows, n))
     total = np.empty((n_rows, n))
     every_state = np.ones(9, dtype=np.bool_)
-    first = np.int64(0)  # every row flies; an int64, as the other callers pass (one signature)
+    rows = np.arange(n_rows)  # every row flies
     for lane in range(n):
         s = starts[lane]
         for t in range(6):
@@ -361,7 +382,7 @@ def rk4_rollout(
         hold_inputs(regs, used, modelled, delays, inputs, input_noise, starts, k, 9)
         for _ in range(substeps):
             for stage in range(N_STAGES):
-                lanes_stage_state(y, slope, NODES[stage], h, ys, n, n_rows, first)
+                lanes_stage_state(y, slope, NODES[stage], h, ys, n, rows)
                 for lane in range(n):
                     stage_features(ys, lane, every_state, features)
                 for t in range(6):
@@ -389,6 +410,6 @@ def rk4_rollout(
                         keep_pos,
                         slope,
                     )
-                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_rows, first)
-            lanes_finish_step(y, total, h, n, n_rows, first)
+                lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, rows)
+            lanes_finish_step(y, total, h, n, rows)
     return out

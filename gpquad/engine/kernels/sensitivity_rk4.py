@@ -30,7 +30,7 @@ from gpquad.engine.kernels.fitness_rk4 import (
     LAG,
     attitude_and_rates_from_data,
     body_from_data,
-    first_flown_row,
+    flown_rows,
     lanes_body_slope,
     stage_features,
 )
@@ -219,7 +219,7 @@ def rk4_window_residuals(
     uses_state = used[:9].any()
     # the body rows stepped, as the fitness kernel steps them (an angle row or the angles'
     # tangents read the angles)
-    flown = first_flown_row(codes, size, linear, track_angles)
+    flown = flown_rows(codes, size, linear, track_angles, n_y)
     # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
     # are tracked, the lag's when there is one
     t_first = TV if linear else TR
@@ -254,7 +254,7 @@ def rk4_window_residuals(
                 for stage in range(N_STAGES):
                     node = NODES[stage]
                     # a diverged lane is stepped too, to no purpose
-                    lanes_stage_state(y, slope, node, h, ys, n, n_y, flown)
+                    lanes_stage_state(y, slope, node, h, ys, n, flown)
                     lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first)
                     if uses_state:
                         for lane in range(n):
@@ -262,7 +262,7 @@ def rk4_window_residuals(
                     lanes_eval_with_gradient(codes, size, slot_of, right, program, grad, pred, n)
                     lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c)
                     lanes_body_slope(
-                        ys, slope, pred, acc, starts, first, k, target, lagged, rate, n
+                        ys, slope, pred, acc, starts, first, k, target, lagged, rate, n, flown
                     )
                     if track_angles:
                         for lane in range(n):
@@ -292,8 +292,8 @@ def rk4_window_residuals(
                     lanes_tangent_accumulate(
                         tan_total, tan_slope, WEIGHTS[stage], stage, n, n_c, t_end, t_first
                     )
-                    lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, n_y, flown)
-                lanes_finish_step(y, total, h, n, n_y, flown)
+                    lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, flown)
+                lanes_finish_step(y, total, h, n, flown)
                 for i in range(t_first, t_end):
                     for c in range(n_c):
                         for lane in range(n):

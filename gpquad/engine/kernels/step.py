@@ -34,7 +34,9 @@ stage_state), its derivative k_s is accumulated with WEIGHTS[s] (accumulate) and
 ends with y + h sum (finish_step). A kernel loops `for s in range(N_STAGES)`, evaluating its
 equations at the stage state between body_stage_state and accumulate. `first` (default Q):
 rows before it are neither stepped nor read (a kernel whose equations never read the attitude,
-or the velocity either, starts at V or W and saves their cost).
+or the velocity either, starts at V or W and saves their cost). The lanes helpers take the
+flown rows as a list instead (`rows`, ascending): an angular equation that reads the attitude
+but not the velocity flies Q and W and leaves V out.
 """
 
 import math
@@ -331,28 +333,32 @@ def unit_attitude(out, lane):
 
 
 @njit(inner=True)
-def lanes_stage_state(y, k, node, h, out, n_lanes, n_rows, first):
-    """body_stage_state of lanes 0..n_lanes-1, row by row over the lanes, so that the loops
-    over lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per
-    lane; a dead lane is stepped too, to no purpose."""
+def lanes_stage_state(y, k, node, h, out, n_lanes, rows):
+    """body_stage_state of lanes 0..n_lanes-1 on the flown `rows` (ascending; the attitude
+    is normalised when they start at Q), row by row over the lanes, so that the loops over
+    lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per lane;
+    a dead lane is stepped too, to no purpose."""
     if node == 0.0:
-        for i in range(first, n_rows):
+        for r in range(rows.shape[0]):
+            i = rows[r]
             for lane in range(n_lanes):
                 out[i, lane] = y[i, lane]
         return
     step = node * h
-    for i in range(first, n_rows):
+    for r in range(rows.shape[0]):
+        i = rows[r]
         for lane in range(n_lanes):
             out[i, lane] = y[i, lane] + step * k[i, lane]
-    if first == Q:
+    if rows[0] == Q:
         for lane in range(n_lanes):
             unit_attitude(out, lane)
 
 
 @njit(inner=True)
-def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first):
-    """accumulate of lanes 0..n_lanes-1, row by row over the lanes."""
-    for i in range(first, n_rows):
+def lanes_accumulate(total, k, weight, stage, n_lanes, rows):
+    """accumulate of lanes 0..n_lanes-1 on the flown `rows`, row by row over the lanes."""
+    for r in range(rows.shape[0]):
+        i = rows[r]
         if stage == 0:
             for lane in range(n_lanes):
                 total[i, lane] = weight * k[i, lane]
@@ -362,12 +368,13 @@ def lanes_accumulate(total, k, weight, stage, n_lanes, n_rows, first):
 
 
 @njit(inner=True)
-def lanes_finish_step(y, total, h, n_lanes, n_rows, first):
-    """finish_step of lanes 0..n_lanes-1, row by row over the lanes."""
-    for i in range(first, n_rows):
+def lanes_finish_step(y, total, h, n_lanes, rows):
+    """finish_step of lanes 0..n_lanes-1 on the flown `rows`, row by row over the lanes."""
+    for r in range(rows.shape[0]):
+        i = rows[r]
         for lane in range(n_lanes):
             y[i, lane] += h * total[i, lane]
-    if first == Q:
+    if rows[0] == Q:
         for lane in range(n_lanes):
             y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane] = renormalize(
                 y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
@@ -375,23 +382,38 @@ def lanes_finish_step(y, total, h, n_lanes, n_rows, first):
 
 
 @njit(inline="always")
-def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
-    """k[:, lane] = d/dt of the rigid body at state y[:, lane] (rows Q, V, W and X when
-    with_pos) under body accelerations (a0, a1, a2) and angular ones (a3, a4, a5)."""
+def attitude_derivative(y, lane, k):
+    """k[Q:Q + 4, lane] = q_dot = q * (0, omega) / 2 at state y[:, lane]."""
     q0, q1, q2, q3 = y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
-    u, v, w = y[V, lane], y[V + 1, lane], y[V + 2, lane]
     p, q, r = y[W, lane], y[W + 1, lane], y[W + 2, lane]
     k[Q, lane] = -0.5 * (q1 * p + q2 * q + q3 * r)
     k[Q + 1, lane] = 0.5 * (q0 * p + q2 * r - q3 * q)
     k[Q + 2, lane] = 0.5 * (q0 * q + q3 * p - q1 * r)
     k[Q + 3, lane] = 0.5 * (q0 * r + q1 * q - q2 * p)
+
+
+@njit(inline="always")
+def velocity_derivative(y, lane, a0, a1, a2, k):
+    """k[V:V + 3, lane] = V_dot = a - omega x V at state y[:, lane]."""
+    u, v, w = y[V, lane], y[V + 1, lane], y[V + 2, lane]
+    p, q, r = y[W, lane], y[W + 1, lane], y[W + 2, lane]
     k[V, lane] = a0 - (q * w - r * v)
     k[V + 1, lane] = a1 - (r * u - p * w)
     k[V + 2, lane] = a2 - (p * v - q * u)
+
+
+@njit(inline="always")
+def body_derivative(y, lane, a0, a1, a2, a3, a4, a5, with_pos, k):
+    """k[:, lane] = d/dt of the rigid body at state y[:, lane] (rows Q, V, W and X when
+    with_pos) under body accelerations (a0, a1, a2) and angular ones (a3, a4, a5)."""
+    attitude_derivative(y, lane, k)
+    velocity_derivative(y, lane, a0, a1, a2, k)
     k[W, lane] = a3
     k[W + 1, lane] = a4
     k[W + 2, lane] = a5
     if with_pos:  # x_dot = R(q) V
+        q0, q1, q2, q3 = y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
+        u, v, w = y[V, lane], y[V + 1, lane], y[V + 2, lane]
         k[X, lane] = (
             (1.0 - 2.0 * (q2 * q2 + q3 * q3)) * u
             + 2.0 * (q1 * q2 - q0 * q3) * v
