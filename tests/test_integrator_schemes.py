@@ -325,6 +325,8 @@ def test_rk4_jacobian_matches_finite_differences(short_dataset, nodes, target, l
     [
         ("p_dot", "54.4*(u_R - phi) - 4.66*p + 0.3*q*r"),
         ("q_dot", "40.0*(u_P - theta) - 5.0*q + 2.0*phi*r"),
+        # r_dot scores psi and reads it: psi's tangent row is followed
+        ("r_dot", "20.0*(u_Y - psi) - 3.0*r + 1.5*theta*q"),
     ],
 )
 def test_rk4_attitude_jacobian_follows_finite_differences(short_dataset, target, text):

@@ -78,17 +78,39 @@ def tangent_row(leaf, linear, axis):
 
 
 @njit(inner=True)
-def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first):
-    """The tangents' stage state of lanes 0..n-1, rows t_first..t_end-1 (stage_state's
-    arithmetic, element by element; tangents are (row, constant, lane))."""
+def tangent_rows(linear, n_angles, lagged):
+    """The tangent rows a flight follows, ascending: the velocity's (linear) or the rate's,
+    the first n_angles Euler angles' (phi, theta: the kinematics read them; psi where it is
+    read or scored), the lag's when there is one. The others stay zero and nothing reads
+    them."""
+    rows = np.empty(TANGENT_ROWS, dtype=np.int64)
+    n = 0
+    for i in range(TANGENT_ROWS):
+        if (
+            (TV <= i < TR and linear)
+            or (i == TR and not linear)
+            or (TA <= i < TA + n_angles)
+            or (i == TL and lagged)
+        ):
+            rows[n] = i
+            n += 1
+    return rows[:n]
+
+
+@njit(inner=True)
+def lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_rows):
+    """The tangents' stage state of lanes 0..n-1 on rows t_rows (stage_state's arithmetic,
+    element by element; tangents are (row, constant, lane))."""
     if node == 0.0:
-        for i in range(t_first, t_end):
+        for r in range(t_rows.shape[0]):
+            i = t_rows[r]
             for c in range(n_c):
                 for lane in range(n):
                     tan_s[i, c, lane] = tan[i, c, lane]
         return
     step = node * h
-    for i in range(t_first, t_end):
+    for r in range(t_rows.shape[0]):
+        i = t_rows[r]
         for c in range(n_c):
             for lane in range(n):
                 tan_s[i, c, lane] = tan[i, c, lane] + step * tan_slope[i, c, lane]
@@ -111,7 +133,7 @@ def lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c):
 
 @njit(inner=True)
 def lanes_tangent_slopes(
-    tan_s, tan_slope, grad, ys, kins, jangs, rate, lagged, linear, target, track_angles, n, n_c
+    tan_s, tan_slope, grad, ys, kins, jangs, rate, lagged, linear, target, n_angles, n, n_c
 ):
     """The tangents' slopes of lanes 0..n-1 at a stage (module notes), element by element."""
     for c in range(n_c):
@@ -138,19 +160,20 @@ def lanes_tangent_slopes(
         else:
             for lane in range(n):
                 tan_slope[TR, c, lane] = tan_s[TL, c, lane] if lagged else grad[c, lane]
-            if track_angles:
+            if n_angles > 0:
                 for lane in range(n):
                     a0, a1, s = tan_s[TA, c, lane], tan_s[TA + 1, c, lane], tan_s[TR, c, lane]
-                    for i in range(3):
+                    for i in range(n_angles):
                         tan_slope[TA + i, c, lane] = (
                             jangs[i, 0, lane] * a0 + jangs[i, 1, lane] * a1 + kins[i, lane] * s
                         )
 
 
 @njit(inner=True)
-def lanes_tangent_accumulate(tan_total, tan_slope, weight, stage, n, n_c, t_end, t_first):
-    """accumulate of the tangents of lanes 0..n-1 (stage 0 overwrites)."""
-    for i in range(t_first, t_end):
+def lanes_tangent_accumulate(tan_total, tan_slope, weight, stage, n, n_c, t_rows):
+    """accumulate of the tangents of lanes 0..n-1 on rows t_rows (stage 0 overwrites)."""
+    for r in range(t_rows.shape[0]):
+        i = t_rows[r]
         for c in range(n_c):
             if stage == 0:
                 for lane in range(n):
@@ -220,10 +243,11 @@ def rk4_window_residuals(
     # the body rows stepped, as the fitness kernel steps them (an angle row or the angles'
     # tangents read the angles)
     flown = flown_rows(codes, size, linear, track_angles, n_y)
-    # tangent rows followed: the velocity's (linear) or the rate's, the angles' where they
-    # are tracked, the lag's when there is one
-    t_first = TV if linear else TR
-    t_end = TANGENT_ROWS if lagged else (TV + 3 if linear else (TA + 3 if track_angles else TR + 1))
+    # the angles' tangents followed: phi's and theta's (the kinematics read them), psi's
+    # where the tree reads psi or its angle is scored
+    psi_read = (angle_tangents and used[2]) or (n_rows == 2 and axis == 2)
+    n_angles = (3 if psi_read else 2) if track_angles else 0
+    t_rows = tangent_rows(linear, n_angles, lagged)
     kin = np.zeros(3)
     jang = np.zeros((3, 2))
     n_diverged = 0
@@ -255,7 +279,7 @@ def rk4_window_residuals(
                     node = NODES[stage]
                     # a diverged lane is stepped too, to no purpose
                     lanes_stage_state(y, slope, node, h, ys, n, flown)
-                    lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_end, t_first)
+                    lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_rows)
                     if uses_state:
                         for lane in range(n):
                             stage_features(ys, lane, used, leaf)
@@ -285,16 +309,17 @@ def rk4_window_residuals(
                         lagged,
                         linear,
                         target,
-                        track_angles,
+                        n_angles,
                         n,
                         n_c,
                     )
                     lanes_tangent_accumulate(
-                        tan_total, tan_slope, WEIGHTS[stage], stage, n, n_c, t_end, t_first
+                        tan_total, tan_slope, WEIGHTS[stage], stage, n, n_c, t_rows
                     )
                     lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, flown)
                 lanes_finish_step(y, total, h, n, flown)
-                for i in range(t_first, t_end):
+                for r in range(t_rows.shape[0]):
+                    i = t_rows[r]
                     for c in range(n_c):
                         for lane in range(n):
                             tan[i, c, lane] += h * tan_total[i, c, lane]
