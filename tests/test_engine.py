@@ -5,6 +5,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gpquad.cli.commands import main
 from gpquad.engine.evolve.coevolution import Coevolution, disagreement
@@ -401,3 +403,25 @@ def test_excluded_leaves_are_never_read_and_unknown_names_are_refused(short_data
     assert all(names.index("psi") + VAR_BASE not in t.codes[: t.size] for t in state.models)
     with pytest.raises(GpquadError, match=r"exclude_leaves\[0\]"):
         config_from_dict({"evolution": {"exclude_leaves": ["heading"]}})
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.one_of(
+            st.floats(0.0, 1e6, allow_nan=False),
+            st.just(float("inf")),
+            st.just(float("nan")),
+        ),
+        min_size=1,
+        max_size=20,
+    )
+)
+def test_median_is_numpys_median_to_the_bit(values):
+    """The generations' median of the climbers' errors is np.median's, inf and NaN alike."""
+    from gpquad.engine.evolve.coevolution import median
+
+    a = np.array(values)
+    want = float(np.median(a))
+    got = median(a)
+    assert (got == want) or (np.isnan(got) and np.isnan(want))

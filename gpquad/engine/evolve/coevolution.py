@@ -64,6 +64,18 @@ def summed_phases(phases: dict[str, dict[str, float]]) -> dict[str, float]:
     return {p: sum(one.get(p, 0.0) for one in phases.values()) for p in PHASES}
 
 
+def median(values: np.ndarray) -> float:
+    """np.median of a short 1-D array, the same bits (the mean of the two middle values of
+    an even count), without numpy's per-call cost (about 19 us against 1 us for the 14
+    climbers' errors, once per generation); NaN when any value is NaN, as numpy's."""
+    items = values.tolist()
+    if not items or any(v != v for v in items):
+        return float("nan")
+    ordered = sorted(items)
+    m = len(ordered) // 2
+    return ordered[m] if len(ordered) % 2 else (ordered[m - 1] + ordered[m]) / 2
+
+
 class Coevolution(FinalChoice):
     """Coevolutionary identification of one target's equation. `seconds`: the wall seconds
     of each of PHASES so far, summed over the iterations (a profile; no result reads it)."""
@@ -176,7 +188,7 @@ class Coevolution(FinalChoice):
                     "iteration": state.iteration,
                     "generation": gen,
                     "best_suite_error": float(state.model_errors[best]),
-                    "median_suite_error": float(np.median(state.model_errors)),
+                    "median_suite_error": median(state.model_errors),
                     "best_size": state.models[best].size,
                 }
             )
