@@ -42,12 +42,10 @@ from gpquad.engine.kernels.step import (
     attitude_derivative,
     body_derivative,
     lag_rate_kernel,
-    lanes_accumulate,
-    lanes_finish_step,
-    lanes_stage_state,
     velocity_derivative,
     wrap_angle,
 )
+from gpquad.engine.kernels.step_lanes import lanes_accumulate, lanes_finish_step, lanes_stage_state
 from gpquad.engine.kernels.tree_eval import (
     compile_program,
     hold_inputs,

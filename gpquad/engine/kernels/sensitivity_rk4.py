@@ -45,11 +45,9 @@ from gpquad.engine.kernels.step import (
     W,
     euler_kinematics,
     lag_rate_kernel,
-    lanes_accumulate,
-    lanes_finish_step,
-    lanes_stage_state,
     wrap_angle,
 )
+from gpquad.engine.kernels.step_lanes import lanes_accumulate, lanes_finish_step, lanes_stage_state
 from gpquad.engine.kernels.tree_tangent import (
     constant_slots,
     lanes_eval_with_gradient,

@@ -34,9 +34,8 @@ stage_state), its derivative k_s is accumulated with WEIGHTS[s] (accumulate) and
 ends with y + h sum (finish_step). A kernel loops `for s in range(N_STAGES)`, evaluating its
 equations at the stage state between body_stage_state and accumulate. `first` (default Q):
 rows before it are neither stepped nor read (a kernel whose equations never read the attitude,
-or the velocity either, starts at V or W and saves their cost). The lanes helpers take the
-flown rows as a list instead (`rows`, ascending): an angular equation that reads the attitude
-but not the velocity flies Q and W and leaves V out.
+or the velocity either, starts at V or W and saves their cost). The same three functions over
+many lanes at once are in gpquad.engine.kernels.step_lanes.
 """
 
 import math
@@ -330,55 +329,6 @@ def unit_attitude(out, lane):
     scale = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     for i in range(4):
         out[Q + i, lane] *= scale
-
-
-@njit(inner=True)
-def lanes_stage_state(y, k, node, h, out, n_lanes, rows):
-    """body_stage_state of lanes 0..n_lanes-1 on the flown `rows` (ascending; the attitude
-    is normalised when they start at Q), row by row over the lanes, so that the loops over
-    lanes vectorise (docs/decisions/2026-11-27-lanes-and-trials.md). The same bits per lane;
-    a dead lane is stepped too, to no purpose."""
-    if node == 0.0:
-        for r in range(rows.shape[0]):
-            i = rows[r]
-            for lane in range(n_lanes):
-                out[i, lane] = y[i, lane]
-        return
-    step = node * h
-    for r in range(rows.shape[0]):
-        i = rows[r]
-        for lane in range(n_lanes):
-            out[i, lane] = y[i, lane] + step * k[i, lane]
-    if rows[0] == Q:
-        for lane in range(n_lanes):
-            unit_attitude(out, lane)
-
-
-@njit(inner=True)
-def lanes_accumulate(total, k, weight, stage, n_lanes, rows):
-    """accumulate of lanes 0..n_lanes-1 on the flown `rows`, row by row over the lanes."""
-    for r in range(rows.shape[0]):
-        i = rows[r]
-        if stage == 0:
-            for lane in range(n_lanes):
-                total[i, lane] = weight * k[i, lane]
-        else:
-            for lane in range(n_lanes):
-                total[i, lane] += weight * k[i, lane]
-
-
-@njit(inner=True)
-def lanes_finish_step(y, total, h, n_lanes, rows):
-    """finish_step of lanes 0..n_lanes-1 on the flown `rows`, row by row over the lanes."""
-    for r in range(rows.shape[0]):
-        i = rows[r]
-        for lane in range(n_lanes):
-            y[i, lane] += h * total[i, lane]
-    if rows[0] == Q:
-        for lane in range(n_lanes):
-            y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane] = renormalize(
-                y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
-            )
 
 
 @njit(inline="always")
