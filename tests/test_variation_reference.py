@@ -15,6 +15,7 @@ from gpquad.engine.tree.variation import (
     macro_mutation,
     micro_mutation,
     mutate,
+    mutate_population,
     random_subtree,
     random_tree,
 )
@@ -223,3 +224,49 @@ def test_subtrees_and_mutations_match_the_reference(seed, draw_settings):
         assert child.delays.dtype == ref_child.delays.dtype == np.int64
         tree = child
     assert fast.random() == ref.random()
+
+
+def _packed(trees: list[Tree], width: int):
+    """Evaluator.pack's rows of `trees`, `width` wide."""
+    codes = np.zeros((len(trees), width), dtype=np.int64)
+    values = np.zeros((len(trees), width))
+    for i, t in enumerate(trees):
+        codes[i, : t.size], values[i, : t.size] = t.codes, t.values
+    sizes = np.array([t.size for t in trees], dtype=np.int64)
+    return codes, values, sizes, np.array([t.delays for t in trees], dtype=np.int64)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), settings_strategy, st.booleans())
+def test_the_population_kernel_mutates_as_the_reference(seed, draw_settings, deep):
+    """mutate_population (the model phase's kernel) gives variation.mutate's mutants tree
+    after tree to the bit and leaves the stream and its Generator where the reference
+    leaves them, past block boundaries and with parents deeper than max_depth (a term
+    insertion's), whose subtrees can outgrow a row and go to the reference."""
+    p = params_for(draw_settings)
+    rng = np.random.default_rng(seed + 1)
+    trees = [random_tree(rng, p) for _ in range(6)]
+    # best + c x, three times: deeper than max_depth allows (below such a node a subtree
+    # grows without a depth limit, which only p_leaf > 1/2 ends, as the defaults' 0.7)
+    if deep and p.p_leaf > 0.5:
+        for _ in range(3):
+            trees = [
+                Tree.from_lists([ADD, *t.codes, CONST], [0.0, *t.values, 1.5], t.delays)
+                for t in trees
+            ]
+    fast_rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    fast, ref = RandomStream(fast_rng), RandomStream(ref_rng)
+    for generation in range(150):  # 900 mutations: past the 4096-draw blocks
+        width = max(t.size for t in trees) + (generation % 3)  # rows as narrow as can be
+        codes, values, sizes, delays = mutate_population(fast, _packed(trees, width), p)
+        children = [mutate(ref, t, p) for t in trees]
+        for i, child in enumerate(children):
+            n = int(sizes[i])
+            assert n == child.size
+            assert codes[i, :n].tolist() == child.codes.tolist()
+            assert values[i, :n].tolist() == child.values.tolist()
+            assert delays[i].tolist() == child.delays.tolist()
+            assert not codes[i, n:].any() and not values[i, n:].any()  # padded as pack pads
+        trees = [c if (generation + i) % 2 else t for i, (t, c) in enumerate(zip(trees, children))]
+    assert fast.random() == ref.random() and fast.normal(1.0) == ref.normal(1.0)
+    assert fast_rng.bit_generator.state == ref_rng.bit_generator.state

@@ -80,9 +80,9 @@ def load() -> None:
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
     seconds it took. "euler": the eq. 2 fitness and sensitivity kernels, the LM's and the
-    joint refit's full-model sensitivity flight; "rk4": the RK4 fitness (also as LM's
-    residuals), sensitivity and full-model rollout kernels and the one-step tree evaluation
-    (about the same compilation time each, and none compiled by both)."""
+    joint refit's full-model sensitivity flight, the model phase's mutation; "rk4": the RK4
+    fitness (also as LM's residuals), sensitivity and full-model rollout kernels and the
+    one-step tree evaluation (about the same compilation time each, none compiled by both)."""
     from gpquad.engine.evolve.evaluator import Evaluator
     from gpquad.engine.evolve.gradient_fit import (
         continued_constants,
@@ -91,6 +91,8 @@ def warm(group: str) -> float:
     )
     from gpquad.engine.kernels import least_squares
     from gpquad.engine.kernels.tree_eval import eval_on_samples
+    from gpquad.engine.tree.random_stream import RandomStream
+    from gpquad.engine.tree.variation import VariationParams, mutate_population
     from gpquad.models.joint_fit import constant_nodes
     from gpquad.models.joint_jacobian import flown_with_sensitivities
     from gpquad.models.reference_models import setpoint_model
@@ -119,6 +121,10 @@ def warm(group: str) -> float:
         continued_constants(ev, tree, float(errors[0]), starts, STEPS, error_of, 2, [])
     if group == "euler":  # the LM's trust-region branch, which a short fit may not reach
         least_squares.gradient_norm(np.eye(2), np.zeros(2))
+        # the model phase's mutation
+        params = VariationParams(n_variables=13, n_inputs=4)
+        stream = RandomStream(np.random.default_rng(0))
+        mutate_population(stream, ev.pack([tree, tree]), params)
         # the joint refit's sensitivity flight (here: this group compiles less)
         flown_with_sensitivities(model, dataset, constant_nodes(model), starts, STEPS)
     if group == "rk4":

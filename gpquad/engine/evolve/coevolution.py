@@ -40,7 +40,8 @@ from gpquad.engine.tree.random_stream import RandomStream
 from gpquad.engine.tree.variation import (
     constant_mutation,
     fold_constants,
-    mutate,
+    kernel_params,
+    mutate_population,
     random_tree,
     replace_with_constant,
 )
@@ -62,6 +63,26 @@ PHASES = (
 def summed_phases(phases: dict[str, dict[str, float]]) -> dict[str, float]:
     """{phase: seconds} of PHASES summed over several searches' {target: {phase: s}}."""
     return {p: sum(one.get(p, 0.0) for one in phases.values()) for p in PHASES}
+
+
+def keep_rows(parents, mutants, rows):
+    """The packed parents with `rows` replaced by the mutants' (the parents widened when a
+    mutant is longer than their rows)."""
+    codes, values, sizes, delays = (a.copy() for a in parents)
+    longest = int(mutants[2][rows].max())
+    if longest > codes.shape[1]:
+        grow = longest - codes.shape[1]
+        codes = np.pad(codes, ((0, 0), (0, grow)))
+        values = np.pad(values, ((0, 0), (0, grow)))
+    for i in rows:
+        n = int(mutants[2][i])
+        codes[i] = 0
+        values[i] = 0.0
+        codes[i, :n] = mutants[0][i, :n]
+        values[i, :n] = mutants[1][i, :n]
+        sizes[i] = n
+        delays[i] = mutants[3][i]
+    return codes, values, sizes, delays
 
 
 def median(values: np.ndarray) -> float:
@@ -172,14 +193,24 @@ class Coevolution(FinalChoice):
 
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:
-        """Hill climbers: each parent makes one mutant, kept if strictly better."""
+        """Hill climbers: each parent makes one mutant, kept if strictly better. The
+        climbers are mutated and flown as packed rows (mutation_kernel.mutate_population:
+        variation.mutate's mutants, drawn in the same order)."""
         ev = self.evaluator
-        state.model_errors = ev.mean_errors(state.models, state.suite)
+        parents = ev.pack(state.models)
+        state.model_errors = ev.packed_mean_errors(parents, state.suite)
+        kernel_args = kernel_params(self.params)
         for gen in range(self.cfg.model_generations):
-            mutants = [mutate(rng, m, self.params) for m in state.models]
-            errors = ev.mean_errors(mutants, state.suite, bounds=state.model_errors)
-            for i in np.flatnonzero(errors < state.model_errors):
-                state.models[i] = mutants[i]
+            mutants = mutate_population(rng, parents, self.params, kernel_args)
+            errors = ev.packed_mean_errors(mutants, state.suite, bounds=state.model_errors)
+            better = np.flatnonzero(errors < state.model_errors)
+            if better.size:
+                parents = keep_rows(parents, mutants, better)
+            for i in better:
+                n = int(mutants[2][i])
+                state.models[i] = Tree(
+                    mutants[0][i, :n].copy(), mutants[1][i, :n].copy(), mutants[3][i].copy()
+                )
                 state.model_errors[i] = errors[i]
             best = int(np.argmin(state.model_errors))
             state.history.append(

@@ -90,18 +90,25 @@ class Evaluator:
             values[i, :n] = t.values
             delays[i] = t.delays
         sizes = np.array(lengths, dtype=np.int64)
-        if (capacity + 1) // 2 > STACK_ROWS:  # n nodes hold <= (n + 1) // 2 leaves >= height
-            check_stack(codes, sizes)
         return codes, values, sizes, delays
 
     def window_errors(self, trees: list[Tree], starts, bounds=None, n_steps=None) -> np.ndarray:
         """Per-window mean error, shape (len(trees), len(starts)); inf = diverged/abandoned."""
+        return self.packed_window_errors(self.pack(trees), starts, bounds, n_steps)
+
+    def packed_window_errors(self, packed, starts, bounds=None, n_steps=None) -> np.ndarray:
+        """window_errors of a population already packed as `pack` packs it (codes, values,
+        sizes, delays; each row's codes past its size are not read)."""
+        codes, values, sizes, delays = packed
+        # n nodes hold <= (n + 1) // 2 leaves >= the height
+        if sizes.size and (int(sizes.max()) + 1) // 2 > STACK_ROWS:
+            check_stack(codes, sizes)
         starts = np.ascontiguousarray(starts, dtype=np.int64)
         n_steps = self.n_steps if n_steps is None else int(n_steps)
+        n_trees = codes.shape[0]
         if bounds is None:
-            bounds = np.full(len(trees), np.inf)
-        out = np.empty((len(trees), len(starts)))
-        codes, values, sizes, delays = self.pack(trees)
+            bounds = np.full(n_trees, np.inf)
+        out = np.empty((n_trees, len(starts)))
         population_window_errors(
             codes,
             values,
@@ -119,9 +126,13 @@ class Evaluator:
             self.scheme,
             self.substeps,
         )
-        self.evaluations += len(trees) * len(starts)
+        self.evaluations += n_trees * len(starts)
         return out
 
     def mean_errors(self, trees: list[Tree], starts, bounds=None) -> np.ndarray:
         """Fitness of each tree: mean over windows of the per-window error."""
         return self.window_errors(trees, starts, bounds).mean(axis=1)
+
+    def packed_mean_errors(self, packed, starts, bounds=None) -> np.ndarray:
+        """mean_errors of a packed population (packed_window_errors)."""
+        return self.packed_window_errors(packed, starts, bounds).mean(axis=1)

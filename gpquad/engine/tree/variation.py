@@ -10,7 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpquad.engine.taps import initial_delays
-from gpquad.engine.tree.encoding import Tree, node_depth, subtree_end, tree_degree
+from gpquad.engine.tree import mutation_kernel as mk
+from gpquad.engine.tree.encoding import Tree, max_nodes, node_depth, subtree_end, tree_degree
 from gpquad.engine.tree.operators import CONST, DIV_EPS, N_OPERATORS, VAR_BASE
 from gpquad.engine.tree.random_stream import RandomStream, as_stream
 
@@ -180,6 +181,95 @@ def mutate(rng, tree: Tree, params: VariationParams) -> Tree:
     return Tree.from_lists(codes, values, delays)
 
 
+def kernel_params(params: VariationParams):
+    """(params_f, params_i, variables) of `params` for mutation_kernel.mutate_rows."""
+    params_f = np.array(
+        [
+            params.p_leaf,
+            params.p_constant_leaf,
+            params.const_low,
+            params.const_high,
+            params.const_sigma,
+            params.p_const_perturb,
+            params.p_delay,
+        ]
+    )
+    params_i = np.array(
+        [
+            params.max_depth,
+            params.n_inputs,
+            params.max_delay,
+            params.max_degree,
+            DEGREE_TRIES if params.max_degree > 0 else 1,
+        ],
+        dtype=np.int64,
+    )
+    variables = (
+        np.arange(params.n_variables, dtype=np.int64)
+        if params.variables is None
+        else np.asarray(params.variables, dtype=np.int64)
+    )
+    return params_f, params_i, variables
+
+
+def mutate_population(stream: RandomStream, packed, params: VariationParams, kernel_args=None):
+    """mutate of every row of `packed` (codes, values, sizes, delays, as
+    Evaluator.pack packs them), drawing from RandomStream `stream` as the reference would
+    tree after tree; returns the mutants packed likewise. kernel_args: kernel_params(params),
+    when the caller keeps them."""
+    codes, values, sizes, delays = packed
+    params_f, params_i, variables = kernel_params(params) if kernel_args is None else kernel_args
+    n_rows = codes.shape[0]
+    width = codes.shape[1] + max_nodes(max(params.max_depth, 0))
+    out = (
+        np.zeros((n_rows, width), dtype=np.int64),
+        np.zeros((n_rows, width)),
+        np.zeros(n_rows, dtype=np.int64),
+        np.empty_like(delays),
+    )
+    pos = np.zeros(3, dtype=np.int64)
+    row = 0
+    while row < n_rows:
+        pos[0], pos[1], pos[2] = stream.u_pos, stream.n_pos, mk.DONE
+        row = mk.mutate_rows(
+            codes,
+            values,
+            sizes,
+            delays,
+            row,
+            stream.uniforms,
+            stream.normals,
+            pos,
+            params_f,
+            params_i,
+            variables,
+            *out,
+        )
+        stream.u_pos, stream.n_pos = int(pos[0]), int(pos[1])
+        if pos[2] == mk.NEED_UNIFORM:
+            stream.refill_uniforms()
+        elif pos[2] == mk.NEED_NORMAL:
+            stream.refill_normals()
+        elif pos[2] == mk.OVERFLOW:  # the reference mutates this row; the rows widen to fit it
+            n = int(sizes[row])
+            parent = Tree(codes[row, :n], values[row, :n], delays[row])
+            child = mutate(stream, parent, params)
+            if child.size > out[0].shape[1]:
+                grow = child.size - out[0].shape[1]
+                out = (
+                    np.pad(out[0], ((0, 0), (0, grow))),
+                    np.pad(out[1], ((0, 0), (0, grow))),
+                    out[2],
+                    out[3],
+                )
+            out[0][row, : child.size] = child.codes
+            out[1][row, : child.size] = child.values
+            out[2][row] = child.size
+            out[3][row] = child.delays
+            row += 1
+    return out
+
+
 def constant_mutation(rng, tree: Tree, params: VariationParams) -> Tree:
     """Gaussian perturbation of one constant only (re-convergence after simplification)."""
     values = perturb_constant(rng, tree.codes.tolist(), tree.values.tolist(), params.const_sigma)
@@ -239,6 +329,7 @@ __all__ = [
     "random_tree",
     "random_subtree",
     "mutate",
+    "mutate_population",
     "constant_mutation",
     "macro_mutation",
     "micro_mutation",
