@@ -194,7 +194,7 @@ class Coevolution(FinalChoice):
     # ---------------------------------------------------------------- phases
     def model_phase(self, state: RunState, rng: RandomStream) -> None:
         """Hill climbers: each parent makes one mutant, kept if strictly better. The
-        climbers are mutated and flown as packed rows (mutation_kernel.mutate_population:
+        climbers are mutated and flown as packed rows (variation.mutate_population:
         variation.mutate's mutants, drawn in the same order)."""
         ev = self.evaluator
         parents = ev.pack(state.models)

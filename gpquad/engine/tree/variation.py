@@ -213,10 +213,10 @@ def kernel_params(params: VariationParams):
 
 
 def mutate_population(stream: RandomStream, packed, params: VariationParams, kernel_args=None):
-    """mutate of every row of `packed` (codes, values, sizes, delays, as
-    Evaluator.pack packs them), drawing from RandomStream `stream` as the reference would
-    tree after tree; returns the mutants packed likewise. kernel_args: kernel_params(params),
-    when the caller keeps them."""
+    """`mutate` of every row of `packed` (codes, values, sizes, delays, as Evaluator.pack
+    packs them) by gpquad.engine.tree.mutation_kernel, drawing from `stream` as `mutate`
+    would tree after tree; returns the mutants packed likewise (the same bits).
+    kernel_args: kernel_params(params), when the caller keeps them."""
     codes, values, sizes, delays = packed
     params_f, params_i, variables = kernel_params(params) if kernel_args is None else kernel_args
     n_rows = codes.shape[0]
@@ -262,6 +262,7 @@ def mutate_population(stream: RandomStream, packed, params: VariationParams, ker
                     out[2],
                     out[3],
                 )
+            out[0][row], out[1][row] = 0, 0.0  # what the stopped kernel wrote
             out[0][row, : child.size] = child.codes
             out[1][row, : child.size] = child.values
             out[2][row] = child.size
