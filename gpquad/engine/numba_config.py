@@ -38,6 +38,7 @@ INNER = {"nopython": True, "no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 KERNEL_SOURCES = (
     "engine/kernels/*.py",
     "engine/numba_config.py",
+    "engine/tree/encoding.py",
     "engine/tree/mutation_kernel.py",
     "engine/tree/operators.py",
     "baselines/body_kernels.py",

@@ -66,9 +66,9 @@ def summed_phases(phases: dict[str, dict[str, float]]) -> dict[str, float]:
 
 
 def keep_rows(parents, mutants, rows):
-    """The packed parents with `rows` replaced by the mutants' (the parents widened when a
-    mutant is longer than their rows)."""
-    codes, values, sizes, delays = (a.copy() for a in parents)
+    """The packed parents with `rows` replaced by the mutants', in place (the model phase
+    owns them; widened when a mutant is longer than their rows)."""
+    codes, values, sizes, delays = parents
     longest = int(mutants[2][rows].max())
     if longest > codes.shape[1]:
         grow = longest - codes.shape[1]

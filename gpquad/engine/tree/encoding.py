@@ -76,7 +76,7 @@ def stack_rows(trees: dict[int, "Tree"], n_rows: int, min_slots: int = 0):
 
 
 def subtree_end(codes, start: int) -> int:
-    """Index one past the subtree rooted at `start`."""
+    """Index one past the subtree rooted at `start` (numba compiles it too)."""
     need = 1
     i = start
     while need:
@@ -98,7 +98,8 @@ def node_depths(codes) -> list[int]:
 
 
 def node_depth(codes, index: int) -> int:
-    """Depth of node `index` of a prefix tree, reading only the nodes before it."""
+    """Depth of node `index` of a prefix tree, reading only the nodes before it (numba
+    compiles it too)."""
     depth = 0
     right_children: list[int] = []  # depths of the right children still to be read
     for k in range(index):
@@ -118,20 +119,19 @@ def tree_depth(codes) -> int:
 def tree_degree(codes) -> int:
     """Polynomial degree of a prefix tree: a variable 1, a constant 0, + and - the larger of
     their children's, * and / the sum (a quotient counts its denominator's variables, so
-    1 / x is degree 1: an upper bound that keeps the rule one of counting)."""
-    if isinstance(codes, np.ndarray):
-        codes = codes.tolist()
-    stack: list[int] = []
-    push, pop = stack.append, stack.pop
-    for c in reversed(codes):
+    1 / x is degree 1: an upper bound that keeps the rule one of counting). Plain enough for
+    numba to compile as it is (gpquad.engine.tree.mutation_kernel)."""
+    stack = []
+    for k in range(len(codes) - 1, -1, -1):
+        c = codes[k]
         if c >= VAR_BASE:
-            push(1)
+            stack.append(1)
         elif c == CONST:
-            push(0)
+            stack.append(0)
         else:
-            a = pop()
-            b = pop()
-            push((a if a > b else b) if c == ADD or c == SUB else a + b)
+            a = stack.pop()
+            b = stack.pop()
+            stack.append((a if a > b else b) if c == ADD or c == SUB else a + b)
     return stack[0]
 
 

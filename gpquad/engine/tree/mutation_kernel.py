@@ -19,7 +19,8 @@ mutated by the reference.
 import numpy as np
 
 from gpquad.engine.numba_config import njit
-from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, SUB, VAR_BASE
+from gpquad.engine.tree.encoding import node_depth, subtree_end, tree_degree
+from gpquad.engine.tree.operators import CONST, N_OPERATORS, VAR_BASE
 
 #: The kernel's status (pos[2]): every tree mutated, a stream ran out, a row overflowed.
 DONE, NEED_UNIFORM, NEED_NORMAL, OVERFLOW = 0, 1, 2, 3
@@ -29,27 +30,28 @@ MAX_DEPTH, N_INPUTS, MAX_DELAY, MAX_DEGREE, DEGREE_TRIES = range(5)
 
 
 @njit(inline="always")
-def _uniform(uniforms, pos):
-    """The next U[0, 1) draw; 0.0 and the status NEED_UNIFORM past the block's end."""
-    i = pos[0]
-    if i >= uniforms.shape[0]:
+def _next(block, pos, slot, short):
+    """The next draw of `block` at position pos[slot]; past the block's end 0.0 and the
+    status `short` (the first shortage met is the one reported)."""
+    i = pos[slot]
+    if i >= block.shape[0]:
         if pos[2] == DONE:
-            pos[2] = NEED_UNIFORM
+            pos[2] = short
         return 0.0
-    pos[0] = i + 1
-    return uniforms[i]
+    pos[slot] = i + 1
+    return block[i]
+
+
+@njit(inline="always")
+def _uniform(uniforms, pos):
+    """The next U[0, 1) draw (NEED_UNIFORM past the block)."""
+    return _next(uniforms, pos, 0, NEED_UNIFORM)
 
 
 @njit(inline="always")
 def _normal(normals, pos):
-    """The next N(0, 1) draw; 0.0 and the status NEED_NORMAL past the block's end."""
-    i = pos[1]
-    if i >= normals.shape[0]:
-        if pos[2] == DONE:
-            pos[2] = NEED_NORMAL
-        return 0.0
-    pos[1] = i + 1
-    return normals[i]
+    """The next N(0, 1) draw (NEED_NORMAL past the block)."""
+    return _next(normals, pos, 1, NEED_NORMAL)
 
 
 @njit(inline="always")
@@ -58,52 +60,10 @@ def _below(uniforms, pos, n):
     return min(int(_uniform(uniforms, pos) * n), n - 1)
 
 
-@njit(inner=True)
-def _node_depth(codes, index):
-    """encoding.node_depth: the depth of node `index`, from the nodes before it."""
-    depth = 0
-    right = np.empty(index + 1, dtype=np.int64)
-    top = 0
-    for k in range(index):
-        if codes[k] < N_OPERATORS:
-            depth += 1
-            right[top] = depth
-            top += 1
-        else:
-            top -= 1
-            depth = right[top]
-    return depth
-
-
-@njit(inner=True)
-def _subtree_end(codes, start):
-    """encoding.subtree_end: one past the subtree rooted at `start`."""
-    need = 1
-    i = start
-    while need:
-        need += 1 if codes[i] < N_OPERATORS else -1
-        i += 1
-    return i
-
-
-@njit(inner=True)
-def _tree_degree(codes, n, work):
-    """encoding.tree_degree of codes[:n]; work (>= n,) is scratch."""
-    top = 0
-    for k in range(n - 1, -1, -1):
-        c = codes[k]
-        if c >= VAR_BASE:
-            work[top] = 1
-            top += 1
-        elif c == CONST:
-            work[top] = 0
-            top += 1
-        else:
-            a = work[top - 1]
-            b = work[top - 2]
-            top -= 1
-            work[top - 1] = (a if a > b else b) if c == ADD or c == SUB else a + b
-    return work[0]
+#: encoding's own structural helpers, compiled for the kernel (the same code, not a copy).
+_node_depth = njit(inner=True)(node_depth)
+_subtree_end = njit(inner=True)(subtree_end)
+_tree_degree = njit(inner=True)(tree_degree)
 
 
 @njit(inner=True)
@@ -248,7 +208,6 @@ def mutate_rows(
     normal positions in their blocks and the status (DONE ...). Returns the row it stopped
     at (the number of rows when every one is done), its positions as before that row."""
     n_rows = codes.shape[0]
-    work = np.empty(out_codes.shape[1], dtype=np.int64)
     max_degree = params_i[MAX_DEGREE]
     for t in range(first, n_rows):
         u0, n0 = pos[0], pos[1]
@@ -268,7 +227,7 @@ def mutate_rows(
                 out_c,
                 out_v,
             )
-            if n < 0 or max_degree <= 0 or _tree_degree(out_c, n, work) <= max_degree:
+            if n < 0 or max_degree <= 0 or _tree_degree(out_c[:n]) <= max_degree:
                 break
             n = -1
         if pos[2] == DONE and n < 0:  # the degree limit refused every draw: the parent's
