@@ -184,33 +184,47 @@ def run_cell(
 
 
 class PeakRss:
-    """Peak resident memory of this process (MB, interpreter included) while in the block,
-    sampled every 50 ms from /proc/self/status (Linux; elsewhere the process's lifetime
-    peak from getrusage). Unlike tracemalloc it costs nothing and sees native allocations
-    (numba, operon's C++)."""
+    """Peak resident memory of this process (MB, interpreter included) while in the block.
+    Unlike tracemalloc it costs nothing and sees native allocations (numba, operon's C++).
+
+    On Linux the kernel keeps the peak (VmHWM in /proc/self/status): it is reset to the
+    current size on entry (writing 5 to /proc/self/clear_refs) and read on exit, with no
+    thread, so that a fit inside the block may still fork its search workers
+    (gpquad.study.workers.fork_context). Where the peak cannot be reset, a thread samples
+    VmRSS every 50 ms; elsewhere the process's lifetime peak (getrusage)."""
+
+    STATUS, CLEAR = "/proc/self/status", "/proc/self/clear_refs"
 
     def __enter__(self):
-        self.peak_mb = self._read()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._watch, daemon=True)
-        self._thread.start()
+        self._thread = None
+        self.peak_mb = self._read("VmRSS:")
+        try:
+            with open(self.CLEAR, "w") as fh:
+                fh.write("5")
+        except OSError:
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._watch, daemon=True)
+            self._thread.start()
         return self
 
     def _watch(self):
         while not self._stop.wait(0.05):
-            self.peak_mb = max(self.peak_mb, self._read())
+            self.peak_mb = max(self.peak_mb, self._read("VmRSS:"))
 
     def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
-        self.peak_mb = max(self.peak_mb, self._read())
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            self.peak_mb = max(self.peak_mb, self._read("VmRSS:"))
+        else:
+            self.peak_mb = max(self.peak_mb, self._read("VmHWM:"))
 
-    @staticmethod
-    def _read() -> float:
+    @classmethod
+    def _read(cls, field: str) -> float:
         try:
-            with open("/proc/self/status") as fh:
+            with open(cls.STATUS) as fh:
                 for line in fh:
-                    if line.startswith("VmRSS:"):
+                    if line.startswith(field):
                         return int(line.split()[1]) / 1024
         except OSError:
             pass
