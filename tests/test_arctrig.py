@@ -112,9 +112,15 @@ def test_euler_angle_lanes_within_one_ulp_of_libm_angles():
     quat[:, 25] = np.nan  # roll and yaw NaN (theta's clamp is not defined for NaN)
     out, y, x = np.empty(n), np.empty(n), np.empty(n)
     for axis in range(3):
-        euler_angle_lanes(axis, quat, out, n, y, x)
+        euler_angle_lanes(axis, quat, 0, out, n, y, x)
         want = np.array([euler_angle(axis, *quat[:, i]) for i in range(n)])
         assert axis == 1 or (np.isnan(out[25]) and np.isnan(want[25]))
         ok = np.arange(n) != 25
         assert np.all(np.abs(out[ok] - want[ok]) <= np.spacing(np.abs(want[ok])))
         assert np.mean(out[ok] == want[ok]) > 0.95
+        # the same attitudes as rows 3-6 of a stage state (the RK4 kernels' layout)
+        ys = np.full((9, n), 7.0)
+        ys[3:7] = quat
+        at_row = np.empty(n)
+        euler_angle_lanes(axis, ys, 3, at_row, n, y, x)
+        assert np.array_equal(at_row, out, equal_nan=True)

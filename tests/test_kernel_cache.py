@@ -160,7 +160,7 @@ def test_a_changed_helper_in_another_file_is_compiled_again(tmp_path):
         quat = np.array([[0.9], [0.1], [0.3], [0.2]])
         quat /= np.sqrt((quat ** 2).sum())
         out = np.empty(1)
-        python_callable(euler_angle_lanes)(1, quat, out, 1, np.empty(1), np.empty(1))
+        python_callable(euler_angle_lanes)(1, quat, 0, out, 1, np.empty(1), np.empty(1))
         print(repr(float(out[0])))
         """
     )

@@ -205,7 +205,7 @@ def euler_tree_window_errors(
         if need_att:  # every lane's (vectorised; a dead lane's are not read)
             for a in range(3):
                 if used[a]:
-                    euler_angle_lanes(a, quat, features[a], n, work[0], work[1])
+                    euler_angle_lanes(a, quat, 0, features[a], n, work[0], work[1])
         for c in range(n_rate):
             col = rate_cols[c]
             for lane in range(n):
@@ -264,7 +264,7 @@ def euler_tree_window_errors(
                             rates[i, lane], acc[starts[lane] + k, 3 + i], dt
                         )
         if att_err:  # the integrated Euler angle of the target's rate
-            euler_angle_lanes(target - 3, quat, work[2], n, work[0], work[1])
+            euler_angle_lanes(target - 3, quat, 0, work[2], n, work[0], work[1])
         total = 0.0
         for lane in range(n):
             if not alive[lane]:

@@ -28,7 +28,12 @@ from gpquad.engine.kernels.divergence import (
     read_leaves,
     uses_leaves,
 )
-from gpquad.engine.kernels.quaternion import euler_angle, euler_phi, euler_psi, euler_theta
+from gpquad.engine.kernels.quaternion import (
+    euler_angle_lanes,
+    euler_phi,
+    euler_psi,
+    euler_theta,
+)
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
     N_STAGES,
@@ -75,6 +80,23 @@ def stage_features(ys, lane, used, features):
             features[3 + i, lane] = ys[V + i, lane]
         if used[6 + i]:
             features[6 + i, lane] = ys[W + i, lane]
+
+
+@njit(inline="always")
+def stage_features_lanes(ys, used, features, n, work):
+    """stage_features of lanes [0, n), the angles by euler_angle_lanes (vectorised, within
+    1 ulp of libm's; the single-equation RK4 flights, fitness and sensitivity alike, read
+    these bits). work (2, n) is scratch."""
+    for a in range(3):
+        if used[a]:
+            euler_angle_lanes(a, ys, Q, features[a], n, work[0], work[1])
+    for i in range(3):
+        if used[3 + i]:
+            for lane in range(n):
+                features[3 + i, lane] = ys[V + i, lane]
+        if used[6 + i]:
+            for lane in range(n):
+                features[6 + i, lane] = ys[W + i, lane]
 
 
 @njit(inner=True)
@@ -189,6 +211,10 @@ def rk4_tree_window_errors(
     n_ops, root = compile_program(codes, values, size, 9 + n_in, regs, prog)
     features = regs[: 9 + n_in]
     pred = regs[root]
+    angle_work, angles = np.empty((2, n)), np.empty(n)
+    # the windows' first lane (an int64 as the sensitivity kernel's, not the literal 0:
+    # one compiled lanes_body_slope for both)
+    first = np.int64(0)
     y = np.empty((n_rows, n))
     ys = np.empty((n_rows, n))
     slope = np.zeros((n_rows, n))
@@ -220,16 +246,18 @@ def rk4_tree_window_errors(
         for _ in range(substeps):
             for stage in range(N_STAGES):
                 lanes_stage_state(y, slope, NODES[stage], h, ys, n, rows)
-                if uses_state:
-                    for lane in range(n):
-                        if alive[lane]:
-                            stage_features(ys, lane, used, features)
+                if uses_state:  # every lane's (vectorised; a dead lane's are not read)
+                    stage_features_lanes(ys, used, features, n, angle_work)
                 run_program(prog, n_ops, regs, n)
                 # a dead lane's slopes too, to no purpose (its error is no longer read)
-                lanes_body_slope(ys, slope, pred, acc, starts, 0, k, target, lagged, rate, n, rows)
+                lanes_body_slope(
+                    ys, slope, pred, acc, starts, first, k, target, lagged, rate, n, rows
+                )
                 lanes_accumulate(total, slope, WEIGHTS[stage], stage, n, rows)
             lanes_finish_step(y, total, h, n, rows)
 
+        if att_err:  # the integrated Euler angle of the target's rate, every lane's
+            euler_angle_lanes(target - 3, y, Q, angles, n, angle_work[0], angle_work[1])
         step_total = 0.0
         for lane in range(n):
             row = (lane * n_steps + k) * n_res
@@ -246,8 +274,7 @@ def rk4_tree_window_errors(
             e = e * e if squared else abs(e)
             if att_err:
                 a = target - 3
-                da = euler_angle(a, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane])
-                da = wrap_angle(da - states[idx + 1, a]) * att_weight
+                da = wrap_angle(angles[lane] - states[idx + 1, a]) * att_weight
                 if write:
                     res[row + 1] = da
                 e += da * da if squared else abs(da)

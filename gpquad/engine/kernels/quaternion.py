@@ -175,17 +175,21 @@ def euler_angle(axis, q0, q1, q2, q3):
 
 
 @njit(inner=True)
-def euler_angle_lanes(axis, quat, out, n, y, x):
-    """out[:n] = euler_angle(axis) of the attitudes quat (4, n) within 1 ulp, in loops that
-    vectorise: gpquad.engine.kernels.arctrig's atan2 and asin (not libm's bits, which
-    euler_angle keeps for the rollouts and exports). y, x (n,) are work buffers."""
+def euler_angle_lanes(axis, quat, row, out, n, y, x):
+    """out[:n] = euler_angle(axis) of the attitudes quat[row:row + 4, :n] within 1 ulp, in
+    loops that vectorise: gpquad.engine.kernels.arctrig's atan2 and asin (not libm's bits,
+    which euler_angle keeps for the full-model rollouts and exports). y, x (n,) are work
+    buffers."""
     if axis == 1:
         for lane in range(n):
-            s = 2.0 * (quat[0, lane] * quat[2, lane] - quat[3, lane] * quat[1, lane])
+            s = 2.0 * (
+                quat[row, lane] * quat[row + 2, lane] - quat[row + 3, lane] * quat[row + 1, lane]
+            )
             out[lane] = asin(min(1.0, max(-1.0, s)))  # as euler_theta
         return
     for lane in range(n):
-        q0, q1, q2, q3 = quat[0, lane], quat[1, lane], quat[2, lane], quat[3, lane]
+        q0, q1 = quat[row, lane], quat[row + 1, lane]
+        q2, q3 = quat[row + 2, lane], quat[row + 3, lane]
         if axis == 0:
             y[lane] = 2.0 * (q0 * q1 + q2 * q3)
             x[lane] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)

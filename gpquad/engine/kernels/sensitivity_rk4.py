@@ -32,9 +32,9 @@ from gpquad.engine.kernels.fitness_rk4 import (
     body_from_data,
     flown_rows,
     lanes_body_slope,
-    stage_features,
+    stage_features_lanes,
 )
-from gpquad.engine.kernels.quaternion import euler_angle
+from gpquad.engine.kernels.quaternion import euler_angle_lanes
 from gpquad.engine.kernels.step import (
     BODY_ROWS,
     N_STAGES,
@@ -230,6 +230,7 @@ def rk4_window_residuals(
     tan_slope = np.zeros((TANGENT_ROWS, n_c, width))
     tan_total = np.zeros((TANGENT_ROWS, n_c, width))
     kins = np.zeros((3, width))
+    angle_work, angles = np.empty((2, width)), np.empty(width)
     jangs = np.zeros((3, 2, width))
     alive = np.ones(width, dtype=np.bool_)
     # the leaves computed at each stage: those the tree reads, and the angles the Euler
@@ -279,8 +280,7 @@ def rk4_window_residuals(
                     lanes_stage_state(y, slope, node, h, ys, n, flown)
                     lanes_tangent_stage(tan, tan_slope, node, h, tan_s, n, n_c, t_rows)
                     if uses_state:
-                        for lane in range(n):
-                            stage_features(ys, lane, used, leaf)
+                        stage_features_lanes(ys, used, leaf, n, angle_work)
                     lanes_eval_with_gradient(codes, size, slot_of, right, program, grad, pred, n)
                     lanes_leaf_tangents(grad, leaf_adjoint, tan_s, moving, rows_of, n, n_c)
                     lanes_body_slope(
@@ -321,6 +321,8 @@ def rk4_window_residuals(
                     for c in range(n_c):
                         for lane in range(n):
                             tan[i, c, lane] += h * tan_total[i, c, lane]
+            if n_rows == 2:  # the scored Euler angle, every lane's
+                euler_angle_lanes(axis, y, Q, angles, n, angle_work[0], angle_work[1])
             for lane in range(n):
                 if not alive[lane]:
                     continue
@@ -336,10 +338,7 @@ def rk4_window_residuals(
                 for c in range(n_c):
                     jac[row, c] = tan[TV + target, c, lane] if linear else tan[TR, c, lane]
                 if n_rows == 2:
-                    angle = euler_angle(
-                        axis, y[Q, lane], y[Q + 1, lane], y[Q + 2, lane], y[Q + 3, lane]
-                    )
-                    res[row + 1] = att_weight * wrap_angle(angle - states[idx + 1, axis])
+                    res[row + 1] = att_weight * wrap_angle(angles[lane] - states[idx + 1, axis])
                     for c in range(n_c):
                         jac[row + 1, c] = att_weight * tan[TA + axis, c, lane]
     return n_diverged
