@@ -116,3 +116,20 @@ def test_a_long_sum_reads_as_the_terms_added_left_to_right():
         parts.append(f"{sign} {c}*{a}*{b}" if k else f"{c}*{a}*{b}")
     text = " ".join(parts) + " - 2.5"
     assert parse_in_symbols(text, SYMBOLS) == reference - sp.Float("2.5")
+
+
+def test_every_power_a_tree_can_hold_reads_back():
+    """A tree of the deepest depth a configuration allows holds a name up to as many times
+    as it has leaves, and sympy may print such a tree as one power: a rotorpy fit wrote
+    1/(-28.5*u_Y**10 + 177.6*u_Y**9 - ...), which the parser refused at powers above 8, so
+    that the run's own parity check (and loading its model.json) failed."""
+    from gpquad.engine.tree.encoding import MAX_TREE_DEPTH, max_nodes
+    from gpquad.models.symmetry import term_parity
+
+    assert MAX_POWER >= (max_nodes(MAX_TREE_DEPTH) + 1) // 2
+    u = SYMBOLS["u_Y"]
+    expr = 1 / (3 * u**10 - 2 * u**9 + 1)
+    assert parse_in_symbols(expr_string(expr), SYMBOLS) == expr
+    assert parse_in_symbols(f"p**{MAX_POWER}", SYMBOLS) == SYMBOLS["p"] ** MAX_POWER
+    assert term_parity(str(u**10), {"u_Y"}) == 1
+    assert term_parity(str(u**11), {"u_Y"}) == -1

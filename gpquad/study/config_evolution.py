@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 from gpquad.engine.kernels.step import SCHEMES
 from gpquad.engine.taps import MAX_TAPS
+from gpquad.engine.tree.encoding import MAX_TREE_DEPTH
 from gpquad.engine.variables import DEFAULT_INPUTS, STATE_NAMES, TARGET_NAMES
 from gpquad.errors import GpquadError
 
@@ -83,7 +84,14 @@ def validate_evolution(cfg: Config, source: str) -> None:
             source=source,
             field="evolution.n_models",
         )
-    check_table(ev.max_depth, "max_depth", 1, 8, "must be between 1 and 8", source)
+    check_table(
+        ev.max_depth,
+        "max_depth",
+        1,
+        MAX_TREE_DEPTH,
+        f"must be between 1 and {MAX_TREE_DEPTH}",
+        source,
+    )
     check_table(ev.max_degree, "max_degree", 0, 16, "must be between 0 (no limit) and 16", source)
     check_table(
         ev.input_taps,

@@ -21,10 +21,13 @@ from collections.abc import Callable
 
 import sympy as sp
 
+from gpquad.engine.tree.encoding import MAX_TREE_DEPTH
 from gpquad.errors import GpquadError
 
-#: Largest |integer exponent| of a power (a product of that many factors in a tree).
-MAX_POWER = 8
+#: Largest |integer exponent| of a power: the leaves of the deepest tree a configuration
+#: may ask for, so that every equation gpquad writes reads back (a tree's expression, however
+#: sympy rearranges it, has no power of a name above the tree's leaves).
+MAX_POWER = 2**MAX_TREE_DEPTH
 #: Longest expression text read.
 MAX_CHARACTERS = 20_000
 #: Deepest nesting of parentheses, signs and powers.

@@ -13,6 +13,9 @@ import numpy as np
 
 from gpquad.engine.tree.operators import ADD, CONST, N_OPERATORS, SUB, VAR_BASE
 
+#: The deepest tree a configuration may ask for (evolution.max_depth).
+MAX_TREE_DEPTH = 8
+
 
 def max_nodes(max_depth: int) -> int:
     """Node capacity of a full binary tree of the given depth."""
