@@ -41,6 +41,11 @@ SYMBOLS = {n: sp.Symbol(n, real=True) for n in terminal_names(INPUTS)}
         "p**2.5",
         f"p**{MAX_POWER + 1}",
         "9**9**9",
+        "(((p**256)**256)**256)**256",  # sympy merges them: p**4294967296
+        "(p**200*q)**2",
+        "((9**256)**256)**256",  # a number of 53 M bits
+        "(p + q + r + v + w)**256",  # 1.9e8 terms once expanded
+        "(p + q + r + v)**9 * (u + w + q)**9 * (p + r)**9",
         "sin(p)",
         "p(t-1)",
         "u_R(t+1)",
@@ -133,3 +138,15 @@ def test_every_power_a_tree_can_hold_reads_back():
     assert parse_in_symbols(f"p**{MAX_POWER}", SYMBOLS) == SYMBOLS["p"] ** MAX_POWER
     assert term_parity(str(u**10), {"u_Y"}) == 1
     assert term_parity(str(u**11), {"u_Y"}) == -1
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["(p + q)**3", "(p + q)*(r - u)*(v + 2)", "1/(p + q)**2 + r", "(p + q + r)**4 - p*q", "p"],
+)
+def test_expanded_terms_bounds_what_sympy_expands_to(text):
+    from gpquad.engine.tree.arithmetic import expanded_terms
+
+    expr = parse_in_symbols(text, SYMBOLS)
+    n = len(sp.Add.make_args(sp.expand(expr)))
+    assert n <= expanded_terms(expr) <= 4 * n

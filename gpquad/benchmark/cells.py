@@ -190,8 +190,9 @@ class PeakRss:
     On Linux the kernel keeps the peak (VmHWM in /proc/self/status): it is reset to the
     current size on entry (writing 5 to /proc/self/clear_refs) and read on exit, with no
     thread, so that a fit inside the block may still fork its search workers
-    (gpquad.study.workers.fork_context). Where the peak cannot be reset, a thread samples
-    VmRSS every 50 ms; elsewhere the process's lifetime peak (getrusage)."""
+    (gpquad.study.workers.fork_context). The reset is the process's: blocks do not nest.
+    Where the peak cannot be reset, a thread samples VmRSS every 50 ms; elsewhere the
+    process's lifetime peak (getrusage). The search workers' memory is not counted."""
 
     STATUS, CLEAR = "/proc/self/status", "/proc/self/clear_refs"
 

@@ -19,9 +19,10 @@ not an approximation:
   FlightArrays.rot and Euler angles from the data;
 - angular targets: the attitude is integrated only when the tree reads Euler
   angles or att_weight > 0, and the velocity only when it reads u, v or w.
-`rollout` integrates everything and is the reference these paths are tested on. The euler
-kernel's Euler angles are gpquad.engine.kernels.arctrig's atan2 and asin, vectorised over
-lanes: within 1 ulp of the rollout's (libm's), not always its bits.
+`rollout` integrates everything and is the reference these paths are tested on. The
+one-equation kernels' Euler angles (eq. 2 and RK4 alike) are gpquad.engine.kernels.arctrig's
+atan2 and asin, vectorised over lanes: within 1 ulp of the rollout's (libm's), not always
+its bits.
 
 Not in the paper: an equation may have a first-order lag (gpquad.engine.lag): the
 acceleration it applies follows the tree's value f as a_k = a_{k-1} + alpha (f_k - a_{k-1}),

@@ -15,6 +15,11 @@ depend on the tree; integrated over a window from noisy data rates the attitude 
 walk), as the eq. 2 kernels read the data's; within the sample they are integrated. For an
 angular target every state a tree reads is the integrated one.
 
+The Euler angles a tree reads at the stage states, and the scored angle, are
+quaternion.euler_angle_lanes' (vectorised, within 1 ulp of libm's) in the fitness and the
+sensitivity flights alike, so that their residuals agree to the bit; the full-model rollouts
+keep libm's.
+
 A lag (alpha < 1) is one more state, tau a_dot = f - a from the data's acceleration of the
 sample before the window, with 1 / tau from alpha (gpquad.engine.kernels.step.lag_rate).
 """

@@ -30,6 +30,11 @@ from gpquad.errors import GpquadError
 MAX_POWER = 2**MAX_TREE_DEPTH
 #: Longest expression text read.
 MAX_CHARACTERS = 20_000
+#: Most bits of an integer power of a number (9**256 has 812).
+MAX_NUMBER_BITS = 4096
+#: Most terms an expression may expand to (the finishing steps and analyses expand the
+#: equations with sympy): (p + q + r + v + w)**256 would be 1.9e8.
+MAX_TERMS = 20_000
 #: Deepest nesting of parentheses, signs and powers.
 MAX_NESTING = 100
 
@@ -93,6 +98,12 @@ class _Parser:
         expr = self.expr()
         if self.peek() is not None:
             self.fail(f"unexpected {self.peek()[1]!r} after a complete expression")
+        # sympy merges powers of powers and products: (p**256)**256 is p**65536
+        for power in expr.atoms(sp.Pow):
+            if power.exp.is_Integer and abs(int(power.exp)) > MAX_POWER:
+                self.fail(f"it makes a power above {MAX_POWER} ({power.base}**{power.exp})")
+        if expanded_terms(expr) > MAX_TERMS:
+            self.fail(f"it expands to more than {MAX_TERMS} terms")
         return expr
 
     def expr(self) -> sp.Expr:
@@ -133,6 +144,10 @@ class _Parser:
                     f"powers take an integer exponent from -{MAX_POWER} to {MAX_POWER}, "
                     f"not {exponent}"
                 )
+            if base.is_Rational:  # computed at once: bound its size first
+                bits = max(abs(base.p).bit_length(), base.q.bit_length())
+                if bits * abs(int(exponent)) > MAX_NUMBER_BITS:
+                    self.fail(f"{base}**{exponent} is a number of more than {MAX_NUMBER_BITS} bits")
             return base**exponent
         if self.at("^"):
             self.fail("write powers as x**2")
@@ -185,6 +200,32 @@ class _Parser:
             self.fail(f"'{name}(t-{k})': the delay k of {name}(t-k) is a whole number of samples")
         self.take(")")
         return int(k)
+
+
+def expanded_terms(expr: sp.Expr, cap: int = MAX_TERMS + 1) -> int:
+    """An upper bound (at most cap) of the number of terms of sp.expand(expr): a sum's
+    terms add, a product's multiply, a power n of k terms gives C(n + k - 1, k - 1) (a
+    negative power counts its base's expansion: expand expands denominators too)."""
+    memo: dict = {}
+
+    def count(e) -> int:
+        if e in memo:
+            return memo[e]
+        if e.is_Add:
+            n = sum(count(a) for a in e.args)
+        elif e.is_Mul:
+            n = 1
+            for a in e.args:
+                n = min(n * count(a), cap)
+        elif e.is_Pow and e.exp.is_Integer:
+            k, m = count(e.base), abs(int(e.exp))
+            n = 1 if k == 1 else math.comb(m + k - 1, k - 1)
+        else:
+            n = 1
+        memo[e] = min(n, cap)
+        return memo[e]
+
+    return count(expr)
 
 
 def parse_arithmetic(
@@ -247,4 +288,4 @@ def parse_in_symbols(
     return parse_arithmetic(text, leaf, caret_power=caret_power, source=source, field=field)
 
 
-__all__ = ["MAX_POWER", "parse_arithmetic", "parse_in_symbols"]
+__all__ = ["MAX_POWER", "expanded_terms", "parse_arithmetic", "parse_in_symbols"]
