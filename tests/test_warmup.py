@@ -127,3 +127,34 @@ def test_after_the_warm_up_the_joint_refit_compiles_nothing():
 def test_an_unknown_group_is_refused():
     with pytest.raises(ValueError, match="euler"):
         warm("gpu")
+
+
+def test_the_wait_for_the_warm_up_is_kept_and_printed(monkeypatch):
+    """submit_all records how long the searches waited for the workers' warm-up (a cold
+    cache's compilation), warm_up_wait hands it out once, and the run's time line shows it
+    where it is 0.1 s or more."""
+    import threading
+    from concurrent.futures import Future
+
+    from gpquad.study import workers
+    from gpquad.study.runner import time_profile
+
+    warm_up: Future = Future()
+    threading.Timer(0.3, warm_up.set_result, (0.3,)).start()
+
+    class Executor:
+        def submit(self, func, *args):
+            done: Future = Future()
+            done.set_result(func(*args))
+            return done
+
+    monkeypatch.setattr(workers, "_pool", {"jobs": 1, "executor": Executor(), "warm": [warm_up]})
+    workers.warm_up_wait()
+    futures = workers.submit_all(1, abs, [(-2,)])
+    assert [f.result() for f in futures] == [2]
+    waited = workers.warm_up_wait()
+    assert 0.25 <= waited < 5.0
+    assert workers.warm_up_wait() == 0.0  # handed out once
+    line = time_profile(30.0, 7.0, {"p_dot": 2.0}, {"refine": 1.0}, waited)
+    assert "loading 7.0, compiling the kernels 0.3, p_dot 2.0" in line
+    assert "compiling" not in time_profile(5.0, 0.3, {"p_dot": 2.0}, {}, 0.05)

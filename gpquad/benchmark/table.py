@@ -84,7 +84,8 @@ def aggregate(cells: list[dict]) -> dict:
 def fit_profile(cell: dict) -> dict[str, float] | None:
     """Where a gpquad cell's fit time went (seconds, summed over a per-vehicle cell's fits):
     "searches" (each equation's search, summed: CPU-like, they run side by side), the
-    slowest search, and each finishing step's wall time; None for a cell without it."""
+    slowest search, each finishing step's wall time and the wait for the kernels'
+    compilation; None for a cell without it."""
     profile = cell.get("fit_profile_s")
     if not profile:
         return None
@@ -95,6 +96,8 @@ def fit_profile(cell: dict) -> dict[str, float] | None:
         out["slowest search"] += max(fit["search"].values(), default=0.0)
         for step, seconds in fit["finish"].items():
             out[step] = out.get(step, 0.0) + seconds
+        if "compile_wait" in fit:  # cells fitted before it was kept have none
+            out["compile wait"] = out.get("compile wait", 0.0) + fit["compile_wait"]
     return out
 
 

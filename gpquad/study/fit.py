@@ -383,9 +383,11 @@ def fit_dataset(
     """Search every configured target and finish the model (module notes). Without a run
     folder the searches may run in `jobs` processes (the same equations for any value).
     `seconds`, if given, receives the fit's profile: {"search": {target: s}, "phases":
-    {target: {phase: s}}, "finish": {step: s}} (each search's own time and its phases',
-    each finishing step's wall time)."""
+    {target: {phase: s}}, "finish": {step: s}, "compile_wait": s} (each search's own time
+    and its phases', each finishing step's wall time, the wait for the kernels'
+    compilation before the searches: workers.warm_up_wait)."""
     cfg = measured_targets(cfg, dataset)
+    workers.warm_up_wait()  # an earlier fit's
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     phases: dict[str, dict[str, float]] = {}
@@ -395,5 +397,7 @@ def fit_dataset(
     steps: dict[str, float] = {}
     model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)
     if seconds is not None:
-        seconds.update(search=timings, phases=phases, finish=steps)
+        seconds.update(
+            search=timings, phases=phases, finish=steps, compile_wait=workers.warm_up_wait()
+        )
     return model

@@ -13,6 +13,7 @@ from gpquad.data.io import load_dataset
 from gpquad.engine.evolve.coevolution import summed_phases
 from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
+from gpquad.study import workers as search_workers
 from gpquad.study.config import Config, folder_config_dict
 from gpquad.study.fit import finish, measured_targets, new_model, search_equations
 from gpquad.study.search import Progress
@@ -196,6 +197,7 @@ def run_experiment(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
+    search_workers.warm_up_wait()  # an earlier fit's
     try:
         equations, timings = search_equations(
             dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases
@@ -209,6 +211,7 @@ def run_experiment(
             file=sys.stderr,
         )
         raise
+    compile_wait = search_workers.warm_up_wait()
     if searched is not None:
         searched(run_dir)
     finish_seconds: dict[str, float] = {}
@@ -221,14 +224,17 @@ def run_experiment(
         finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         wall_time_s=wall,
         load_time_s=load_seconds,
+        compile_wait_s=compile_wait,
         target_time_s=timings,
         search_phase_time_s=phases,
         finish_time_s=finish_seconds,
     )
     write_json(run_dir / "run.json", info)
     if seconds is not None:
-        seconds.update(search=timings, phases=phases, finish=finish_seconds)
-    report.say(time_profile(wall, load_seconds, timings, finish_seconds))
+        seconds.update(
+            search=timings, phases=phases, finish=finish_seconds, compile_wait=compile_wait
+        )
+    report.say(time_profile(wall, load_seconds, timings, finish_seconds, compile_wait))
     if phases:
         report.say(phase_profile(phases))
     if after is not None:
@@ -245,11 +251,18 @@ def phase_profile(phases: dict[str, dict[str, float]]) -> str:
 
 
 def time_profile(
-    wall: float, load: float, searches: dict[str, float], finishing: dict[str, float]
+    wall: float,
+    load: float,
+    searches: dict[str, float],
+    finishing: dict[str, float],
+    compile_wait: float = 0.0,
 ) -> str:
-    """One line: where a run's wall time went (run.json keeps the numbers)."""
+    """One line: where a run's wall time went (run.json keeps the numbers); the wait for
+    the kernels' compilation (a cold cache) where it took 0.1 s or more."""
+    waited = [f"compiling the kernels {compile_wait:.1f}"] if compile_wait >= 0.1 else []
     parts = (
         [f"loading {load:.1f}"]
+        + waited
         + [f"{t} {s:.1f}" for t, s in searches.items()]
         + [f"{name} {s:.1f}" for name, s in finishing.items()]
     )

@@ -36,6 +36,17 @@ from gpquad.study.warmup import GROUPS, load, warm
 
 #: The executor of the last start() and its warm-up futures.
 _pool: dict = {}
+#: Seconds the last submit_all waited for the warm-up (`warm_up_wait`).
+_waited: dict = {}
+
+
+def warm_up_wait(reset: bool = True) -> float:
+    """Seconds the searches waited for the workers' warm-up since the last call (0 if none
+    did): with a cold kernel cache, the compilation that the loading did not hide."""
+    waited = _waited.get("s", 0.0)
+    if reset:
+        _waited.clear()
+    return waited
 
 
 def default_jobs() -> int:
@@ -201,6 +212,7 @@ def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
     """func(*args) for each of `arguments` in the warmed workers (started now if they were
     not); the futures, in the order of `arguments`."""
     start(jobs)
+    t0 = time.perf_counter()
     done, _ = wait(_pool["warm"], return_when=FIRST_EXCEPTION)
     try:
         for future in done:
@@ -208,6 +220,7 @@ def submit_all(jobs: int, func, arguments: list[tuple]) -> list[Future]:
     except BaseException:
         release(kill=True)  # a pool that failed is not kept for the next fit
         raise
+    _waited["s"] = time.perf_counter() - t0
     executor = _pool["executor"]
     return [executor.submit(func, *args) for args in arguments]
 
