@@ -45,6 +45,7 @@ SYMBOLS = {n: sp.Symbol(n, real=True) for n in terminal_names(INPUTS)}
         "(p**200*q)**2",
         "((9**256)**256)**256",  # a number of 53 M bits
         "(p + q + r + v + w)**256",  # 1.9e8 terms once expanded
+        "1/(p + q + r + v + w)**200",  # expand expands the denominator too
         "(p + q + r + v)**9 * (u + w + q)**9 * (p + r)**9",
         "sin(p)",
         "p(t-1)",
@@ -142,7 +143,14 @@ def test_every_power_a_tree_can_hold_reads_back():
 
 @pytest.mark.parametrize(
     "text",
-    ["(p + q)**3", "(p + q)*(r - u)*(v + 2)", "1/(p + q)**2 + r", "(p + q + r)**4 - p*q", "p"],
+    [
+        "(p + q)**3",
+        "(p + q)*(r - u)*(v + 2)",
+        "1/(p + q)**2 + r",
+        "(p + q + r)**4 - p*q",
+        "p",
+        "(p + q*r + u)/(v + w**2)",
+    ],
 )
 def test_expanded_terms_bounds_what_sympy_expands_to(text):
     from gpquad.engine.tree.arithmetic import expanded_terms
@@ -150,3 +158,18 @@ def test_expanded_terms_bounds_what_sympy_expands_to(text):
     expr = parse_in_symbols(text, SYMBOLS)
     n = len(sp.Add.make_args(sp.expand(expr)))
     assert n <= expanded_terms(expr) <= 4 * n
+
+
+def test_a_written_quotient_of_long_sums_reads_back():
+    """gpquad writes a quotient as expanded numerator / expanded denominator: 150 terms over
+    150 terms is 150 terms once expanded, not 22,500."""
+    names = ["p", "q", "r", "u", "v", "w"]
+    pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1 :]]
+    monomials = [f"{a}**{i}*{b}**{j}" for a, b in pairs for i in range(1, 6) for j in range(1, 6)]
+    monomials = monomials[:150]  # distinct: 150 terms above and below
+    num = " + ".join(f"{k + 1}*{m}" for k, m in enumerate(monomials))
+    den = " + ".join(f"{k + 2}*{m}" for k, m in enumerate(monomials))
+    expr = parse_in_symbols(f"({num})/({den})", SYMBOLS)
+    numerator, denominator = sp.fraction(expr)
+    assert len(sp.Add.make_args(numerator)) == len(sp.Add.make_args(denominator)) == 150
+    assert len(sp.Add.make_args(sp.expand(expr))) == 150

@@ -203,10 +203,12 @@ class _Parser:
 
 
 def expanded_terms(expr: sp.Expr, cap: int = MAX_TERMS + 1) -> int:
-    """An upper bound (at most cap) of the number of terms of sp.expand(expr): a sum's
-    terms add, a product's multiply, a power n of k terms gives C(n + k - 1, k - 1) (a
-    negative power counts its base's expansion: expand expands denominators too)."""
+    """An upper bound (at most cap) of the terms sp.expand makes of expr or of any part it
+    expands: a sum's terms add, a product's multiply, a power n of k terms gives
+    C(n + k - 1, k - 1). A negative power is one term of its product (expand leaves the
+    quotient), but its base's expansion counts on its own (expand expands denominators)."""
     memo: dict = {}
+    inner = [0]  # the largest expansion inside a denominator
 
     def count(e) -> int:
         if e in memo:
@@ -219,13 +221,16 @@ def expanded_terms(expr: sp.Expr, cap: int = MAX_TERMS + 1) -> int:
                 n = min(n * count(a), cap)
         elif e.is_Pow and e.exp.is_Integer:
             k, m = count(e.base), abs(int(e.exp))
-            n = 1 if k == 1 else math.comb(m + k - 1, k - 1)
+            n = 1 if k == 1 else min(math.comb(m + k - 1, k - 1), cap)
+            if e.exp < 0:
+                inner[0] = max(inner[0], n)
+                n = 1
         else:
             n = 1
         memo[e] = min(n, cap)
         return memo[e]
 
-    return count(expr)
+    return max(count(expr), inner[0])
 
 
 def parse_arithmetic(
