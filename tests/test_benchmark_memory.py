@@ -10,19 +10,9 @@ import pytest
 from gpquad.benchmark.cells import PeakRss
 from gpquad.study.workers import fork_context
 
-
-def _peak_resettable() -> bool:
-    try:
-        with open(PeakRss.CLEAR, "w") as fh:
-            fh.write("5")
-    except OSError:
-        return False
-    return True
-
-
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc is Linux's")
 resettable = pytest.mark.skipif(
-    not sys.platform.startswith("linux") or not _peak_resettable(),
+    not sys.platform.startswith("linux") or not PeakRss.reset(),
     reason="this kernel does not reset the peak (/proc/self/clear_refs)",
 )
 

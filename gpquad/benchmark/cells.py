@@ -196,13 +196,21 @@ class PeakRss:
 
     STATUS, CLEAR = "/proc/self/status", "/proc/self/clear_refs"
 
+    @classmethod
+    def reset(cls) -> bool:
+        """Reset the kernel's peak of this process to its current size; False where it
+        cannot (not Linux, a kernel before 4.0, a /proc that refuses the write)."""
+        try:
+            with open(cls.CLEAR, "w") as fh:
+                fh.write("5")
+        except OSError:
+            return False
+        return True
+
     def __enter__(self):
         self._thread = None
         self.peak_mb = self._read("VmRSS:")
-        try:
-            with open(self.CLEAR, "w") as fh:
-                fh.write("5")
-        except OSError:
+        if not self.reset():
             self._stop = threading.Event()
             self._thread = threading.Thread(target=self._watch, daemon=True)
             self._thread.start()

@@ -162,6 +162,7 @@ def search_equations(
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
     phases = {} if phases is None else phases
+    workers.warm_up_wait()  # forget an earlier fit's: workers.warm_up_wait() tells this one's
     history = HistoryWriter(run_dir / "history.csv") if run_dir is not None else None
     inside = workers.inside_worker()
     parallel = jobs > 1 and len(ev.targets) > 1 and not inside and not in_process
@@ -387,7 +388,6 @@ def fit_dataset(
     and its phases', each finishing step's wall time, the wait for the kernels'
     compilation before the searches: workers.warm_up_wait)."""
     cfg = measured_targets(cfg, dataset)
-    workers.warm_up_wait()  # an earlier fit's
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     phases: dict[str, dict[str, float]] = {}

@@ -197,7 +197,6 @@ def run_experiment(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
-    search_workers.warm_up_wait()  # an earlier fit's
     try:
         equations, timings = search_equations(
             dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases

@@ -40,13 +40,10 @@ _pool: dict = {}
 _waited: dict = {}
 
 
-def warm_up_wait(reset: bool = True) -> float:
+def warm_up_wait() -> float:
     """Seconds the searches waited for the workers' warm-up since the last call (0 if none
     did): with a cold kernel cache, the compilation that the loading did not hide."""
-    waited = _waited.get("s", 0.0)
-    if reset:
-        _waited.clear()
-    return waited
+    return _waited.pop("s", 0.0)
 
 
 def default_jobs() -> int:
