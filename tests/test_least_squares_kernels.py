@@ -22,20 +22,66 @@ def problem(seed: int, m: int, n: int, spread: float):
     spread=st.floats(0.0, 4.0),
 )
 def test_triangularize_is_a_qr_of_the_jacobian(seed, m, n, spread):
-    """For J = jac / scale: R^T R = J^T J and R^T (Q^T res) = J^T res, R upper triangular
-    (signs may differ from numpy's QR, products do not)."""
+    """For J = jac / scale, both factorisations: R^T R = J^T J and R^T qtr = J^T res, R
+    upper triangular (signs may differ from numpy's QR, products do not)."""
     m = max(m, n)
     jac, res = problem(seed, m, n, spread)
     columns = np.random.default_rng(seed).uniform(0.5, 20.0, n)  # the caller's scaling
     kept = jac.copy()
-    r, qtr = np.zeros((n, n)), np.zeros(n)
-    kernels.triangularize(jac, columns, res, r, qtr)
-    assert np.array_equal(jac, kept)  # the input is not touched
-    assert np.all(np.tril(r, -1) == 0.0)
     scaled = jac / columns
     size = np.abs(scaled).max() ** 2
-    np.testing.assert_allclose(r.T @ r, scaled.T @ scaled, atol=1e-10 * size * m)
-    np.testing.assert_allclose(r.T @ qtr, scaled.T @ res, atol=1e-10 * size * m)
+    for triangularize in (kernels.triangularize, kernels.householder_triangularize):
+        r, qtr = np.zeros((n, n)), np.zeros(n)
+        triangularize(jac, columns, res, r, qtr)
+        assert np.array_equal(jac, kept)  # the input is not touched
+        assert np.all(np.tril(r, -1) == 0.0)
+        np.testing.assert_allclose(r.T @ r, scaled.T @ scaled, atol=1e-10 * size * m)
+        np.testing.assert_allclose(r.T @ qtr, scaled.T @ res, atol=1e-10 * size * m)
+
+
+def factors(triangularize, jac, res, scale=None):
+    n = jac.shape[1]
+    r, qtr = np.zeros((n, n)), np.zeros(n)
+    triangularize(jac, np.ones(n) if scale is None else scale, res, r, qtr)
+    return r, qtr
+
+
+@pytest.mark.parametrize("m", [4, 7, 401, 2003])
+def test_triangularize_takes_the_normal_equations_and_gives_the_qr_steps(m):
+    """On a well-conditioned Jacobian (rows in blocks of four and a remainder) the factor
+    is the normal equations' Cholesky factor (positive diagonal, not the QR's bits), and
+    its damped steps are the QR's."""
+    jac, res = problem(m, m, 4, 1.0)
+    scale = np.linalg.norm(jac, axis=0)
+    r, qtr = factors(kernels.triangularize, jac, res, scale)
+    r_qr, qtr_qr = factors(kernels.householder_triangularize, jac, res, scale)
+    assert np.all(np.diag(r) > 0.0)
+    assert not np.array_equal(np.abs(r), np.abs(r_qr))
+    np.testing.assert_allclose(r, np.linalg.cholesky((jac / scale).T @ (jac / scale)).T)
+    for mu in (0.0, 1e-3, 1.0):
+        h, h_qr = np.zeros(4), np.zeros(4)
+        kernels.damped_step(r, qtr, mu, h)
+        kernels.damped_step(r_qr, qtr_qr, mu, h_qr)
+        np.testing.assert_allclose(h, h_qr, rtol=1e-9, atol=1e-12 * np.abs(h_qr).max())
+
+
+@pytest.mark.parametrize("case", ["singular", "ill-conditioned", "zero column", "not finite"])
+def test_triangularize_falls_back_to_the_qr(case):
+    """Where the normal equations lose the step (two equal columns, a condition of 1e7, a
+    column of zeros, a NaN) the factor is the Householder QR's, bit for bit."""
+    jac, res = problem(3, 60, 4, 0.0)
+    if case == "singular":
+        jac[:, 3] = jac[:, 1]
+    elif case == "ill-conditioned":
+        jac[:, 3] = jac[:, 1] + 1e-7 * jac[:, 2]
+    elif case == "zero column":
+        jac[:, 2] = 0.0
+    else:
+        jac[5, 2] = np.nan
+    r, qtr = factors(kernels.triangularize, jac, res)
+    r_qr, qtr_qr = factors(kernels.householder_triangularize, jac, res)
+    assert np.array_equal(r, r_qr, equal_nan=True)
+    assert np.array_equal(qtr, qtr_qr, equal_nan=True)
 
 
 @settings(max_examples=40, deadline=None)

@@ -445,7 +445,7 @@ def test_broyden_updates_fit_with_fewer_jacobians():
 def test_normal_triangularize_gives_the_qr_step_and_falls_back_when_singular():
     """normal_triangularize (the joint refit's) gives an R and Q^T f with the QR's R^T R
     and R^T Q^T f, so the same damped steps; with two equal columns (a singular normal
-    matrix, the bad case for Cholesky) it gives the QR of kernels.triangularize itself."""
+    matrix, the bad case for Cholesky) it gives kernels.householder_triangularize's QR."""
     from gpquad.engine.evolve.lm import normal_triangularize
     from gpquad.engine.kernels import least_squares as kernels
 
@@ -459,7 +459,7 @@ def test_normal_triangularize_gives_the_qr_step_and_falls_back_when_singular():
         triangularize(j, scale, res, r, qtr)
         return r, qtr
 
-    r_qr, qtr_qr = factors(kernels.triangularize, jac)
+    r_qr, qtr_qr = factors(kernels.householder_triangularize, jac)
     r_ne, qtr_ne = factors(normal_triangularize, jac)
     np.testing.assert_allclose(r_ne.T @ r_ne, r_qr.T @ r_qr, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(r_ne.T @ qtr_ne, r_qr.T @ qtr_qr, rtol=1e-10, atol=1e-10)
@@ -472,6 +472,6 @@ def test_normal_triangularize_gives_the_qr_step_and_falls_back_when_singular():
 
     singular = jac.copy()
     singular[:, 3] = singular[:, 1] * scale[3] / scale[1]  # equal once scaled
-    r_qr, qtr_qr = factors(kernels.triangularize, singular)
+    r_qr, qtr_qr = factors(kernels.householder_triangularize, singular)
     r_ne, qtr_ne = factors(normal_triangularize, singular)
     assert np.array_equal(r_ne, r_qr) and np.array_equal(qtr_ne, qtr_qr)

@@ -7,12 +7,13 @@ for bit-identical inputs depending on which least-squares fits ran before in the
 scaling, MINPACK mode 2, about one replay in twenty, once in CI); the search amplifies that
 into other equations for the same seed in another process. `levenberg_marquardt` is
 therefore gpquad's own: MINPACK's algorithm in mode 2 (Moré's trust-region LM, variables
-scaled, fixed, by the first Jacobian's column norms), rewritten with every reduction, QR
-and solve in numba loops of fixed order (gpquad.engine.kernels.least_squares): no BLAS, whose
-summation order may change with the thread count or memory alignment.
+scaled, fixed, by the first Jacobian's column norms), rewritten with every reduction,
+factorisation and solve in numba loops of fixed order (gpquad.engine.kernels.least_squares;
+each Jacobian's R from the normal equations, the QR where they are ill-conditioned): no
+BLAS, whose summation order may change with the thread count or memory alignment.
 
-The joint refit (up to 80 constants, 10^5 residuals) takes each Jacobian's R and Q^T f
-from the normal equations (`normal_triangularize`, BLAS on one thread in every finish).
+The joint refit (up to 80 constants, 10^5 residuals) forms its normal equations in BLAS
+on one thread, as every finish runs (`normal_triangularize`).
 Its Jacobian is a sensitivity flight for a continuous-time model
 (gpquad.models.joint_jacobian); otherwise `forward_difference` gives one (scipy's
 '2-point' step) whose result is also a function of the inputs alone. `broyden_jacobian`
@@ -42,8 +43,8 @@ MU_ITERATIONS = 10
 #: gpquad.models.refine_problem.STALL.
 STALL = (2, 1e-3)
 #: normal_triangularize takes the QR instead when its Cholesky factor's smallest diagonal
-#: entry is at most this fraction of the largest.
-NORMAL_PIVOT_RATIO = 1e-6
+#: entry is at most this fraction of the largest (the kernels' own rule).
+NORMAL_PIVOT_RATIO = kernels.NORMAL_PIVOT_RATIO
 
 
 def column_norms(j: np.ndarray) -> np.ndarray:
@@ -176,14 +177,13 @@ def levenberg_marquardt(
 
 
 def normal_triangularize(jac, scale, res, r, qtr) -> None:
-    """kernels.triangularize's (R, the first n entries of Q^T res) for a tall Jacobian, from
-    the normal equations: R = the Cholesky factor of (jac / scale)^T (jac / scale), qtr =
-    R^-T (jac / scale)^T res. The LM step reads only R^T R and R^T qtr, which equal jac's
-    own; the cost is m n^2 / 2 in BLAS against m n^2 in loops (the joint refit's Jacobian:
-    108,000 x 43). Under gpquad.engine.threads.one_blas_thread, as every finish runs, the
-    result is a function of the inputs. Where the scaled normal matrix is close to singular
-    (the factor's diagonal spans more than NORMAL_PIVOT_RATIO, a condition above about
-    1e12), the Householder QR of kernels.triangularize is taken instead."""
+    """kernels.triangularize's R and qtr for a tall, wide Jacobian (the joint refit's:
+    108,000 x 43), its normal equations formed by BLAS: R = the Cholesky factor of
+    (jac / scale)^T (jac / scale), qtr = R^-T (jac / scale)^T res. The LM step reads only
+    R^T R and R^T qtr, which equal jac's own. Under gpquad.engine.threads.one_blas_thread,
+    as every finish runs, the result is a function of the inputs. Where the scaled normal
+    matrix is close to singular (the factor's diagonal spans more than NORMAL_PIVOT_RATIO,
+    a condition above about 1e12), kernels.householder_triangularize's QR is taken."""
     from scipy.linalg import cho_factor, solve_triangular
 
     scaled = np.asarray(jac, dtype=float) / scale
@@ -194,7 +194,9 @@ def normal_triangularize(jac, scale, res, r, qtr) -> None:
         upper = None
     diagonal = np.abs(np.diag(upper)) if upper is not None else np.zeros(1)
     if upper is None or not diagonal.min() > NORMAL_PIVOT_RATIO * diagonal.max():
-        kernels.triangularize(np.ascontiguousarray(jac, dtype=float), scale, res, r, qtr)
+        kernels.householder_triangularize(
+            np.ascontiguousarray(jac, dtype=float), scale, res, r, qtr
+        )
         return
     r[:, :] = upper
     qtr[:] = solve_triangular(upper, scaled.T @ res, trans="T", lower=False)

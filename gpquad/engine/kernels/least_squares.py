@@ -7,9 +7,13 @@ MINPACK took other trial points for bit-identical inputs after other fits in the
 whatever ran before and however many threads or jobs.
 
 Flat arrays in, flat arrays out:
-- `triangularize(jac, scale, res, r, qtr)`: Householder QR of jac (m, n), m >= n, its
-  columns divided by scale; r (n, n) gets R, qtr (n,) the first n entries of Q^T res.
-  Cost m n^2.
+- `triangularize(jac, scale, res, r, qtr)`: for J = jac (m, n) with its columns divided
+  by scale, an upper triangular R (r, (n, n)) and qtr (n,) with R^T R = J^T J and
+  R^T qtr = J^T res, what the LM step reads: the Cholesky factor of the normal equations,
+  summed four rows at a time in one pass over jac (cost m n^2 / 2, no dependency chain);
+  where that factor is close to singular (its diagonal spans more than
+  NORMAL_PIVOT_RATIO), the Householder QR (`householder_triangularize`: R and the first
+  n entries of Q^T res, cost 2 m n^2 in dependent sums).
 - `damped_step(r, qtr, mu, h)`: the step h minimising |jac h + res|^2 + mu |h|^2, from R and
   Q^T res alone (QR of [R; sqrt(mu) I], n^3), and what Newton's correction of mu needs.
 - `predicted_drop`, `gradient_norm`, `sum_squares`, `column_norms`: the reductions
@@ -19,6 +23,11 @@ Flat arrays in, flat arrays out:
 import numpy as np
 
 from gpquad.engine.numba_config import njit
+
+#: The normal equations' Cholesky factor is replaced by the QR when its smallest diagonal
+#: entry is at most this fraction of its largest (a condition of J above about 1e6, where
+#: the factor loses more than about 1e-4 of its digits).
+NORMAL_PIVOT_RATIO = 1e-6
 
 
 @njit(inner=True)
@@ -61,6 +70,65 @@ def _householder(at, b, n_rows, n_cols):
 
 @njit
 def triangularize(jac, scale, res, r, qtr):
+    """R (upper triangle of r, zeros below) and qtr with R^T R = J^T J and R^T qtr = J^T res
+    for J = jac / scale (each column j divided by scale[j]): the normal equations' Cholesky
+    factor, or householder_triangularize's QR where that factor is close to singular
+    (module notes). jac and res are left as they are; the result is a function of them."""
+    m, n = jac.shape
+    gram = np.zeros((n, n))  # upper triangle of J^T J
+    jtr = np.zeros(n)
+    inverse = 1.0 / scale
+    block = np.empty((4, n))
+    whole = m - m % 4
+    for i in range(0, whole, 4):
+        for k in range(4):
+            for a in range(n):
+                block[k, a] = jac[i + k, a] * inverse[a]
+        f0, f1, f2, f3 = res[i], res[i + 1], res[i + 2], res[i + 3]
+        for a in range(n):
+            x0, x1, x2, x3 = block[0, a], block[1, a], block[2, a], block[3, a]
+            jtr[a] += (x0 * f0 + x1 * f1) + (x2 * f2 + x3 * f3)
+            for b in range(a, n):
+                gram[a, b] += (x0 * block[0, b] + x1 * block[1, b]) + (
+                    x2 * block[2, b] + x3 * block[3, b]
+                )
+    for i in range(whole, m):
+        for a in range(n):
+            xa = jac[i, a] * inverse[a]
+            jtr[a] += xa * res[i]
+            for b in range(a, n):
+                gram[a, b] += xa * (jac[i, b] * inverse[b])
+    largest = 0.0
+    for k in range(n):  # gram = R^T R, R upper triangular
+        d = gram[k, k]
+        for p in range(k):
+            d -= r[p, k] * r[p, k]
+        if not d > 0.0:  # singular (or not finite)
+            householder_triangularize(jac, scale, res, r, qtr)
+            return
+        d = np.sqrt(d)
+        largest = max(largest, d)
+        r[k, k] = d
+        for j in range(k):
+            r[k, j] = 0.0
+        for j in range(k + 1, n):
+            s = gram[k, j]
+            for p in range(k):
+                s -= r[p, k] * r[p, j]
+            r[k, j] = s / d
+    for k in range(n):
+        if not r[k, k] > NORMAL_PIVOT_RATIO * largest:
+            householder_triangularize(jac, scale, res, r, qtr)
+            return
+    for k in range(n):  # R^T qtr = J^T res
+        s = jtr[k]
+        for p in range(k):
+            s -= r[p, k] * qtr[p]
+        qtr[k] = s / r[k, k]
+
+
+@njit
+def householder_triangularize(jac, scale, res, r, qtr):
     """R (upper triangle of r) and the first n entries of Q^T res for jac / scale = Q R
     (each column j divided by scale[j]); jac and res are left as they are."""
     m, n = jac.shape
