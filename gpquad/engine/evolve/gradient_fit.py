@@ -221,7 +221,11 @@ def gauss_newton_constants(
     if free.size == 0:
         return model, error
 
+    every = free.size == slots.size  # every constant fitted: no columns to pick
+
     def full(x_free):
+        if every:
+            return x_free
         x = x0.copy()
         x[free] = x_free
         return x
@@ -230,7 +234,7 @@ def gauss_newton_constants(
         x_fit = levenberg_marquardt(
             lambda x: evaluate(full(x), jacobian=False)[0],
             x0[free],
-            lambda x: evaluate(full(x))[1][:, free],
+            lambda x: evaluate(full(x))[1] if every else evaluate(full(x))[1][:, free],
             max_steps,
             ftol=ftol,
             stall=stall,
