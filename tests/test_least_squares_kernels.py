@@ -136,3 +136,26 @@ def test_reductions(shape):
     np.testing.assert_allclose(out, np.where(expected > 0, expected, 1.0), rtol=1e-12)
     np.testing.assert_allclose(kernels.sum_squares(res), res @ res, rtol=1e-12)
     assert np.isinf(kernels.sum_squares(np.array([1.0, np.inf])))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(
+            st.floats(-1e6, 1e6),
+            st.sampled_from([np.inf, -np.inf, np.nan, 1e154, -3e154, 1e200]),
+        ),
+        max_size=23,
+    )
+)
+def test_squares_finite_is_the_finiteness_of_sum_squares(values):
+    """The LM's check of a Jacobian: finite exactly when sum_squares is (an entry not
+    finite, or squares that overflow together)."""
+    v = np.array(values, dtype=float)
+    assert kernels.squares_finite(v) == np.isfinite(kernels.sum_squares(v))
+
+
+def test_squares_finite_sees_an_overflow_of_the_sum_alone():
+    """Squares that are each finite and overflow only when summed."""
+    assert kernels.squares_finite(np.full(7, 1e153))
+    assert not kernels.squares_finite(np.full(7, 1e154))

@@ -125,7 +125,7 @@ def levenberg_marquardt(
     if not np.isfinite(cost) or cost == 0.0 or n == 0:
         return x
     j = np.ascontiguousarray(jac(x), dtype=float)
-    if not np.isfinite(kernels.sum_squares(j.ravel())):
+    if not kernels.squares_finite(j.ravel()):
         return x
     scale = column_norms(j)
     r, qtr, h = np.zeros((n, n)), np.zeros(n), np.zeros(n)
@@ -166,7 +166,7 @@ def levenberg_marquardt(
             ):
                 break
             j = np.ascontiguousarray(jac(x), dtype=float)
-            if not np.isfinite(kernels.sum_squares(j.ravel())):
+            if not kernels.squares_finite(j.ravel()):
                 break
             triangularize(j, scale, f, r, qtr)
         if (abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0) or radius <= xtol * _norm(

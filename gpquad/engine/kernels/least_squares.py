@@ -16,8 +16,8 @@ Flat arrays in, flat arrays out:
   n entries of Q^T res, cost 2 m n^2 in dependent sums).
 - `damped_step(r, qtr, mu, h)`: the step h minimising |jac h + res|^2 + mu |h|^2, from R and
   Q^T res alone (QR of [R; sqrt(mu) I], n^3), and what Newton's correction of mu needs.
-- `predicted_drop`, `gradient_norm`, `sum_squares`, `column_norms`: the reductions
-  around them.
+- `predicted_drop`, `gradient_norm`, `sum_squares`, `squares_finite`, `column_norms`: the
+  reductions around them.
 """
 
 import numpy as np
@@ -216,6 +216,22 @@ def sum_squares(v):
     for i in range(v.size):
         total += v[i] * v[i]
     return total
+
+
+@njit
+def squares_finite(v):
+    """Whether sum(v^2) is finite: summed in four independent parts (only its finiteness is
+    read, so their order need not be sum_squares's; the sums differ only within rounding of
+    the largest float)."""
+    parts = np.zeros(4)
+    whole = v.size - v.size % 4
+    for i in range(0, whole, 4):
+        for k in range(4):
+            parts[k] += v[i + k] * v[i + k]
+    total = (parts[0] + parts[1]) + (parts[2] + parts[3])
+    for i in range(whole, v.size):
+        total += v[i] * v[i]
+    return np.isfinite(total)
 
 
 @njit
