@@ -221,11 +221,10 @@ def gauss_newton_constants(
     if free.size == 0:
         return model, error
 
-    every = free.size == slots.size  # every constant fitted: no columns to pick
+    # every constant fitted (the usual case): the Jacobian itself, a view, not a copy
+    columns = slice(None) if free.size == slots.size else free
 
     def full(x_free):
-        if every:
-            return x_free
         x = x0.copy()
         x[free] = x_free
         return x
@@ -234,7 +233,7 @@ def gauss_newton_constants(
         x_fit = levenberg_marquardt(
             lambda x: evaluate(full(x), jacobian=False)[0],
             x0[free],
-            lambda x: evaluate(full(x))[1] if every else evaluate(full(x))[1][:, free],
+            lambda x: evaluate(full(x))[1][:, columns],
             max_steps,
             ftol=ftol,
             stall=stall,

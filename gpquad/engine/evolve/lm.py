@@ -42,9 +42,6 @@ MU_ITERATIONS = 10
 #: (docs/decisions/2026-11-27-jacobians.md). The refinement has its own,
 #: gpquad.models.refine_problem.STALL.
 STALL = (2, 1e-3)
-#: normal_triangularize takes the QR instead when its Cholesky factor's smallest diagonal
-#: entry is at most this fraction of the largest (the kernels' own rule).
-NORMAL_PIVOT_RATIO = kernels.NORMAL_PIVOT_RATIO
 
 
 def column_norms(j: np.ndarray) -> np.ndarray:
@@ -182,8 +179,9 @@ def normal_triangularize(jac, scale, res, r, qtr) -> None:
     (jac / scale)^T (jac / scale), qtr = R^-T (jac / scale)^T res. The LM step reads only
     R^T R and R^T qtr, which equal jac's own. Under gpquad.engine.threads.one_blas_thread,
     as every finish runs, the result is a function of the inputs. Where the scaled normal
-    matrix is close to singular (the factor's diagonal spans more than NORMAL_PIVOT_RATIO,
-    a condition above about 1e12), kernels.householder_triangularize's QR is taken."""
+    matrix is close to singular (the factor's diagonal spans more than the kernels'
+    NORMAL_PIVOT_RATIO, a condition above about 1e12), kernels.householder_triangularize's
+    QR is taken."""
     from scipy.linalg import cho_factor, solve_triangular
 
     scaled = np.asarray(jac, dtype=float) / scale
@@ -193,7 +191,7 @@ def normal_triangularize(jac, scale, res, r, qtr) -> None:
     except (np.linalg.LinAlgError, ValueError):
         upper = None
     diagonal = np.abs(np.diag(upper)) if upper is not None else np.zeros(1)
-    if upper is None or not diagonal.min() > NORMAL_PIVOT_RATIO * diagonal.max():
+    if upper is None or not diagonal.min() > kernels.NORMAL_PIVOT_RATIO * diagonal.max():
         kernels.householder_triangularize(
             np.ascontiguousarray(jac, dtype=float), scale, res, r, qtr
         )
