@@ -80,9 +80,10 @@ def load() -> None:
 def warm(group: str) -> float:
     """Compile (or load from numba's cache) the kernels of `group` (GROUPS); returns the
     seconds it took. "euler": the eq. 2 fitness and sensitivity kernels, the LM's and the
-    joint refit's full-model sensitivity flight, the model phase's mutation; "rk4": the RK4
-    fitness (also as LM's residuals), sensitivity and full-model rollout kernels and the
-    one-step tree evaluation (about the same compilation time each, none compiled by both)."""
+    joint refit's full-model sensitivity flight, the model phase's mutation and the one-step
+    tree evaluation; "rk4": the RK4 fitness (also as LM's residuals), sensitivity and
+    full-model rollout kernels (about the same compilation time each; the helpers both call
+    are compiled by "rk4" while "euler" compiles what calls none of them, then loaded)."""
     from gpquad.engine.evolve.evaluator import Evaluator
     from gpquad.engine.evolve.gradient_fit import (
         continued_constants,
@@ -130,11 +131,11 @@ def warm(group: str) -> float:
         continued_constants(ev, tree, float(errors[0]), starts, STEPS, error_of, 2, [])
     if group == "euler":  # the LM's trust-region branch, which a short fit may not reach
         least_squares.gradient_norm(np.eye(2), np.zeros(2))
-    if group == "rk4":
-        samples = np.arange(1, STEPS, dtype=np.int64)
+        samples = np.arange(1, STEPS, dtype=np.int64)  # the one-step tree evaluation
         arrays = dataset.arrays
         eval_on_samples(
             tree.codes, tree.values, tree.size, tree.delays, arrays.states, arrays.inputs, samples
         )
+    if group == "rk4":
         model.simulate(dataset, starts, STEPS)
     return time.perf_counter() - t0
