@@ -152,7 +152,7 @@ def test_the_finishing_steps_fit_the_printed_terms(dataset, monkeypatch):
     model = DiscoveredModel({"p_dot": noisy}, INPUTS, dict(dataset.trim), dataset.dt, 0, {})
     seen = []
 
-    def step(model, dataset, evolution, flipped, workers):
+    def step(model, dataset, evolution, flipped, workers, each):
         seen.append(model.equations["p_dot"].sympy().free_symbols)
         return model
 

@@ -84,8 +84,9 @@ def aggregate(cells: list[dict]) -> dict:
 def fit_profile(cell: dict) -> dict[str, float] | None:
     """Where a gpquad cell's fit time went (seconds, summed over a per-vehicle cell's fits):
     "searches" (each equation's search, summed: CPU-like, they run side by side), the
-    slowest search, each finishing step's wall time and the wait for the kernels'
-    compilation; None for a cell without it."""
+    slowest search, each finishing step's wall time, the wait for the kernels' compilation
+    and the finishing work begun during the searches (thread seconds, not in the steps'
+    wall times); None for a cell without it."""
     profile = cell.get("fit_profile_s")
     if not profile:
         return None
@@ -98,6 +99,8 @@ def fit_profile(cell: dict) -> dict[str, float] | None:
             out[step] = out.get(step, 0.0) + seconds
         if "compile_wait" in fit:  # cells fitted before it was kept have none
             out["compile wait"] = out.get("compile wait", 0.0) + fit["compile_wait"]
+        if fit.get("early_finish"):  # finishing work begun on a core the searches left idle
+            out["early finish"] = out.get("early finish", 0.0) + fit["early_finish"]
     return out
 
 

@@ -281,16 +281,25 @@ def text(equation, term: sp.Expr) -> str:
     return str(round_constants(term, equation.digits).xreplace(reps))
 
 
-def refine(model, dataset, evolution, flipped=(), workers: int = 1) -> tuple[object, dict]:
+def refine(
+    model, dataset, evolution, flipped=(), workers: int = 1, each=None
+) -> tuple[object, dict]:
     """(model, report): every equation with `refine_terms` > 0 refined (module notes),
     then refinements the full model flies worse with reverted (keep_what_flies);
     report {target: refine_equation's report, with "reverted": true for those}.
     workers: threads that refine equations side by side (their fits release the GIL); each
-    equation's refinement is its own, so the result is the same for any number."""
+    equation's refinement is its own, so the result is the same for any number.
+    each(kind, equation, compute), if given: how an equation's refinement is had
+    (gpquad.models.early_finish.EarlyFinish: taken from the work begun during the searches
+    where its input is the same); else it is computed."""
     targets = [t for t in model.equations if evolution.refine_for(t) > 0]
 
     def one(target):
-        return refine_equation(model.equations[target], dataset, evolution, flipped, workers)
+        def compute(e):
+            return refine_equation(e, dataset, evolution, flipped, workers)
+
+        found = model.equations[target]
+        return compute(found) if each is None else each("refine", found, compute)
 
     results = thread_map(one, targets, workers)
     equations, report = dict(model.equations), {}

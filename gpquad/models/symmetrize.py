@@ -67,22 +67,37 @@ def refit(equation, tree, dataset, evolution):
     return gauss_newton_constants(ev, tree, start_error, starts, steps, error_of, REFIT_STEPS, FTOL)
 
 
-def symmetrize(model, dataset, evolution, flipped):
-    """(model, report): every equation without its wrong-parity terms, constants refitted;
-    report {target: {"dropped": [term texts], "error_after": training error after the
-    refit}} for the equations that lost a term."""
+def symmetrize_equation(equation, dataset, evolution, flipped):
+    """(the equation without its wrong-parity terms, constants refitted, its report entry
+    {"dropped": [term texts], "error_after": training error after the refit}), or None
+    when it has no such term."""
+    found = without_wrong_parity(equation, frozenset(flipped))
+    if found is None:
+        return None
+    expr, dropped = found
+    tree = from_sympy(expr, equation.used_delays(), equation.input_names)
+    tree, error = refit(equation, tree, dataset, evolution)
+    return (
+        dataclasses.replace(equation, tree=tree, error=float(error), validation_error=np.nan),
+        {"dropped": dropped, "error_after": float(error)},
+    )
+
+
+def symmetrize(model, dataset, evolution, flipped, each=None):
+    """(model, report): every equation without its wrong-parity terms, constants refitted
+    (symmetrize_equation); report {target: entry} for the equations that lost a term.
+    each(kind, equation, compute), if given: how an equation's result is had
+    (gpquad.models.early_finish.EarlyFinish: taken from the work begun during the searches
+    where its input is the same); else it is computed."""
     equations, report = dict(model.equations), {}
     for target, equation in model.equations.items():
-        found = without_wrong_parity(equation, frozenset(flipped))
-        if found is None:
-            continue
-        expr, dropped = found
-        tree = from_sympy(expr, equation.used_delays(), equation.input_names)
-        tree, error = refit(equation, tree, dataset, evolution)
-        equations[target] = dataclasses.replace(
-            equation, tree=tree, error=float(error), validation_error=np.nan
-        )
-        report[target] = {"dropped": dropped, "error_after": float(error)}
+
+        def compute(e):
+            return symmetrize_equation(e, dataset, evolution, flipped)
+
+        done = compute(equation) if each is None else each("symmetrize", equation, compute)
+        if done is not None:
+            equations[target], report[target] = done
     return dataclasses.replace(model, equations=equations), report
 
 

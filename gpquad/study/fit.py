@@ -14,16 +14,12 @@ from pathlib import Path
 from gpquad.data.dataset import Dataset
 from gpquad.engine.variables import TARGET_NAMES, TARGET_STATE
 from gpquad.errors import GpquadError
+from gpquad.models.early_finish import EarlyFinish
 from gpquad.models.envelope import training_envelope
 from gpquad.models.equations import DiscoveredModel, Equation
-from gpquad.models.finish import finish_model
-from gpquad.models.joint_fit import joint_fit_summary
-from gpquad.models.refine import refined_summary
-from gpquad.models.stability import stability_summary
-from gpquad.models.symmetrize import symmetrized_summary
-from gpquad.models.symmetry import mirror_odd_terms, parity_summary
 from gpquad.study import workers
 from gpquad.study.config import Config
+from gpquad.study.finishing import finish
 from gpquad.study.search import Progress, identify
 from gpquad.study.store import HistoryWriter, write_json
 
@@ -32,13 +28,6 @@ from gpquad.study.store import HistoryWriter, write_json
 #: takes the next search when its last ends, so the longest going last would leave the
 #: other core idle at the end; the equations are the same in any order.
 SEARCH_ORDER = ("r_dot", "p_dot", "q_dot", "a_z", "a_x", "a_y")
-
-FINISH_WORDS = {
-    "symmetrize": "symmetric equations",
-    "refine": "refining the rate equations",
-    "repair": "full-model stability repair",
-    "joint_fit": "joint refit",
-}
 
 
 def measured_targets(cfg: Config, dataset: Dataset) -> Config:
@@ -142,6 +131,7 @@ def search_equations(
     in_process: bool = False,
     idle=None,
     phases: dict | None = None,
+    early=None,
 ) -> tuple[dict[str, Equation], dict[str, float]]:
     """Every target's equation ({target: Equation}) and search time (s); `phases`, if given,
     receives each search's phases ({target: {phase: s}}, coevolution.PHASES). With run_dir, the
@@ -157,7 +147,8 @@ def search_equations(
     history.csv is the same bytes as with jobs = 1; a target interrupted in a worker
     restarts on resume (no per-iteration checkpoint there). `idle()`, if given, is called
     once when the worker processes leave a core idle (fewer searches left than processes):
-    the command line loads its plotting there."""
+    the command line loads its plotting there. `early` (gpquad.models.early_finish.
+    EarlyFinish), if given, is told each equation found in a worker and started there."""
     ev = cfg.evolution
     equations: dict[str, Equation] = {}
     timings: dict[str, float] = {}
@@ -206,7 +197,17 @@ def search_equations(
                 history.truncate(history_end)
             phases.update(
                 _search_in_workers(
-                    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle
+                    dataset,
+                    cfg,
+                    report,
+                    run_dir,
+                    history,
+                    pending,
+                    jobs,
+                    equations,
+                    timings,
+                    idle,
+                    early,
                 )
             )
     except KeyboardInterrupt as exc:
@@ -245,7 +246,7 @@ def _say_found(report: Progress, equation: Equation, seconds: float | None = Non
 
 
 def _search_in_workers(
-    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle=None
+    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle, early
 ) -> dict[str, dict[str, float]]:
     """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
     target order as soon as every target before it is (search_equations' notes); returns
@@ -264,15 +265,18 @@ def _search_in_workers(
         # idle() once a process has no search left: after this many results, or at once
         # (a resumed run with fewer searches than processes)
         idle_after = max(0, len(pending) - pool + 1)
-        if idle is not None and idle_after == 0:
-            idle()
+        starts = [f for f in (idle, early and early.start) if f is not None]
+        for start in starts if idle_after == 0 else ():
+            start()
         for left, (target, equation, rows, seconds, phase_seconds) in enumerate(
             workers.completed(futures), start=1
         ):
             phases[target] = phase_seconds
             share.set(len(pending) - left)
-            if idle is not None and left == idle_after:
-                idle()
+            if early is not None:
+                early.found(equation)
+            for start in starts if left == idle_after else ():
+                start()
             ready[target] = (equation, rows)
             equations[target], timings[target] = equation, seconds
             _say_found(report, equation, seconds)
@@ -316,60 +320,9 @@ def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> 
     )
 
 
-class StepClock:
-    """Wall time of each finishing step (the time between one step's start and the next)."""
-
-    def __init__(self, say):
-        self.say = say
-        self.seconds: dict[str, float] = {}
-        self._current: tuple[str, float] | None = None
-
-    def start(self, name: str) -> None:
-        self.stop()
-        self.say(f"gpquad: {FINISH_WORDS[name]} ...")
-        self._current = (name, time.perf_counter())
-
-    def stop(self) -> None:
-        if self._current is not None:
-            name, t0 = self._current
-            self.seconds[name] = time.perf_counter() - t0
-            self._current = None
-
-
-def finish(
-    model: DiscoveredModel,
-    dataset: Dataset,
-    cfg: Config,
-    report: Progress | None = None,
-    seconds: dict[str, float] | None = None,
-    workers: int = 1,
-) -> DiscoveredModel:
-    """The finished model (cfg.evolution.finish), each step's summary line reported, and
-    its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
-    given, receives each step's wall time; `workers`: threads of the steps (the run's
-    jobs; the same model for any number)."""
-    say = (lambda text: None) if report is None else report.say
-    clock = StepClock(say)
-    model = finish_model(
-        model, dataset, cfg.evolution, cfg.vehicle, on_step=clock.start, workers=workers
-    )
-    clock.stop()
-    if seconds is not None:
-        seconds.update(clock.seconds)
-    for name, summary in (
-        ("symmetrized", symmetrized_summary),
-        ("refined", refined_summary),
-        ("stability", stability_summary),
-        ("joint_fit", joint_fit_summary),
-    ):
-        if getattr(model, name) is not None:
-            say(summary(getattr(model, name)))
-    flipped = cfg.vehicle.flipped(dataset.input_names)
-    if flipped:
-        found = mirror_odd_terms(model, dataset, flipped)
-        model = dataclasses.replace(model, mirror_parity=found)
-        say(parity_summary(found, flipped))
-    return model
+def early_finish(dataset: Dataset, cfg: Config) -> EarlyFinish:
+    """The EarlyFinish of a fit of `cfg` on `dataset` (a context: closed on leaving)."""
+    return EarlyFinish(dataset, cfg.evolution, cfg.vehicle.flipped(dataset.input_names))
 
 
 def fit_dataset(
@@ -384,20 +337,27 @@ def fit_dataset(
     """Search every configured target and finish the model (module notes). Without a run
     folder the searches may run in `jobs` processes (the same equations for any value).
     `seconds`, if given, receives the fit's profile: {"search": {target: s}, "phases":
-    {target: {phase: s}}, "finish": {step: s}, "compile_wait": s} (each search's own time
-    and its phases', each finishing step's wall time, the wait for the kernels'
-    compilation before the searches: workers.warm_up_wait)."""
+    {target: {phase: s}}, "finish": {step: s}, "early_finish": s, "compile_wait": s} (each
+    search's own time and its phases', each finishing step's wall time, the seconds of
+    per-equation finishing work begun on a core the searches left idle (gpquad.models.
+    early_finish), the wait for the kernels' compilation before the searches:
+    workers.warm_up_wait)."""
     cfg = measured_targets(cfg, dataset)
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     phases: dict[str, dict[str, float]] = {}
-    equations, timings = search_equations(
-        dataset, cfg, report, run_dir, resuming, jobs, phases=phases
-    )
-    steps: dict[str, float] = {}
-    model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, workers=jobs)
+    with early_finish(dataset, cfg) as early:
+        equations, timings = search_equations(
+            dataset, cfg, report, run_dir, resuming, jobs, phases=phases, early=early
+        )
+        steps: dict[str, float] = {}
+        model = finish(new_model(equations, dataset, cfg), dataset, cfg, report, steps, jobs, early)
     if seconds is not None:
         seconds.update(
-            search=timings, phases=phases, finish=steps, compile_wait=workers.warm_up_wait()
+            search=timings,
+            phases=phases,
+            finish=steps,
+            early_finish=early.busy_s,
+            compile_wait=workers.warm_up_wait(),
         )
     return model

@@ -15,7 +15,8 @@ from gpquad.errors import GpquadError
 from gpquad.models.equations import DiscoveredModel
 from gpquad.study import workers as search_workers
 from gpquad.study.config import Config, folder_config_dict
-from gpquad.study.fit import finish, measured_targets, new_model, search_equations
+from gpquad.study.finishing import finish
+from gpquad.study.fit import early_finish, measured_targets, new_model, search_equations
 from gpquad.study.search import Progress
 from gpquad.study.store import (
     atomic_write_text,
@@ -197,26 +198,27 @@ def run_experiment(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
-    try:
-        equations, timings = search_equations(
-            dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases
+    with early_finish(dataset, cfg) as early:
+        try:
+            equations, timings = search_equations(
+                dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases, early
+            )
+        except KeyboardInterrupt as exc:
+            model = new_model(getattr(exc, "equations", {}), dataset, cfg)
+            write_model(run_dir, dataclasses.replace(model, interrupted=True))
+            print(
+                f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the "
+                "same command with the same --out resumes",
+                file=sys.stderr,
+            )
+            raise
+        compile_wait = search_workers.warm_up_wait()
+        if searched is not None:
+            searched(run_dir)
+        finish_seconds: dict[str, float] = {}
+        model = finish(
+            new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, jobs, early
         )
-    except KeyboardInterrupt as exc:
-        model = new_model(getattr(exc, "equations", {}), dataset, cfg)
-        write_model(run_dir, dataclasses.replace(model, interrupted=True))
-        print(
-            f"\ngpquad: interrupted; the equations found so far are in {run_dir}; the same "
-            "command with the same --out resumes",
-            file=sys.stderr,
-        )
-        raise
-    compile_wait = search_workers.warm_up_wait()
-    if searched is not None:
-        searched(run_dir)
-    finish_seconds: dict[str, float] = {}
-    model = finish(
-        new_model(equations, dataset, cfg), dataset, cfg, report, finish_seconds, workers=jobs
-    )
     write_model(run_dir, model)
     wall = time.time() - started
     info.update(
@@ -227,11 +229,16 @@ def run_experiment(
         target_time_s=timings,
         search_phase_time_s=phases,
         finish_time_s=finish_seconds,
+        early_finish_s=early.busy_s,
     )
     write_json(run_dir / "run.json", info)
     if seconds is not None:
         seconds.update(
-            search=timings, phases=phases, finish=finish_seconds, compile_wait=compile_wait
+            search=timings,
+            phases=phases,
+            finish=finish_seconds,
+            early_finish=early.busy_s,
+            compile_wait=compile_wait,
         )
     report.say(time_profile(wall, load_seconds, timings, finish_seconds, compile_wait))
     if phases:
