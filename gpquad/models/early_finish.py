@@ -5,7 +5,8 @@ waits for the last search. The finish (gpquad.models.finish) then refines each e
 flown alone, which needs no other equation: symmetrize and refine are per equation, and
 only their model-level parts (keep_what_flies, the repair, the joint refit) need all six.
 `EarlyFinish` runs that per-equation work for the equations already found, in one thread
-of this process, while the last searches go on.
+of this process at the lowest priority (`yield_cores`: it takes only what the searches and
+the finish's own threads leave idle), while the last searches go on.
 
 Nothing is guessed into the model. The early work computes what the finish would compute
 if its inputs turn out as expected, and keeps each result under the exact content of its
@@ -24,7 +25,9 @@ limit is the process's, and a limit lifted by one thread would reach the other.
 
 from __future__ import annotations
 
+import os
 import pickle
+import sys
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -48,6 +51,23 @@ def content_key(equation) -> bytes:
     return pickle.dumps([getattr(equation, f.name) for f in fields(equation)], protocol=5)
 
 
+#: The niceness of the early work's threads (Linux: the lowest priority).
+NICE = 19
+
+
+def yield_cores() -> None:
+    """This thread, and the threads it starts (they inherit it), at the lowest priority
+    where the system has per-thread priorities (Linux): the searches and the finish's own
+    threads take the cores first, the early work takes what they leave idle. Elsewhere,
+    or where it is refused, nothing changes."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+    except (AttributeError, OSError):
+        pass
+
+
 class EarlyFinish:
     """Per-equation finishing work started while searches are still running (module notes).
 
@@ -56,8 +76,9 @@ class EarlyFinish:
     itself for each per-equation result (`__call__`), then `close()`.
     """
 
-    def __init__(self, dataset, evolution, flipped=()):
+    def __init__(self, dataset, evolution, flipped=(), workers: int = 1):
         self.dataset, self.evolution, self.flipped = dataset, evolution, tuple(flipped)
+        self.workers = workers  # threads of a refinement's candidates (refine_equation)
         steps = []
         for name in evolution.finish:
             if name not in PER_EQUATION:
@@ -92,7 +113,9 @@ class EarlyFinish:
             if self._pool is not None or self._closed or not self.useful:
                 return
             self._limits = threadpool_limits(limits=1, user_api="blas")
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gpquad-early")
+            self._pool = ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix="gpquad-early", initializer=yield_cores
+            )
             for equation in self._found:
                 self._pool.submit(self._prepare, equation)
 
@@ -187,4 +210,6 @@ class EarlyFinish:
         return symmetrize_equation(equation, self.dataset, self.evolution, self.flipped)
 
     def _refined(self, equation):
-        return refine_equation(equation, self.dataset, self.evolution, self.flipped, workers=1)
+        return refine_equation(
+            equation, self.dataset, self.evolution, self.flipped, workers=self.workers
+        )

@@ -320,9 +320,11 @@ def new_model(equations: dict[str, Equation], dataset: Dataset, cfg: Config) -> 
     )
 
 
-def early_finish(dataset: Dataset, cfg: Config) -> EarlyFinish:
-    """The EarlyFinish of a fit of `cfg` on `dataset` (a context: closed on leaving)."""
-    return EarlyFinish(dataset, cfg.evolution, cfg.vehicle.flipped(dataset.input_names))
+def early_finish(dataset: Dataset, cfg: Config, jobs: int) -> EarlyFinish:
+    """The EarlyFinish of a fit of `cfg` on `dataset` on `jobs` cores (a context: closed on
+    leaving)."""
+    flipped = cfg.vehicle.flipped(dataset.input_names)
+    return EarlyFinish(dataset, cfg.evolution, flipped, workers=jobs)
 
 
 def fit_dataset(
@@ -346,7 +348,7 @@ def fit_dataset(
     report = report or Progress(False, cfg.evolution.iterations * len(cfg.evolution.targets))
     report.total = cfg.evolution.iterations * len(cfg.evolution.targets)
     phases: dict[str, dict[str, float]] = {}
-    with early_finish(dataset, cfg) as early:
+    with early_finish(dataset, cfg, jobs) as early:
         equations, timings = search_equations(
             dataset, cfg, report, run_dir, resuming, jobs, phases=phases, early=early
         )

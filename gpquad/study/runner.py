@@ -198,7 +198,7 @@ def run_experiment(
         f"gpquad: {dataset.summary()['train_samples']} training samples at "
         f"{1 / dataset.dt:.4g} Hz; targets {', '.join(ev.targets)}; run folder {run_dir}"
     )
-    with early_finish(dataset, cfg) as early:
+    with early_finish(dataset, cfg, jobs) as early:
         try:
             equations, timings = search_equations(
                 dataset, cfg, report, run_dir, resuming, jobs, in_process, idle, phases, early
