@@ -154,3 +154,35 @@ def test_idle_is_called_once_when_a_process_has_no_search_left(monkeypatch, pend
         lambda: calls.append(len(arrived)),
     )
     assert calls == [after]
+
+
+def test_the_early_finish_starts_once_a_core_is_idle_and_hears_of_every_equation(monkeypatch):
+    """Six searches on two processes: a core is idle once five have arrived; the early
+    finish is started then (with the command line's idle hook), not before, and told of
+    every equation as it arrives."""
+    fake_workers(monkeypatch, lambda a: a)
+    calls: list = []
+
+    class Early:
+        def found(self, equation):
+            calls.append(("found", equation.target))
+
+        def start(self):
+            calls.append(("start", None))
+
+    report = Progress(False, 6)
+    fit._search_in_workers(
+        None,
+        Config(),
+        report,
+        None,
+        None,
+        list(TARGET_NAMES),
+        2,
+        {},
+        {},
+        idle=lambda: calls.append(("idle", None)),
+        early=Early(),
+    )
+    arrived = [("found", t) for t in fit.SEARCH_ORDER]
+    assert calls == arrived[:5] + [("idle", None), ("start", None)] + arrived[5:]

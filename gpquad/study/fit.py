@@ -246,7 +246,7 @@ def _say_found(report: Progress, equation: Equation, seconds: float | None = Non
 
 
 def _search_in_workers(
-    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle, early
+    dataset, cfg, report, run_dir, history, pending, jobs, equations, timings, idle=None, early=None
 ) -> dict[str, dict[str, float]]:
     """The `pending` targets searched in worker processes on `jobs` cores, each recorded in
     target order as soon as every target before it is (search_equations' notes); returns
