@@ -3,6 +3,8 @@ finish takes a result begun early only for an input equal to its own, so the mod
 one the finish makes alone."""
 
 import dataclasses
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -108,3 +110,19 @@ def test_nothing_begins_before_start_or_after_drain(dataset):  # noqa: F811
 def test_useful_only_with_per_equation_work(dataset, flipped):  # noqa: F811
     evo = dataclasses.replace(evolution(2), finish=("symmetrize",))
     assert EarlyFinish(dataset, evo, flipped).useful == bool(flipped)
+
+
+def test_an_abandoned_early_finish_does_not_wait_for_its_work(dataset):  # noqa: F811
+    """On an error or Ctrl-C the fit leaves at once; close() (a finish that ended) waits.
+    Bad case: abandon() waiting would take the work's 10 s."""
+    gate, began = threading.Event(), threading.Event()
+    early = EarlyFinish(dataset, evolution(2), FLIP)
+    early._prepare = lambda equation: (began.set(), gate.wait(10))
+    early.start()
+    early.found(object())
+    assert began.wait(10)
+    t0 = time.perf_counter()
+    early.abandon()
+    assert time.perf_counter() - t0 < 5 and not gate.is_set()
+    gate.set()
+    early.close()

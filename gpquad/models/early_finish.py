@@ -140,14 +140,19 @@ class EarlyFinish:
     def __enter__(self) -> EarlyFinish:
         return self
 
-    def __exit__(self, exc_type, *exc) -> None:
-        if exc_type is None:
-            self.close()
-            return
-        self.drain()  # an error or Ctrl-C: the work begun is not waited for
+    def abandon(self) -> None:
+        """drain() without waiting for the work begun (an error or Ctrl-C: nothing will
+        take it)."""
+        self.drain()
         if self._limits is not None:
             self._limits.restore_original_limits()
             self._limits = None
+
+    def __exit__(self, exc_type, *exc) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abandon()
 
     def __call__(self, kind: str, equation, compute):
         """compute(equation) for the finish step `kind`, or the result the early work made

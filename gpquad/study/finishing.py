@@ -68,9 +68,12 @@ def finish(
         model = finish_model(
             model, dataset, cfg.evolution, cfg.vehicle, clock.start, workers, early
         )
-    finally:
+    except BaseException:
         if early is not None:
-            early.close()
+            early.abandon()  # an error or Ctrl-C: the work begun is not waited for
+        raise
+    if early is not None:
+        early.close()
     clock.stop()
     if seconds is not None:
         seconds.update(clock.seconds)
