@@ -265,7 +265,7 @@ def _search_in_workers(
         # idle() once a process has no search left: after this many results, or at once
         # (a resumed run with fewer searches than processes)
         idle_after = max(0, len(pending) - pool + 1)
-        starts = [f for f in (idle, early and early.start) if f is not None]
+        starts = [f for f in (idle, None if early is None else early.start) if f is not None]
         for start in starts if idle_after == 0 else ():
             start()
         for left, (target, equation, rows, seconds, phase_seconds) in enumerate(
