@@ -59,21 +59,12 @@ def finish(
     its terms of the wrong left-right parity when the vehicle is symmetric. `seconds`, if
     given, receives each step's wall time; `workers`: threads of the steps (the run's jobs;
     the same model for any number); `early`: the EarlyFinish of the searches, if any (its
-    results are taken where their inputs are the finish's own; closed here)."""
+    results are taken where their inputs are the finish's own; its owner closes it)."""
     say = (lambda text: None) if report is None else report.say
     clock = StepClock(say)
     if early is not None:
-        early.drain()
-    try:
-        model = finish_model(
-            model, dataset, cfg.evolution, cfg.vehicle, clock.start, workers, early
-        )
-    except BaseException:
-        if early is not None:
-            early.abandon()  # an error or Ctrl-C: the work begun is not waited for
-        raise
-    if early is not None:
-        early.close()
+        early.drain()  # the searches have ended: the finish does what has not begun
+    model = finish_model(model, dataset, cfg.evolution, cfg.vehicle, clock.start, workers, early)
     clock.stop()
     if seconds is not None:
         seconds.update(clock.seconds)
